@@ -1,0 +1,192 @@
+//! The binary frame header: 64 bytes, little-endian, in front of every frame payload.
+//!
+//! | offset | size | field |
+//! | --- | --- | --- |
+//! | 0 | 4 | magic `ISRF` |
+//! | 4 | 2 | protocol version (1) |
+//! | 6 | 2 | header length in bytes (64) |
+//! | 8 | 8 | frame sequence number, from 1, per session |
+//! | 16 | 8 | last applied `input_id` (0 before any input) |
+//! | 24 | 4 | width in pixels |
+//! | 28 | 4 | height in pixels |
+//! | 32 | 1 | codec (1 JPEG, 2 PNG) |
+//! | 33 | 1 | flags (bit 0: still frame, the view has settled) |
+//! | 34 | 2 | reserved, zero |
+//! | 36 | 4 | state update time, microseconds |
+//! | 40 | 4 | acceleration structure build time, microseconds |
+//! | 44 | 4 | trace time, microseconds |
+//! | 48 | 4 | encode time, microseconds |
+//! | 52 | 4 | reserved, zero |
+//! | 56 | 8 | scene time the frame shows, seconds (f64) |
+
+use thiserror::Error;
+
+/// Bytes in the header.
+pub const FRAME_HEADER_LEN: usize = 64;
+/// First four bytes of every frame.
+pub const FRAME_MAGIC: [u8; 4] = *b"ISRF";
+
+/// Flag bit: the frame is the settled, full-quality view.
+pub const FLAG_STILL: u8 = 1;
+
+/// How the payload is encoded.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Codec {
+    Jpeg,
+    Png,
+}
+
+impl Codec {
+    pub fn to_u8(self) -> u8 {
+        match self {
+            Codec::Jpeg => 1,
+            Codec::Png => 2,
+        }
+    }
+
+    pub fn from_u8(value: u8) -> Option<Codec> {
+        match value {
+            1 => Some(Codec::Jpeg),
+            2 => Some(Codec::Png),
+            _ => None,
+        }
+    }
+}
+
+/// Time spent in each stage of producing a frame, microseconds.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct StageTimings {
+    pub update_us: u32,
+    pub build_us: u32,
+    pub trace_us: u32,
+    pub encode_us: u32,
+}
+
+/// The decoded header.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FrameHeader {
+    pub version: u16,
+    pub sequence: u64,
+    pub input_id: u64,
+    pub width: u32,
+    pub height: u32,
+    pub codec: Codec,
+    pub flags: u8,
+    pub timings: StageTimings,
+    pub scene_time: f64,
+}
+
+/// Why bytes are not a frame.
+#[derive(Debug, Error, PartialEq)]
+pub enum FrameHeaderError {
+    #[error("frame is {0} bytes, shorter than the {FRAME_HEADER_LEN}-byte header")]
+    TooShort(usize),
+    #[error("frame does not start with the magic bytes ISRF")]
+    BadMagic,
+    #[error("unknown codec {0}")]
+    UnknownCodec(u8),
+}
+
+impl FrameHeader {
+    /// The header as it goes on the wire.
+    pub fn encode(&self) -> [u8; FRAME_HEADER_LEN] {
+        let mut out = [0u8; FRAME_HEADER_LEN];
+        out[0..4].copy_from_slice(&FRAME_MAGIC);
+        out[4..6].copy_from_slice(&self.version.to_le_bytes());
+        out[6..8].copy_from_slice(&(FRAME_HEADER_LEN as u16).to_le_bytes());
+        out[8..16].copy_from_slice(&self.sequence.to_le_bytes());
+        out[16..24].copy_from_slice(&self.input_id.to_le_bytes());
+        out[24..28].copy_from_slice(&self.width.to_le_bytes());
+        out[28..32].copy_from_slice(&self.height.to_le_bytes());
+        out[32] = self.codec.to_u8();
+        out[33] = self.flags;
+        out[36..40].copy_from_slice(&self.timings.update_us.to_le_bytes());
+        out[40..44].copy_from_slice(&self.timings.build_us.to_le_bytes());
+        out[44..48].copy_from_slice(&self.timings.trace_us.to_le_bytes());
+        out[48..52].copy_from_slice(&self.timings.encode_us.to_le_bytes());
+        out[56..64].copy_from_slice(&self.scene_time.to_le_bytes());
+        out
+    }
+
+    /// Reads the header from the front of a frame; the payload is `&bytes[FRAME_HEADER_LEN..]`.
+    pub fn decode(bytes: &[u8]) -> Result<FrameHeader, FrameHeaderError> {
+        if bytes.len() < FRAME_HEADER_LEN {
+            return Err(FrameHeaderError::TooShort(bytes.len()));
+        }
+        if bytes[0..4] != FRAME_MAGIC {
+            return Err(FrameHeaderError::BadMagic);
+        }
+        let u16_at = |i: usize| u16::from_le_bytes([bytes[i], bytes[i + 1]]);
+        let u32_at = |i: usize| {
+            let mut b = [0u8; 4];
+            b.copy_from_slice(&bytes[i..i + 4]);
+            u32::from_le_bytes(b)
+        };
+        let u64_at = |i: usize| {
+            let mut b = [0u8; 8];
+            b.copy_from_slice(&bytes[i..i + 8]);
+            u64::from_le_bytes(b)
+        };
+        let codec = Codec::from_u8(bytes[32]).ok_or(FrameHeaderError::UnknownCodec(bytes[32]))?;
+        Ok(FrameHeader {
+            version: u16_at(4),
+            sequence: u64_at(8),
+            input_id: u64_at(16),
+            width: u32_at(24),
+            height: u32_at(28),
+            codec,
+            flags: bytes[33],
+            timings: StageTimings {
+                update_us: u32_at(36),
+                build_us: u32_at(40),
+                trace_us: u32_at(44),
+                encode_us: u32_at(48),
+            },
+            scene_time: f64::from_bits(u64_at(56)),
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn header_round_trips_and_matches_the_documented_offsets() {
+        let header = FrameHeader {
+            version: 1,
+            sequence: 0x0102_0304_0506_0708,
+            input_id: 42,
+            width: 640,
+            height: 480,
+            codec: Codec::Jpeg,
+            flags: FLAG_STILL,
+            timings: StageTimings {
+                update_us: 1,
+                build_us: 2,
+                trace_us: 3,
+                encode_us: 4,
+            },
+            scene_time: 1.5,
+        };
+        let bytes = header.encode();
+        assert_eq!(&bytes[0..4], b"ISRF");
+        assert_eq!(bytes[8], 0x08, "sequence is little-endian");
+        assert_eq!(
+            u32::from_le_bytes([bytes[24], bytes[25], bytes[26], bytes[27]]),
+            640
+        );
+        assert_eq!(bytes[32], 1);
+        assert_eq!(FrameHeader::decode(&bytes), Ok(header));
+        assert_eq!(
+            FrameHeader::decode(&bytes[..10]),
+            Err(FrameHeaderError::TooShort(10))
+        );
+        let mut bad = bytes;
+        bad[32] = 9;
+        assert_eq!(
+            FrameHeader::decode(&bad),
+            Err(FrameHeaderError::UnknownCodec(9))
+        );
+    }
+}

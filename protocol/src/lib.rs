@@ -1,0 +1,182 @@
+//! Wire types of isoray's websocket protocol, version 1.
+//!
+//! This crate is the compatibility promise between the server and its clients, and nothing
+//! else: plain data types with serde derives, plus the fixed binary frame header. It has no
+//! engine types and no validation beyond what the wire format itself needs (the server checks
+//! values such as finiteness and ranges at its boundary). `PROTOCOL.md` beside this crate is
+//! the human-readable description; the tests below pin the JSON shapes it documents.
+
+pub mod frame;
+
+pub use frame::{
+    Codec, FrameHeader, FrameHeaderError, StageTimings, FLAG_STILL, FRAME_HEADER_LEN, FRAME_MAGIC,
+};
+
+use serde::{Deserialize, Serialize};
+
+/// The protocol version this crate describes. Carried in every frame header and in `info`.
+pub const PROTOCOL_VERSION: u16 = 1;
+
+/// Identifier a client attaches to each input so it can match frames to inputs. JSON numbers
+/// are doubles in a browser, so the server accepts integers up to 2^53 only.
+pub type InputId = u64;
+
+/// Largest `input_id` a client may send (the largest integer a JavaScript number holds exactly).
+pub const MAX_INPUT_ID: u64 = (1 << 53) - 1;
+
+/// A message from the client to the server (a JSON text message).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "type", rename_all = "snake_case", deny_unknown_fields)]
+pub enum ClientMessage {
+    /// Place the camera. Positions are in world space.
+    Camera {
+        input_id: InputId,
+        eye: [f64; 3],
+        target: [f64; 3],
+        up: [f64; 3],
+        /// Vertical field of view in degrees; 45 when absent.
+        #[serde(default)]
+        fov_y_deg: Option<f64>,
+    },
+    /// Set the isovalue of the (first) isosurface.
+    Isovalue { input_id: InputId, value: f64 },
+    /// Set the render size in pixels.
+    Resize {
+        input_id: InputId,
+        width: u32,
+        height: u32,
+    },
+    /// Pin the scene time in seconds, or follow the live animation with `null`.
+    Time {
+        input_id: InputId,
+        time: Option<f64>,
+    },
+}
+
+impl ClientMessage {
+    /// The client's identifier for this input.
+    pub fn input_id(&self) -> InputId {
+        match self {
+            ClientMessage::Camera { input_id, .. }
+            | ClientMessage::Isovalue { input_id, .. }
+            | ClientMessage::Resize { input_id, .. }
+            | ClientMessage::Time { input_id, .. } => *input_id,
+        }
+    }
+}
+
+/// A JSON text message from the server to the client.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "type", rename_all = "snake_case")]
+pub enum ServerMessage {
+    /// Sent once after the websocket opens.
+    Info(SessionInfo),
+    /// An input was rejected; the session goes on with its previous state.
+    Error(ErrorMessage),
+}
+
+/// What the client needs to know to drive a session.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SessionInfo {
+    pub protocol_version: u16,
+    pub scene: SceneSummary,
+    /// Largest width and height the server renders.
+    pub max_width: u32,
+    pub max_height: u32,
+    /// The size frames have until the client sends `resize`.
+    pub width: u32,
+    pub height: u32,
+    /// The current isovalue and the open interval it must stay in.
+    pub isovalue: f64,
+    pub isovalue_range: [f64; 2],
+    /// A slider range inside `isovalue_range` where the surface changes visibly.
+    pub isovalue_slider: [f64; 2],
+    /// A camera that frames the whole scene.
+    pub camera: CameraPose,
+}
+
+/// A camera as the server reports it.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct CameraPose {
+    pub eye: [f64; 3],
+    pub target: [f64; 3],
+    pub up: [f64; 3],
+    pub fov_y_deg: f64,
+}
+
+/// One scene in `GET /api/v1/scenes`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SceneSummary {
+    pub id: String,
+    pub name: String,
+    /// `metaballs`, `surfels` or `tets`.
+    pub kind: String,
+    /// Number of primitives (balls, surfels, tetrahedra) in the current state.
+    pub primitives: u64,
+    /// Whether the scene changes over time by itself.
+    pub animated: bool,
+    pub description: String,
+}
+
+/// The body of `GET /api/v1/scenes`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SceneList {
+    pub scenes: Vec<SceneSummary>,
+}
+
+/// An error, on the socket and as the JSON body of HTTP errors.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ErrorMessage {
+    /// A stable, machine-readable code such as `bad_json` or `invalid_value`.
+    pub code: String,
+    /// What was wrong, for a person.
+    pub message: String,
+    /// The input this error answers, when the server could read one.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub input_id: Option<InputId>,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn client_messages_have_the_documented_json_shape() {
+        let camera: ClientMessage = serde_json::from_str(
+            r#"{"type":"camera","input_id":7,"eye":[0,0,5],"target":[0,0,0],"up":[0,1,0]}"#,
+        )
+        .expect("documented camera message parses");
+        assert_eq!(
+            camera,
+            ClientMessage::Camera {
+                input_id: 7,
+                eye: [0.0, 0.0, 5.0],
+                target: [0.0; 3],
+                up: [0.0, 1.0, 0.0],
+                fov_y_deg: None
+            }
+        );
+        let time: ClientMessage =
+            serde_json::from_str(r#"{"type":"time","input_id":1,"time":null}"#).expect("parses");
+        assert_eq!(time.input_id(), 1);
+        assert!(serde_json::from_str::<ClientMessage>(r#"{"type":"zoom","input_id":1}"#).is_err());
+        assert!(serde_json::from_str::<ClientMessage>(
+            r#"{"type":"isovalue","input_id":1,"value":0.5,"extra":1}"#
+        )
+        .is_err());
+    }
+
+    #[test]
+    fn server_error_serializes_with_type_tag() {
+        let msg = ServerMessage::Error(ErrorMessage {
+            code: "bad_json".into(),
+            message: "expected value".into(),
+            input_id: None,
+        });
+        let json = serde_json::to_string(&msg).expect("serializes");
+        assert_eq!(
+            json,
+            r#"{"type":"error","code":"bad_json","message":"expected value"}"#
+        );
+    }
+}

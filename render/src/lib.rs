@@ -1,0 +1,41 @@
+//! isoray's engine: scenes of implicit surfaces, their acceleration structures and
+//! intersectors, shading, and the CPU backend that traces tiles on a rayon pool.
+//!
+//! Architecture invariant: this crate knows nothing about tokio, sockets, JSON or files. It
+//! takes plain values (a [`Scene`], a [`View`]) and returns pixels. It is deterministic: the
+//! same scene, view and settings give the same [`Framebuffer`], whatever the thread count.
+//!
+//! The seams, from the outside in:
+//! - [`CpuBackend`] owns the worker pool and turns a [`PreparedScene`] and a [`View`] into a
+//!   [`Framebuffer`] (`backend` is the one place that knows about threads).
+//! - [`integrator`] follows a camera ray, asks the scene for the first hit and shades it.
+//! - [`PreparedScene`] is a scene plus its acceleration structure, built once per state and
+//!   shared by every view of that state; it answers "first hit along this ray segment".
+//! - [`Scene`] is the closed set of primitive kinds (metaballs for now).
+
+pub mod backend;
+pub mod camera;
+pub mod framebuffer;
+pub mod integrator;
+pub mod metaball;
+pub mod ray;
+pub mod scene;
+pub mod scenes;
+pub mod shade;
+
+pub use backend::CpuBackend;
+pub use camera::Camera;
+pub use framebuffer::Framebuffer;
+pub use ray::{Hit, Ray};
+pub use scene::{PreparedScene, Scene, SceneError};
+pub use shade::Lighting;
+
+/// Everything a session chooses about one frame, apart from the scene itself.
+#[derive(Clone, Debug, PartialEq)]
+pub struct View {
+    pub width: u32,
+    pub height: u32,
+    pub camera: Camera,
+    /// The isovalue of the surface to show.
+    pub isovalue: f32,
+}

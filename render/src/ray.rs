@@ -1,0 +1,35 @@
+//! Rays and hit records shared by every primitive kind.
+
+use glam::Vec3;
+
+/// A ray `origin + t * dir`; `dir` has unit length so `t` is a distance.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Ray {
+    pub origin: Vec3,
+    pub dir: Vec3,
+}
+
+impl Ray {
+    pub fn new(origin: Vec3, dir: Vec3) -> Ray {
+        Ray {
+            origin,
+            dir: dir.normalize(),
+        }
+    }
+
+    pub fn at(&self, t: f32) -> Vec3 {
+        self.origin + t * self.dir
+    }
+}
+
+/// The first intersection of a ray with a surface.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Hit {
+    /// Distance along the ray.
+    pub t: f32,
+    pub position: Vec3,
+    /// Unit normal pointing out of the solid (towards lower field values for metaballs).
+    pub normal: Vec3,
+    /// Linear-light diffuse colour at the hit.
+    pub albedo: Vec3,
+}

@@ -1,0 +1,250 @@
+//! Client input: parsing, validation and application to a session's settings.
+//!
+//! Every message is checked in full before anything changes, so a rejected input leaves the
+//! session exactly as it was. Errors name the field and the limit that was broken.
+
+use isoray_protocol::{ClientMessage, ErrorMessage, InputId, MAX_INPUT_ID};
+use isoray_render::Camera;
+
+/// What a session renders, as the client last set it.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Settings {
+    pub camera: Camera,
+    pub isovalue: f32,
+    pub width: u32,
+    pub height: u32,
+    /// `None`: follow the live animation.
+    pub pinned_time: Option<f64>,
+    /// The last input applied, echoed in frame headers.
+    pub last_input_id: InputId,
+    /// Bumped by every applied input, so the renderer knows the view changed.
+    pub version: u64,
+}
+
+/// The limits inputs are checked against.
+#[derive(Clone, Copy, Debug)]
+pub struct Limits {
+    pub max_size: u32,
+    /// Open interval of meaningful isovalues for the scene.
+    pub isovalue_range: (f32, f32),
+}
+
+/// Largest coordinate accepted for a camera: keeps every value exact enough in f32.
+const MAX_COORDINATE: f64 = 1.0e6;
+
+fn error(code: &str, message: String, input_id: Option<InputId>) -> ErrorMessage {
+    ErrorMessage {
+        code: code.to_string(),
+        message,
+        input_id,
+    }
+}
+
+/// Parses one text message. Distinguishes broken JSON, unknown types and bad fields.
+pub fn parse(text: &str) -> Result<ClientMessage, ErrorMessage> {
+    let value: serde_json::Value = serde_json::from_str(text)
+        .map_err(|e| error("bad_json", format!("message is not valid JSON: {e}"), None))?;
+    let input_id = value.get("input_id").and_then(|v| v.as_u64());
+    let kind = match value.get("type") {
+        Some(serde_json::Value::String(kind)) => kind.clone(),
+        Some(_) => {
+            return Err(error(
+                "invalid_message",
+                "`type` must be a string".into(),
+                input_id,
+            ))
+        }
+        None if value.is_object() => {
+            return Err(error(
+                "invalid_message",
+                "message has no `type` field".into(),
+                input_id,
+            ))
+        }
+        None => {
+            return Err(error(
+                "invalid_message",
+                "message must be a JSON object".into(),
+                None,
+            ))
+        }
+    };
+    const KNOWN: [&str; 4] = ["camera", "isovalue", "resize", "time"];
+    if !KNOWN.contains(&kind.as_str()) {
+        return Err(error(
+            "unknown_type",
+            format!(
+                "unknown message type `{kind}`; expected one of {}",
+                KNOWN.join(", ")
+            ),
+            input_id,
+        ));
+    }
+    serde_path_to_error::deserialize(value).map_err(|e| {
+        let path = e.path().to_string();
+        error(
+            "invalid_message",
+            format!("`{kind}` message, field `{path}`: {}", e.into_inner()),
+            input_id,
+        )
+    })
+}
+
+/// Checks `message` against `limits` and, if it is valid, applies it to `settings`.
+pub fn apply(
+    message: &ClientMessage,
+    settings: &mut Settings,
+    limits: &Limits,
+) -> Result<(), ErrorMessage> {
+    let input_id = message.input_id();
+    let fail = |message: String| Err(error("invalid_value", message, Some(input_id)));
+    if input_id > MAX_INPUT_ID {
+        return fail(format!("input_id {input_id} exceeds 2^53 - 1"));
+    }
+    match *message {
+        ClientMessage::Camera {
+            eye,
+            target,
+            up,
+            fov_y_deg,
+            ..
+        } => {
+            for (name, v) in [("eye", eye), ("target", target), ("up", up)] {
+                for (i, c) in v.iter().enumerate() {
+                    if !c.is_finite() || c.abs() > MAX_COORDINATE {
+                        return fail(format!(
+                            "camera.{name}[{i}] = {c} must be finite and within ±{MAX_COORDINATE}"
+                        ));
+                    }
+                }
+            }
+            let fov = fov_y_deg.unwrap_or(45.0);
+            if !(1.0..=170.0).contains(&fov) {
+                return fail(format!("camera.fov_y_deg = {fov} must be in [1, 170]"));
+            }
+            let to_vec = |v: [f64; 3]| glam::DVec3::from_array(v);
+            let (eye, target, up) = (to_vec(eye), to_vec(target), to_vec(up));
+            let forward = target - eye;
+            if forward.length() < 1e-6 {
+                return fail("camera: eye and target coincide".into());
+            }
+            if up.length() < 1e-9 || forward.normalize().cross(up.normalize()).length() < 1e-6 {
+                return fail("camera: up is zero or parallel to the view direction".into());
+            }
+            settings.camera = Camera {
+                eye: eye.as_vec3(),
+                target: target.as_vec3(),
+                up: up.as_vec3(),
+                fov_y_deg: fov as f32,
+            };
+        }
+        ClientMessage::Isovalue { value, .. } => {
+            let (lo, hi) = limits.isovalue_range;
+            if !(value.is_finite() && value > lo as f64 && value < hi as f64) {
+                return fail(format!(
+                    "isovalue {value} is outside the scene's range ({lo}, {hi})"
+                ));
+            }
+            settings.isovalue = value as f32;
+        }
+        ClientMessage::Resize { width, height, .. } => {
+            let max = limits.max_size;
+            if width == 0 || height == 0 {
+                return fail(format!(
+                    "resize {width}×{height}: width and height must be at least 1"
+                ));
+            }
+            if width > max || height > max {
+                return fail(format!(
+                    "resize {width}×{height} exceeds the maximum {max}×{max}"
+                ));
+            }
+            settings.width = width;
+            settings.height = height;
+        }
+        ClientMessage::Time { time, .. } => match time {
+            None => settings.pinned_time = None,
+            Some(t) if t.is_finite() && (0.0..=1.0e9).contains(&t) => {
+                settings.pinned_time = Some(t)
+            }
+            Some(t) => {
+                return fail(format!(
+                    "time {t} must be a number in [0, 1e9] seconds, or null to follow the animation"
+                ))
+            }
+        },
+    }
+    settings.last_input_id = input_id;
+    settings.version += 1;
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use glam::Vec3;
+
+    fn settings() -> Settings {
+        Settings {
+            camera: Camera {
+                eye: Vec3::Z,
+                target: Vec3::ZERO,
+                up: Vec3::Y,
+                fov_y_deg: 45.0,
+            },
+            isovalue: 0.5,
+            width: 64,
+            height: 64,
+            pinned_time: None,
+            last_input_id: 0,
+            version: 0,
+        }
+    }
+
+    const LIMITS: Limits = Limits {
+        max_size: 4096,
+        isovalue_range: (0.0, 2.0),
+    };
+
+    #[test]
+    fn errors_name_the_field() {
+        let e = parse(
+            r#"{"type":"camera","input_id":3,"eye":[0,null,1],"target":[0,0,0],"up":[0,1,0]}"#,
+        )
+        .expect_err("null coordinate");
+        assert_eq!(e.code, "invalid_message");
+        assert!(e.message.contains("eye[1]"), "{}", e.message);
+        assert_eq!(e.input_id, Some(3));
+        assert_eq!(parse("{").expect_err("broken").code, "bad_json");
+        assert_eq!(
+            parse(r#"{"type":"fly","input_id":1}"#)
+                .expect_err("unknown")
+                .code,
+            "unknown_type"
+        );
+        assert_eq!(parse("[1,2]").expect_err("array").code, "invalid_message");
+    }
+
+    #[test]
+    fn rejected_input_changes_nothing() {
+        let mut s = settings();
+        let before = s.clone();
+        for text in [
+            r#"{"type":"resize","input_id":1,"width":0,"height":10}"#,
+            r#"{"type":"resize","input_id":1,"width":5000,"height":10}"#,
+            r#"{"type":"isovalue","input_id":1,"value":2.5}"#,
+            r#"{"type":"isovalue","input_id":1,"value":0}"#,
+            r#"{"type":"camera","input_id":1,"eye":[0,0,0],"target":[0,0,0],"up":[0,1,0]}"#,
+            r#"{"type":"camera","input_id":1,"eye":[0,5,0],"target":[0,0,0],"up":[0,1,0]}"#,
+            r#"{"type":"time","input_id":1,"time":-1}"#,
+        ] {
+            let msg = parse(text).expect("well-formed");
+            let e = apply(&msg, &mut s, &LIMITS).expect_err(text);
+            assert_eq!(e.code, "invalid_value", "{text}");
+            assert_eq!(s, before, "{text} changed the settings");
+        }
+        let ok = parse(r#"{"type":"isovalue","input_id":9,"value":1.25}"#).expect("parses");
+        apply(&ok, &mut s, &LIMITS).expect("valid");
+        assert_eq!((s.isovalue, s.last_input_id, s.version), (1.25, 9, 1));
+    }
+}

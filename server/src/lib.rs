@@ -1,0 +1,107 @@
+//! The isoray server: axum on tokio for I/O, a rayon pool for rendering and encoding.
+//!
+//! Entry points: [`app`] builds the router over an [`AppState`] (tests drive it in-process);
+//! [`serve`] runs it on a listener until a shutdown future completes, then closes every
+//! session with a reason and drains. The `isoray` binary (`main.rs`) parses flags and calls
+//! [`serve`].
+//!
+//! Architecture invariant: no handler renders or encodes; those run on the render pool and
+//! come back through channels (see `session`).
+
+pub mod config;
+pub mod encode;
+pub mod error;
+pub mod input;
+pub mod scenes;
+pub mod session;
+pub mod state;
+mod web;
+
+pub use config::Config;
+pub use state::AppState;
+
+use axum::extract::ws::rejection::WebSocketUpgradeRejection;
+use axum::extract::ws::WebSocketUpgrade;
+use axum::extract::{Path, State};
+use axum::response::Response;
+use axum::routing::get;
+use axum::{Json, Router};
+use error::AppError;
+use isoray_protocol::SceneList;
+use std::future::Future;
+use std::time::Duration;
+use tokio::net::TcpListener;
+use tower_http::trace::TraceLayer;
+
+/// Largest websocket message a client may send: inputs are small JSON objects.
+const MAX_CLIENT_MESSAGE_BYTES: usize = 64 * 1024;
+
+/// How long shutdown waits for sessions to close before it gives up on them.
+const DRAIN_TIMEOUT: Duration = Duration::from_secs(5);
+
+/// The HTTP routes.
+pub fn app(state: AppState) -> Router {
+    Router::new()
+        .route("/", get(web::index))
+        .route("/healthz", get(|| async { "ok" }))
+        .route("/api/v1/scenes", get(list_scenes))
+        .route("/api/v1/scenes/{id}/stream", get(stream))
+        .route("/{file}", get(web::asset))
+        .layer(TraceLayer::new_for_http())
+        .with_state(state)
+}
+
+async fn list_scenes(State(state): State<AppState>) -> Json<SceneList> {
+    Json(SceneList {
+        scenes: state.scenes().summaries(),
+    })
+}
+
+async fn stream(
+    State(state): State<AppState>,
+    Path(id): Path<String>,
+    ws: Result<WebSocketUpgrade, WebSocketUpgradeRejection>,
+) -> Result<Response, AppError> {
+    let entry = state
+        .scenes()
+        .get(&id)
+        .ok_or_else(|| AppError::not_found(format!("no scene with id `{id}`")))?;
+    let ws = ws.map_err(|e| AppError {
+        status: e.status(),
+        code: "not_websocket",
+        message: format!("this route streams frames over a websocket: {e}"),
+    })?;
+    Ok(ws
+        .max_message_size(MAX_CLIENT_MESSAGE_BYTES)
+        .on_upgrade(move |socket| session::run(socket, state, entry)))
+}
+
+/// Serves `state` on `listener` until `shutdown` completes, then closes sessions and drains.
+pub async fn serve(
+    listener: TcpListener,
+    state: AppState,
+    shutdown: impl Future<Output = ()> + Send + 'static,
+) -> std::io::Result<()> {
+    let signal_state = state.clone();
+    let router = app(state.clone());
+    axum::serve(listener, router)
+        .with_graceful_shutdown(async move {
+            shutdown.await;
+            tracing::info!("shutting down: closing sessions");
+            signal_state.begin_shutdown();
+        })
+        .await?;
+    // Upgraded websockets outlive the HTTP server's own drain; wait for them here.
+    let deadline = tokio::time::Instant::now() + DRAIN_TIMEOUT;
+    while state.sessions().count() > 0 && tokio::time::Instant::now() < deadline {
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    }
+    let left = state.sessions().count();
+    if left > 0 {
+        tracing::warn!(
+            sessions = left,
+            "sessions still open after the drain timeout"
+        );
+    }
+    Ok(())
+}

@@ -1,0 +1,340 @@
+//! One viewer's websocket session: read inputs, render when something changed, send frames.
+//!
+//! Three loops run together in the session's task and end together:
+//! - the reader applies inputs to the session's [`Settings`] and wakes the renderer;
+//! - the renderer waits until the view or the scene time changed *and* the frame slot is
+//!   empty, hands the frame to the render pool (never rendering on the async runtime), and
+//!   puts the encoded result in the slot;
+//! - the writer takes frames from the slot and error messages from a small queue and sends
+//!   them.
+//!
+//! The slot holds at most one frame. While a client does not read, the writer blocks in
+//! `send`, the slot stays full, and the renderer stops: a slow client costs one frame of
+//! memory and no CPU. When it reads again, the next frame rendered shows the newest state.
+
+use crate::input::{self, Limits, Settings};
+use crate::scenes::{micros, SceneEntry};
+use crate::state::AppState;
+use axum::body::Bytes;
+use axum::extract::ws::{CloseFrame, Message, WebSocket};
+use futures_util::{SinkExt, StreamExt};
+use isoray_protocol::{
+    Codec, ErrorMessage, FrameHeader, ServerMessage, SessionInfo, StageTimings, PROTOCOL_VERSION,
+};
+use isoray_render::View;
+use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+use tokio::sync::{mpsc, oneshot, Notify};
+use tracing::Instrument;
+
+/// Error messages queued for a client that is not reading; more are dropped.
+const CONTROL_QUEUE: usize = 16;
+
+/// Counters of one session, readable while it runs (tests, metrics).
+#[derive(Debug, Default)]
+pub struct SessionStats {
+    pub frames_rendered: AtomicU64,
+    pub frames_sent: AtomicU64,
+    pub inputs_applied: AtomicU64,
+    pub inputs_rejected: AtomicU64,
+    /// Frames rendered but not yet handed to the socket, now and at most.
+    pub pending_frames: AtomicUsize,
+    pub max_pending_frames: AtomicUsize,
+}
+
+/// The one-frame mailbox between renderer and writer.
+#[derive(Default)]
+struct FrameSlot {
+    frame: Mutex<Option<Bytes>>,
+    ready: Notify,
+    free: Notify,
+}
+
+impl FrameSlot {
+    fn lock(&self) -> std::sync::MutexGuard<'_, Option<Bytes>> {
+        // Only plain values live here; a panic elsewhere cannot leave them inconsistent.
+        self.frame.lock().unwrap_or_else(|e| e.into_inner())
+    }
+
+    fn is_empty(&self) -> bool {
+        self.lock().is_none()
+    }
+
+    fn put(&self, frame: Bytes, stats: &SessionStats) {
+        let replaced = self.lock().replace(frame).is_some();
+        if !replaced {
+            let now = stats.pending_frames.fetch_add(1, Ordering::SeqCst) + 1;
+            stats.max_pending_frames.fetch_max(now, Ordering::SeqCst);
+        }
+        self.ready.notify_one();
+    }
+
+    fn take(&self, stats: &SessionStats) -> Option<Bytes> {
+        let frame = self.lock().take();
+        if frame.is_some() {
+            stats.pending_frames.fetch_sub(1, Ordering::SeqCst);
+            self.free.notify_one();
+        }
+        frame
+    }
+}
+
+/// Runs a session until the client leaves, the connection fails or the server shuts down.
+pub async fn run(socket: WebSocket, app: AppState, entry: Arc<SceneEntry>) {
+    let (id, stats) = app.sessions().register();
+    let span = tracing::info_span!("session", id, scene = entry.id());
+    run_registered(socket, &app, entry, &stats)
+        .instrument(span)
+        .await;
+    app.sessions().unregister(id);
+}
+
+async fn run_registered(
+    socket: WebSocket,
+    app: &AppState,
+    entry: Arc<SceneEntry>,
+    stats: &SessionStats,
+) {
+    tracing::info!("session opened");
+
+    let config = app.config();
+    let demo = entry.demo();
+    let camera = demo.default_camera();
+    let settings = Settings {
+        camera,
+        isovalue: demo.default_isovalue(),
+        width: config.default_width,
+        height: config.default_height,
+        pinned_time: None,
+        last_input_id: 0,
+        version: 0,
+    };
+    let limits = Limits {
+        max_size: config.max_size,
+        isovalue_range: entry.isovalue_range(),
+    };
+    let slider = demo.isovalue_slider();
+    let info = ServerMessage::Info(SessionInfo {
+        protocol_version: PROTOCOL_VERSION,
+        scene: entry.summary(),
+        max_width: config.max_size,
+        max_height: config.max_size,
+        width: settings.width,
+        height: settings.height,
+        isovalue: settings.isovalue as f64,
+        isovalue_range: [
+            limits.isovalue_range.0 as f64,
+            limits.isovalue_range.1 as f64,
+        ],
+        isovalue_slider: [slider.0 as f64, slider.1 as f64],
+        camera: isoray_protocol::CameraPose {
+            eye: camera.eye.as_dvec3().to_array(),
+            target: camera.target.as_dvec3().to_array(),
+            up: camera.up.as_dvec3().to_array(),
+            fov_y_deg: camera.fov_y_deg as f64,
+        },
+    });
+
+    let settings = Arc::new(Mutex::new(settings));
+    let changed = Arc::new(Notify::new());
+    let slot = Arc::new(FrameSlot::default());
+    let (control_tx, control_rx) = mpsc::channel::<Message>(CONTROL_QUEUE);
+    let (mut sink, stream) = socket.split();
+
+    let mut shutdown = app.shutdown_signal();
+    let outcome = async {
+        sink.send(Message::Text(to_json(&info).into())).await?;
+        tokio::select! {
+            r = read_loop(stream, &settings, &changed, &limits, &control_tx, stats) => r,
+            r = write_loop(&mut sink, control_rx, &slot, stats) => r,
+            () = render_loop(app, &entry, &settings, &changed, &slot, stats) => Ok(()),
+            _ = async { shutdown.wait_for(|down| *down).await.map(|_| ()) } => {
+                let close = CloseFrame { code: 1001, reason: "server shutting down".into() };
+                let _ = sink.send(Message::Close(Some(close))).await;
+                Ok(())
+            }
+        }
+    }
+    .await;
+
+    match outcome {
+        Ok(()) => tracing::info!(
+            frames = stats.frames_sent.load(Ordering::Relaxed),
+            "session closed"
+        ),
+        Err(e) => tracing::info!(error = %e, "session ended by a connection error"),
+    }
+}
+
+fn to_json(msg: &ServerMessage) -> String {
+    // Serializing these plain structs cannot fail: no maps with non-string keys, no floats
+    // that serde_json refuses (NaN serializes as null).
+    serde_json::to_string(msg).unwrap_or_else(|_| String::from(r#"{"type":"error"}"#))
+}
+
+async fn read_loop(
+    mut stream: futures_util::stream::SplitStream<WebSocket>,
+    settings: &Mutex<Settings>,
+    changed: &Notify,
+    limits: &Limits,
+    control: &mpsc::Sender<Message>,
+    stats: &SessionStats,
+) -> Result<(), axum::Error> {
+    while let Some(message) = stream.next().await {
+        let result = match message? {
+            Message::Text(text) => input::parse(text.as_str()).and_then(|msg| {
+                let mut s = settings.lock().unwrap_or_else(|e| e.into_inner());
+                input::apply(&msg, &mut s, limits)
+            }),
+            Message::Binary(_) => Err(ErrorMessage {
+                code: "unsupported".into(),
+                message: "binary messages are not part of protocol v1; send JSON text".into(),
+                input_id: None,
+            }),
+            Message::Close(_) => return Ok(()),
+            Message::Ping(_) | Message::Pong(_) => continue,
+        };
+        match result {
+            Ok(()) => {
+                stats.inputs_applied.fetch_add(1, Ordering::Relaxed);
+                changed.notify_one();
+            }
+            Err(error) => {
+                stats.inputs_rejected.fetch_add(1, Ordering::Relaxed);
+                tracing::debug!(code = %error.code, message = %error.message, "input rejected");
+                // A client that floods bad input without reading loses the surplus errors.
+                let _ =
+                    control.try_send(Message::Text(to_json(&ServerMessage::Error(error)).into()));
+            }
+        }
+    }
+    Ok(())
+}
+
+async fn write_loop(
+    sink: &mut futures_util::stream::SplitSink<WebSocket, Message>,
+    mut control: mpsc::Receiver<Message>,
+    slot: &FrameSlot,
+    stats: &SessionStats,
+) -> Result<(), axum::Error> {
+    loop {
+        tokio::select! {
+            biased;
+            message = control.recv() => match message {
+                Some(message) => sink.send(message).await?,
+                None => return Ok(()),
+            },
+            () = slot.ready.notified() => {
+                if let Some(frame) = slot.take(stats) {
+                    sink.send(Message::Binary(frame)).await?;
+                    stats.frames_sent.fetch_add(1, Ordering::Relaxed);
+                }
+            }
+        }
+    }
+}
+
+async fn render_loop(
+    app: &AppState,
+    entry: &Arc<SceneEntry>,
+    settings: &Mutex<Settings>,
+    changed: &Notify,
+    slot: &FrameSlot,
+    stats: &SessionStats,
+) {
+    let fps = app.config().max_fps;
+    let frame_interval = Duration::from_secs_f64(1.0 / fps);
+    let quality = app.config().jpeg_quality;
+    let mut last: Option<(u64, f64)> = None;
+    let mut next_tick = tokio::time::Instant::now();
+    let mut sequence = 0u64;
+    loop {
+        while !slot.is_empty() {
+            slot.free.notified().await;
+        }
+        let current = settings.lock().unwrap_or_else(|e| e.into_inner()).clone();
+        let live = current.pinned_time.is_none();
+        let time = current
+            .pinned_time
+            .unwrap_or_else(|| (app.scenes().live_time() * fps).floor() / fps);
+        let view_changed = last.map(|(v, _)| v) != Some(current.version);
+        let time_changed = last.map(|(_, t)| t) != Some(time);
+        // New input renders at once; animation alone renders at most once per tick.
+        if !view_changed && (!time_changed || tokio::time::Instant::now() < next_tick) {
+            if live {
+                tokio::select! {
+                    () = changed.notified() => {}
+                    () = tokio::time::sleep_until(next_tick) => {}
+                }
+            } else {
+                changed.notified().await;
+            }
+            continue;
+        }
+        next_tick = tokio::time::Instant::now() + frame_interval;
+        sequence += 1;
+        last = Some((current.version, time));
+
+        let (tx, rx) = oneshot::channel();
+        let job_entry = Arc::clone(entry);
+        let job_app = app.clone();
+        app.backend().spawn(move || {
+            let frame = render_frame(&job_app, &job_entry, &current, time, sequence, quality);
+            let _ = tx.send(frame);
+        });
+        match rx.await {
+            Ok(Ok(frame)) => {
+                stats.frames_rendered.fetch_add(1, Ordering::Relaxed);
+                slot.put(frame, stats);
+            }
+            Ok(Err(e)) => {
+                tracing::warn!(error = %e, "frame failed; the session waits for the next change");
+                changed.notified().await;
+            }
+            Err(_) => return, // the pool dropped the job: the server is going down
+        }
+    }
+}
+
+/// Prepares, traces and encodes one frame. Runs on the render pool.
+fn render_frame(
+    app: &AppState,
+    entry: &SceneEntry,
+    settings: &Settings,
+    time: f64,
+    sequence: u64,
+    quality: u8,
+) -> Result<Bytes, crate::encode::EncodeError> {
+    let state = entry.prepared_at(time);
+    let view = View {
+        width: settings.width,
+        height: settings.height,
+        camera: settings.camera,
+        isovalue: settings.isovalue,
+    };
+    let t0 = Instant::now();
+    let fb = app.backend().render(&state.prepared, &view);
+    let t1 = Instant::now();
+    let jpeg = crate::encode::jpeg(&fb, quality)?;
+    let header = FrameHeader {
+        version: PROTOCOL_VERSION,
+        sequence,
+        input_id: settings.last_input_id,
+        width: fb.width,
+        height: fb.height,
+        codec: Codec::Jpeg,
+        flags: 0,
+        timings: StageTimings {
+            update_us: state.update_us,
+            build_us: state.build_us,
+            trace_us: micros(t1 - t0),
+            encode_us: micros(t1.elapsed()),
+        },
+        scene_time: time,
+    };
+    let mut bytes = Vec::with_capacity(isoray_protocol::FRAME_HEADER_LEN + jpeg.len());
+    bytes.extend_from_slice(&header.encode());
+    bytes.extend_from_slice(&jpeg);
+    Ok(Bytes::from(bytes))
+}

@@ -1,0 +1,103 @@
+//! State shared by every request: configuration, the render pool, the scenes, the sessions,
+//! and the shutdown signal.
+
+use crate::config::Config;
+use crate::scenes::SceneRegistry;
+use crate::session::SessionStats;
+use isoray_render::CpuBackend;
+use std::collections::BTreeMap;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Arc, Mutex};
+use tokio::sync::watch;
+
+/// Cheap to clone; everything lives behind one `Arc`.
+#[derive(Clone)]
+pub struct AppState {
+    inner: Arc<Inner>,
+}
+
+struct Inner {
+    config: Config,
+    backend: CpuBackend,
+    scenes: SceneRegistry,
+    sessions: SessionTable,
+    shutdown: watch::Sender<bool>,
+}
+
+impl AppState {
+    /// Starts the render pool and loads the built-in scenes.
+    pub fn new(config: Config) -> Result<AppState, String> {
+        config.validate()?;
+        let backend = CpuBackend::new(config.threads).map_err(|e| e.to_string())?;
+        Ok(AppState {
+            inner: Arc::new(Inner {
+                config,
+                backend,
+                scenes: SceneRegistry::with_demos(),
+                sessions: SessionTable::default(),
+                shutdown: watch::Sender::new(false),
+            }),
+        })
+    }
+
+    pub fn config(&self) -> &Config {
+        &self.inner.config
+    }
+
+    pub fn backend(&self) -> &CpuBackend {
+        &self.inner.backend
+    }
+
+    pub fn scenes(&self) -> &SceneRegistry {
+        &self.inner.scenes
+    }
+
+    pub fn sessions(&self) -> &SessionTable {
+        &self.inner.sessions
+    }
+
+    /// Tells every session to close with a reason.
+    pub fn begin_shutdown(&self) {
+        self.inner.shutdown.send_replace(true);
+    }
+
+    pub fn shutdown_signal(&self) -> watch::Receiver<bool> {
+        self.inner.shutdown.subscribe()
+    }
+}
+
+/// The open sessions and their counters.
+#[derive(Default)]
+pub struct SessionTable {
+    next_id: AtomicU64,
+    open: Mutex<BTreeMap<u64, Arc<SessionStats>>>,
+}
+
+impl SessionTable {
+    pub fn register(&self) -> (u64, Arc<SessionStats>) {
+        let id = self.next_id.fetch_add(1, Ordering::Relaxed) + 1;
+        let stats = Arc::new(SessionStats::default());
+        self.lock().insert(id, Arc::clone(&stats));
+        (id, stats)
+    }
+
+    pub fn unregister(&self, id: u64) {
+        self.lock().remove(&id);
+    }
+
+    /// The counters of every open session, by id.
+    pub fn snapshot(&self) -> Vec<(u64, Arc<SessionStats>)> {
+        self.lock()
+            .iter()
+            .map(|(id, s)| (*id, Arc::clone(s)))
+            .collect()
+    }
+
+    pub fn count(&self) -> usize {
+        self.lock().len()
+    }
+
+    fn lock(&self) -> std::sync::MutexGuard<'_, BTreeMap<u64, Arc<SessionStats>>> {
+        self.open.lock().unwrap_or_else(|e| e.into_inner())
+    }
+}

@@ -1,0 +1,1 @@
+//! Holder crate for the workspace-wide integration tests in `tests/tests/`.
