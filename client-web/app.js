@@ -174,8 +174,17 @@ function sendSize() {
 new ResizeObserver(() => sendSize()).observe(canvas);
 
 // --- frames -----------------------------------------------------------------------------
-async function onFrame(buffer) {
+async function onFrame(socket, buffer) {
   const header = parseFrameHeader(buffer);
+  try {
+    await drawFrame(header, buffer);
+  } finally {
+    // Acknowledge once shown: the server sends only a small window of frames ahead of acks.
+    if (socket.readyState === WebSocket.OPEN) socket.send(JSON.stringify({ type: 'ack', sequence: header.sequence }));
+  }
+}
+
+async function drawFrame(header, buffer) {
   const now = performance.now();
   const sentAt = state.pendingInputs.get(header.inputId);
   if (sentAt !== undefined) {
@@ -232,7 +241,7 @@ function connect() {
   socket.addEventListener('open', () => { state.reconnectDelayMs = 250; });
   socket.addEventListener('message', (event) => {
     if (typeof event.data === 'string') return onText(JSON.parse(event.data));
-    onFrame(event.data).catch((err) => showError(`bad frame: ${err.message}`));
+    onFrame(socket, event.data).catch((err) => showError(`bad frame: ${err.message}`));
   });
   socket.addEventListener('close', (event) => {
     if (state.socket !== socket) return;

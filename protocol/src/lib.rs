@@ -24,43 +24,76 @@ pub type InputId = u64;
 /// Largest `input_id` a client may send (the largest integer a JavaScript number holds exactly).
 pub const MAX_INPUT_ID: u64 = (1 << 53) - 1;
 
-/// A message from the client to the server (a JSON text message).
+/// A message from the client to the server (a JSON text message, tagged by `type`).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(tag = "type", rename_all = "snake_case", deny_unknown_fields)]
+#[serde(tag = "type", rename_all = "snake_case")]
 pub enum ClientMessage {
-    /// Place the camera. Positions are in world space.
-    Camera {
-        input_id: InputId,
-        eye: [f64; 3],
-        target: [f64; 3],
-        up: [f64; 3],
-        /// Vertical field of view in degrees; 45 when absent.
-        #[serde(default)]
-        fov_y_deg: Option<f64>,
-    },
-    /// Set the isovalue of the (first) isosurface.
-    Isovalue { input_id: InputId, value: f64 },
-    /// Set the render size in pixels.
-    Resize {
-        input_id: InputId,
-        width: u32,
-        height: u32,
-    },
-    /// Pin the scene time in seconds, or follow the live animation with `null`.
-    Time {
-        input_id: InputId,
-        time: Option<f64>,
-    },
+    Camera(CameraInput),
+    Isovalue(IsovalueInput),
+    Resize(ResizeInput),
+    Time(TimeInput),
+    Ack(FrameAck),
+}
+
+/// The `type` of every client message, in the order of [`ClientMessage`].
+pub const CLIENT_MESSAGE_TYPES: [&str; 5] = ["camera", "isovalue", "resize", "time", "ack"];
+
+/// Place the camera. Positions are in world space.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CameraInput {
+    pub input_id: InputId,
+    pub eye: [f64; 3],
+    pub target: [f64; 3],
+    pub up: [f64; 3],
+    /// Vertical field of view in degrees; 45 when absent.
+    #[serde(default)]
+    pub fov_y_deg: Option<f64>,
+}
+
+/// Set the isovalue of the (first) isosurface.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct IsovalueInput {
+    pub input_id: InputId,
+    pub value: f64,
+}
+
+/// Set the render size in pixels.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ResizeInput {
+    pub input_id: InputId,
+    pub width: u32,
+    pub height: u32,
+}
+
+/// Pin the scene time in seconds, or follow the live animation with `null`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TimeInput {
+    pub input_id: InputId,
+    pub time: Option<f64>,
+}
+
+/// The client has received (and shown) every frame up to `sequence`. The server keeps at
+/// most a small window of unacknowledged frames in flight per session, so frames never pile
+/// up in network buffers in front of a slow client.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct FrameAck {
+    pub sequence: u64,
 }
 
 impl ClientMessage {
-    /// The client's identifier for this input.
-    pub fn input_id(&self) -> InputId {
+    /// The client's identifier for this input; acknowledgements carry none.
+    pub fn input_id(&self) -> Option<InputId> {
         match self {
-            ClientMessage::Camera { input_id, .. }
-            | ClientMessage::Isovalue { input_id, .. }
-            | ClientMessage::Resize { input_id, .. }
-            | ClientMessage::Time { input_id, .. } => *input_id,
+            ClientMessage::Camera(m) => Some(m.input_id),
+            ClientMessage::Isovalue(m) => Some(m.input_id),
+            ClientMessage::Resize(m) => Some(m.input_id),
+            ClientMessage::Time(m) => Some(m.input_id),
+            ClientMessage::Ack(_) => None,
         }
     }
 }
@@ -93,6 +126,8 @@ pub struct SessionInfo {
     pub isovalue_slider: [f64; 2],
     /// A camera that frames the whole scene.
     pub camera: CameraPose,
+    /// Frames the server sends ahead of the client's `ack`s.
+    pub frame_window: u32,
 }
 
 /// A camera as the server reports it.
@@ -148,17 +183,20 @@ mod tests {
         .expect("documented camera message parses");
         assert_eq!(
             camera,
-            ClientMessage::Camera {
+            ClientMessage::Camera(CameraInput {
                 input_id: 7,
                 eye: [0.0, 0.0, 5.0],
                 target: [0.0; 3],
                 up: [0.0, 1.0, 0.0],
                 fov_y_deg: None
-            }
+            })
         );
         let time: ClientMessage =
             serde_json::from_str(r#"{"type":"time","input_id":1,"time":null}"#).expect("parses");
-        assert_eq!(time.input_id(), 1);
+        assert_eq!(time.input_id(), Some(1));
+        let ack: ClientMessage =
+            serde_json::from_str(r#"{"type":"ack","sequence":3}"#).expect("parses");
+        assert_eq!(ack, ClientMessage::Ack(FrameAck { sequence: 3 }));
         assert!(serde_json::from_str::<ClientMessage>(r#"{"type":"zoom","input_id":1}"#).is_err());
         assert!(serde_json::from_str::<ClientMessage>(
             r#"{"type":"isovalue","input_id":1,"value":0.5,"extra":1}"#

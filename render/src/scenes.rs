@@ -98,7 +98,7 @@ const PALETTE: [Vec3; 6] = [
 ];
 
 fn blobs(count: usize, time: f64) -> Scene {
-    let mut rng = SplitMix64(0x1503_A7);
+    let mut rng = SplitMix64(0x0015_03A7);
     let balls = (0..count)
         .map(|i| {
             let freq = Vec3::new(

@@ -3,7 +3,10 @@
 //! Every message is checked in full before anything changes, so a rejected input leaves the
 //! session exactly as it was. Errors name the field and the limit that was broken.
 
-use isoray_protocol::{ClientMessage, ErrorMessage, InputId, MAX_INPUT_ID};
+use isoray_protocol::{
+    CameraInput, ClientMessage, ErrorMessage, InputId, IsovalueInput, ResizeInput, TimeInput,
+    CLIENT_MESSAGE_TYPES, MAX_INPUT_ID,
+};
 use isoray_render::Camera;
 
 /// What a session renders, as the client last set it.
@@ -40,13 +43,21 @@ fn error(code: &str, message: String, input_id: Option<InputId>) -> ErrorMessage
     }
 }
 
-/// Parses one text message. Distinguishes broken JSON, unknown types and bad fields.
+/// Parses one text message. Distinguishes broken JSON, unknown types and bad fields, and
+/// names the field (`eye[1]`) that is wrong.
 pub fn parse(text: &str) -> Result<ClientMessage, ErrorMessage> {
     let value: serde_json::Value = serde_json::from_str(text)
         .map_err(|e| error("bad_json", format!("message is not valid JSON: {e}"), None))?;
-    let input_id = value.get("input_id").and_then(|v| v.as_u64());
-    let kind = match value.get("type") {
-        Some(serde_json::Value::String(kind)) => kind.clone(),
+    let serde_json::Value::Object(mut fields) = value else {
+        return Err(error(
+            "invalid_message",
+            "message must be a JSON object".into(),
+            None,
+        ));
+    };
+    let input_id = fields.get("input_id").and_then(|v| v.as_u64());
+    let kind = match fields.remove("type") {
+        Some(serde_json::Value::String(kind)) => kind,
         Some(_) => {
             return Err(error(
                 "invalid_message",
@@ -54,61 +65,75 @@ pub fn parse(text: &str) -> Result<ClientMessage, ErrorMessage> {
                 input_id,
             ))
         }
-        None if value.is_object() => {
+        None => {
             return Err(error(
                 "invalid_message",
                 "message has no `type` field".into(),
                 input_id,
             ))
         }
-        None => {
-            return Err(error(
+    };
+    let body = serde_json::Value::Object(fields);
+    fn typed<T: serde::de::DeserializeOwned>(
+        kind: &str,
+        body: serde_json::Value,
+        input_id: Option<InputId>,
+    ) -> Result<T, ErrorMessage> {
+        serde_path_to_error::deserialize(body).map_err(|e| {
+            let path = e.path().to_string();
+            let field = if path == "." {
+                String::new()
+            } else {
+                format!(", field `{path}`")
+            };
+            error(
                 "invalid_message",
-                "message must be a JSON object".into(),
-                None,
+                format!("`{kind}` message{field}: {}", e.into_inner()),
+                input_id,
+            )
+        })
+    }
+    Ok(match kind.as_str() {
+        "camera" => ClientMessage::Camera(typed(&kind, body, input_id)?),
+        "isovalue" => ClientMessage::Isovalue(typed(&kind, body, input_id)?),
+        "resize" => ClientMessage::Resize(typed(&kind, body, input_id)?),
+        "time" => ClientMessage::Time(typed(&kind, body, input_id)?),
+        "ack" => ClientMessage::Ack(typed(&kind, body, input_id)?),
+        _ => {
+            return Err(error(
+                "unknown_type",
+                format!(
+                    "unknown message type `{kind}`; expected one of {}",
+                    CLIENT_MESSAGE_TYPES.join(", ")
+                ),
+                input_id,
             ))
         }
-    };
-    const KNOWN: [&str; 4] = ["camera", "isovalue", "resize", "time"];
-    if !KNOWN.contains(&kind.as_str()) {
-        return Err(error(
-            "unknown_type",
-            format!(
-                "unknown message type `{kind}`; expected one of {}",
-                KNOWN.join(", ")
-            ),
-            input_id,
-        ));
-    }
-    serde_path_to_error::deserialize(value).map_err(|e| {
-        let path = e.path().to_string();
-        error(
-            "invalid_message",
-            format!("`{kind}` message, field `{path}`: {}", e.into_inner()),
-            input_id,
-        )
     })
 }
 
-/// Checks `message` against `limits` and, if it is valid, applies it to `settings`.
+/// Checks a view input against `limits` and, if it is valid, applies it to `settings`.
+/// Acknowledgements are not view inputs; the session handles them.
 pub fn apply(
     message: &ClientMessage,
     settings: &mut Settings,
     limits: &Limits,
 ) -> Result<(), ErrorMessage> {
-    let input_id = message.input_id();
+    let Some(input_id) = message.input_id() else {
+        return Ok(());
+    };
     let fail = |message: String| Err(error("invalid_value", message, Some(input_id)));
     if input_id > MAX_INPUT_ID {
         return fail(format!("input_id {input_id} exceeds 2^53 - 1"));
     }
-    match *message {
-        ClientMessage::Camera {
+    match message {
+        ClientMessage::Camera(CameraInput {
             eye,
             target,
             up,
             fov_y_deg,
             ..
-        } => {
+        }) => {
             for (name, v) in [("eye", eye), ("target", target), ("up", up)] {
                 for (i, c) in v.iter().enumerate() {
                     if !c.is_finite() || c.abs() > MAX_COORDINATE {
@@ -122,7 +147,7 @@ pub fn apply(
             if !(1.0..=170.0).contains(&fov) {
                 return fail(format!("camera.fov_y_deg = {fov} must be in [1, 170]"));
             }
-            let to_vec = |v: [f64; 3]| glam::DVec3::from_array(v);
+            let to_vec = |v: &[f64; 3]| glam::DVec3::from_array(*v);
             let (eye, target, up) = (to_vec(eye), to_vec(target), to_vec(up));
             let forward = target - eye;
             if forward.length() < 1e-6 {
@@ -138,8 +163,9 @@ pub fn apply(
                 fov_y_deg: fov as f32,
             };
         }
-        ClientMessage::Isovalue { value, .. } => {
+        ClientMessage::Isovalue(IsovalueInput { value, .. }) => {
             let (lo, hi) = limits.isovalue_range;
+            let value = *value;
             if !(value.is_finite() && value > lo as f64 && value < hi as f64) {
                 return fail(format!(
                     "isovalue {value} is outside the scene's range ({lo}, {hi})"
@@ -147,8 +173,8 @@ pub fn apply(
             }
             settings.isovalue = value as f32;
         }
-        ClientMessage::Resize { width, height, .. } => {
-            let max = limits.max_size;
+        ClientMessage::Resize(ResizeInput { width, height, .. }) => {
+            let (width, height, max) = (*width, *height, limits.max_size);
             if width == 0 || height == 0 {
                 return fail(format!(
                     "resize {width}×{height}: width and height must be at least 1"
@@ -162,7 +188,7 @@ pub fn apply(
             settings.width = width;
             settings.height = height;
         }
-        ClientMessage::Time { time, .. } => match time {
+        ClientMessage::Time(TimeInput { time, .. }) => match *time {
             None => settings.pinned_time = None,
             Some(t) if t.is_finite() && (0.0..=1.0e9).contains(&t) => {
                 settings.pinned_time = Some(t)
@@ -173,6 +199,7 @@ pub fn apply(
                 ))
             }
         },
+        ClientMessage::Ack(_) => return Ok(()),
     }
     settings.last_input_id = input_id;
     settings.version += 1;

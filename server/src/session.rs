@@ -8,9 +8,11 @@
 //! - the writer takes frames from the slot and error messages from a small queue and sends
 //!   them.
 //!
-//! The slot holds at most one frame. While a client does not read, the writer blocks in
-//! `send`, the slot stays full, and the renderer stops: a slow client costs one frame of
-//! memory and no CPU. When it reads again, the next frame rendered shows the newest state.
+//! Flow control: the slot holds at most one frame, and the renderer starts a frame only while
+//! fewer than [`FRAME_WINDOW`] sent frames await the client's `ack`. A client that stops
+//! reading stops acknowledging, so the renderer stops: it costs one frame of memory and no
+//! CPU, and no backlog builds up in socket buffers. When it reads and acknowledges again, the
+//! next frame rendered shows the newest state.
 
 use crate::input::{self, Limits, Settings};
 use crate::scenes::{micros, SceneEntry};
@@ -19,7 +21,8 @@ use axum::body::Bytes;
 use axum::extract::ws::{CloseFrame, Message, WebSocket};
 use futures_util::{SinkExt, StreamExt};
 use isoray_protocol::{
-    Codec, ErrorMessage, FrameHeader, ServerMessage, SessionInfo, StageTimings, PROTOCOL_VERSION,
+    ClientMessage, Codec, ErrorMessage, FrameAck, FrameHeader, ServerMessage, SessionInfo,
+    StageTimings, PROTOCOL_VERSION,
 };
 use isoray_render::View;
 use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
@@ -27,6 +30,9 @@ use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 use tokio::sync::{mpsc, oneshot, Notify};
 use tracing::Instrument;
+
+/// Frames sent ahead of the client's acknowledgements: one on screen, one on the wire.
+pub const FRAME_WINDOW: u64 = 2;
 
 /// Error messages queued for a client that is not reading; more are dropped.
 const CONTROL_QUEUE: usize = 16;
@@ -38,6 +44,9 @@ pub struct SessionStats {
     pub frames_sent: AtomicU64,
     pub inputs_applied: AtomicU64,
     pub inputs_rejected: AtomicU64,
+    /// Highest frame sequence sent, and highest acknowledged by the client.
+    pub last_sent_sequence: AtomicU64,
+    pub last_acked_sequence: AtomicU64,
     /// Frames rendered but not yet handed to the socket, now and at most.
     pub pending_frames: AtomicUsize,
     pub max_pending_frames: AtomicUsize,
@@ -46,13 +55,12 @@ pub struct SessionStats {
 /// The one-frame mailbox between renderer and writer.
 #[derive(Default)]
 struct FrameSlot {
-    frame: Mutex<Option<Bytes>>,
+    frame: Mutex<Option<(u64, Bytes)>>,
     ready: Notify,
-    free: Notify,
 }
 
 impl FrameSlot {
-    fn lock(&self) -> std::sync::MutexGuard<'_, Option<Bytes>> {
+    fn lock(&self) -> std::sync::MutexGuard<'_, Option<(u64, Bytes)>> {
         // Only plain values live here; a panic elsewhere cannot leave them inconsistent.
         self.frame.lock().unwrap_or_else(|e| e.into_inner())
     }
@@ -61,7 +69,7 @@ impl FrameSlot {
         self.lock().is_none()
     }
 
-    fn put(&self, frame: Bytes, stats: &SessionStats) {
+    fn put(&self, frame: (u64, Bytes), stats: &SessionStats) {
         let replaced = self.lock().replace(frame).is_some();
         if !replaced {
             let now = stats.pending_frames.fetch_add(1, Ordering::SeqCst) + 1;
@@ -70,11 +78,10 @@ impl FrameSlot {
         self.ready.notify_one();
     }
 
-    fn take(&self, stats: &SessionStats) -> Option<Bytes> {
+    fn take(&self, stats: &SessionStats) -> Option<(u64, Bytes)> {
         let frame = self.lock().take();
         if frame.is_some() {
             stats.pending_frames.fetch_sub(1, Ordering::SeqCst);
-            self.free.notify_one();
         }
         frame
     }
@@ -128,6 +135,7 @@ async fn run_registered(
             limits.isovalue_range.1 as f64,
         ],
         isovalue_slider: [slider.0 as f64, slider.1 as f64],
+        frame_window: FRAME_WINDOW as u32,
         camera: isoray_protocol::CameraPose {
             eye: camera.eye.as_dvec3().to_array(),
             target: camera.target.as_dvec3().to_array(),
@@ -137,7 +145,8 @@ async fn run_registered(
     });
 
     let settings = Arc::new(Mutex::new(settings));
-    let changed = Arc::new(Notify::new());
+    // Wakes the renderer: an input applied, an ack received, the slot emptied.
+    let wake = Arc::new(Notify::new());
     let slot = Arc::new(FrameSlot::default());
     let (control_tx, control_rx) = mpsc::channel::<Message>(CONTROL_QUEUE);
     let (mut sink, stream) = socket.split();
@@ -146,9 +155,9 @@ async fn run_registered(
     let outcome = async {
         sink.send(Message::Text(to_json(&info).into())).await?;
         tokio::select! {
-            r = read_loop(stream, &settings, &changed, &limits, &control_tx, stats) => r,
-            r = write_loop(&mut sink, control_rx, &slot, stats) => r,
-            () = render_loop(app, &entry, &settings, &changed, &slot, stats) => Ok(()),
+            r = read_loop(stream, &settings, &wake, &limits, &control_tx, stats) => r,
+            r = write_loop(&mut sink, control_rx, &slot, &wake, stats) => r,
+            () = render_loop(app, &entry, &settings, &wake, &slot, stats) => Ok(()),
             _ = async { shutdown.wait_for(|down| *down).await.map(|_| ()) } => {
                 let close = CloseFrame { code: 1001, reason: "server shutting down".into() };
                 let _ = sink.send(Message::Close(Some(close))).await;
@@ -176,16 +185,19 @@ fn to_json(msg: &ServerMessage) -> String {
 async fn read_loop(
     mut stream: futures_util::stream::SplitStream<WebSocket>,
     settings: &Mutex<Settings>,
-    changed: &Notify,
+    wake: &Notify,
     limits: &Limits,
     control: &mpsc::Sender<Message>,
     stats: &SessionStats,
 ) -> Result<(), axum::Error> {
     while let Some(message) = stream.next().await {
         let result = match message? {
-            Message::Text(text) => input::parse(text.as_str()).and_then(|msg| {
-                let mut s = settings.lock().unwrap_or_else(|e| e.into_inner());
-                input::apply(&msg, &mut s, limits)
+            Message::Text(text) => input::parse(text.as_str()).and_then(|msg| match msg {
+                ClientMessage::Ack(FrameAck { sequence }) => acknowledge(sequence, stats),
+                msg => {
+                    let mut s = settings.lock().unwrap_or_else(|e| e.into_inner());
+                    input::apply(&msg, &mut s, limits)
+                }
             }),
             Message::Binary(_) => Err(ErrorMessage {
                 code: "unsupported".into(),
@@ -198,7 +210,7 @@ async fn read_loop(
         match result {
             Ok(()) => {
                 stats.inputs_applied.fetch_add(1, Ordering::Relaxed);
-                changed.notify_one();
+                wake.notify_one();
             }
             Err(error) => {
                 stats.inputs_rejected.fetch_add(1, Ordering::Relaxed);
@@ -212,10 +224,27 @@ async fn read_loop(
     Ok(())
 }
 
+/// Records the client's acknowledgement of every frame up to `sequence`.
+fn acknowledge(sequence: u64, stats: &SessionStats) -> Result<(), ErrorMessage> {
+    let sent = stats.last_sent_sequence.load(Ordering::SeqCst);
+    if sequence > sent {
+        return Err(ErrorMessage {
+            code: "invalid_value".into(),
+            message: format!("ack of frame {sequence}, but the last frame sent is {sent}"),
+            input_id: None,
+        });
+    }
+    stats
+        .last_acked_sequence
+        .fetch_max(sequence, Ordering::SeqCst);
+    Ok(())
+}
+
 async fn write_loop(
     sink: &mut futures_util::stream::SplitSink<WebSocket, Message>,
     mut control: mpsc::Receiver<Message>,
     slot: &FrameSlot,
+    wake: &Notify,
     stats: &SessionStats,
 ) -> Result<(), axum::Error> {
     loop {
@@ -226,7 +255,9 @@ async fn write_loop(
                 None => return Ok(()),
             },
             () = slot.ready.notified() => {
-                if let Some(frame) = slot.take(stats) {
+                if let Some((sequence, frame)) = slot.take(stats) {
+                    wake.notify_one();
+                    stats.last_sent_sequence.store(sequence, Ordering::SeqCst);
                     sink.send(Message::Binary(frame)).await?;
                     stats.frames_sent.fetch_add(1, Ordering::Relaxed);
                 }
@@ -239,7 +270,7 @@ async fn render_loop(
     app: &AppState,
     entry: &Arc<SceneEntry>,
     settings: &Mutex<Settings>,
-    changed: &Notify,
+    wake: &Notify,
     slot: &FrameSlot,
     stats: &SessionStats,
 ) {
@@ -250,8 +281,11 @@ async fn render_loop(
     let mut next_tick = tokio::time::Instant::now();
     let mut sequence = 0u64;
     loop {
-        while !slot.is_empty() {
-            slot.free.notified().await;
+        // Flow control: one frame in the slot at most, and a window of unacknowledged ones.
+        let acked = stats.last_acked_sequence.load(Ordering::SeqCst);
+        if !slot.is_empty() || sequence + 1 > acked + FRAME_WINDOW {
+            wake.notified().await;
+            continue;
         }
         let current = settings.lock().unwrap_or_else(|e| e.into_inner()).clone();
         let live = current.pinned_time.is_none();
@@ -264,11 +298,11 @@ async fn render_loop(
         if !view_changed && (!time_changed || tokio::time::Instant::now() < next_tick) {
             if live {
                 tokio::select! {
-                    () = changed.notified() => {}
+                    () = wake.notified() => {}
                     () = tokio::time::sleep_until(next_tick) => {}
                 }
             } else {
-                changed.notified().await;
+                wake.notified().await;
             }
             continue;
         }
@@ -286,11 +320,11 @@ async fn render_loop(
         match rx.await {
             Ok(Ok(frame)) => {
                 stats.frames_rendered.fetch_add(1, Ordering::Relaxed);
-                slot.put(frame, stats);
+                slot.put((sequence, frame), stats);
             }
             Ok(Err(e)) => {
                 tracing::warn!(error = %e, "frame failed; the session waits for the next change");
-                changed.notified().await;
+                wake.notified().await;
             }
             Err(_) => return, // the pool dropped the job: the server is going down
         }

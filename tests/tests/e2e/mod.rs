@@ -1,0 +1,6 @@
+//! The server run in-process on an ephemeral loopback port, driven over real sockets.
+
+mod bad_input;
+mod slow_client;
+mod stream;
+mod support;

@@ -1,0 +1,184 @@
+//! Helpers: start a server on 127.0.0.1:0, open a websocket, read frames and messages.
+
+use futures_util::{SinkExt, StreamExt};
+use isoray_protocol::{ErrorMessage, FrameHeader, ServerMessage, SessionInfo, FRAME_HEADER_LEN};
+use isoray_server::{AppState, Config};
+use std::net::SocketAddr;
+use std::time::Duration;
+use tokio::net::TcpStream;
+use tokio::sync::oneshot;
+use tokio::task::JoinHandle;
+use tokio_tungstenite::tungstenite::Message;
+use tokio_tungstenite::{MaybeTlsStream, WebSocketStream};
+
+pub type Ws = WebSocketStream<MaybeTlsStream<TcpStream>>;
+
+/// How long any single wait in a test may take before the test fails.
+pub const WAIT: Duration = Duration::from_secs(20);
+
+pub struct TestServer {
+    pub addr: SocketAddr,
+    pub state: AppState,
+    shutdown: Option<oneshot::Sender<()>>,
+    handle: Option<JoinHandle<std::io::Result<()>>>,
+}
+
+impl TestServer {
+    /// A server with default settings plus `args` (flags as on the command line).
+    pub async fn start(args: &[&str]) -> TestServer {
+        let mut argv = vec!["isoray", "--listen", "127.0.0.1:0"];
+        argv.extend_from_slice(args);
+        let config = <Config as clap::Parser>::parse_from(argv);
+        let state = AppState::new(config).expect("valid test config");
+        let listener = tokio::net::TcpListener::bind("127.0.0.1:0")
+            .await
+            .expect("bind loopback");
+        let addr = listener.local_addr().expect("local addr");
+        let (tx, rx) = oneshot::channel::<()>();
+        let handle = tokio::spawn(isoray_server::serve(listener, state.clone(), async move {
+            let _ = rx.await;
+        }));
+        TestServer {
+            addr,
+            state,
+            shutdown: Some(tx),
+            handle: Some(handle),
+        }
+    }
+
+    pub fn url(&self, path: &str) -> String {
+        format!("ws://{}{}", self.addr, path)
+    }
+
+    /// Opens a stream of `scene` and returns the socket and the server's `info`.
+    pub async fn connect(&self, scene: &str) -> (Ws, SessionInfo) {
+        let (mut ws, _) =
+            tokio_tungstenite::connect_async(self.url(&format!("/api/v1/scenes/{scene}/stream")))
+                .await
+                .expect("websocket connects");
+        let info = match next_text(&mut ws).await {
+            ServerMessage::Info(info) => info,
+            other => panic!("expected info first, got {other:?}"),
+        };
+        (ws, info)
+    }
+
+    /// Stops the server and waits for it to drain.
+    pub async fn stop(mut self) {
+        if let Some(tx) = self.shutdown.take() {
+            let _ = tx.send(());
+        }
+        if let Some(handle) = self.handle.take() {
+            tokio::time::timeout(WAIT, handle)
+                .await
+                .expect("server drains in time")
+                .expect("server task did not panic")
+                .expect("server ran without I/O error");
+        }
+    }
+}
+
+pub async fn send_json(ws: &mut Ws, value: serde_json::Value) {
+    ws.send(Message::Text(value.to_string().into()))
+        .await
+        .expect("send");
+}
+
+pub async fn send_text(ws: &mut Ws, text: &str) {
+    ws.send(Message::Text(text.to_string().into()))
+        .await
+        .expect("send");
+}
+
+/// The next text message, skipping frames.
+pub async fn next_text(ws: &mut Ws) -> ServerMessage {
+    loop {
+        let msg = tokio::time::timeout(WAIT, ws.next())
+            .await
+            .expect("a message within the wait")
+            .expect("stream open")
+            .expect("no websocket error");
+        if let Message::Text(text) = msg {
+            return serde_json::from_str(text.as_str()).expect("server text is a ServerMessage");
+        }
+    }
+}
+
+/// The next error message, skipping frames.
+pub async fn next_error(ws: &mut Ws) -> ErrorMessage {
+    match next_text(ws).await {
+        ServerMessage::Error(e) => e,
+        other => panic!("expected an error, got {other:?}"),
+    }
+}
+
+/// A decoded frame.
+pub struct Frame {
+    pub header: FrameHeader,
+    pub image: image::RgbImage,
+}
+
+/// The next binary frame, decoded and acknowledged; text messages in between are skipped.
+pub async fn next_frame(ws: &mut Ws) -> Frame {
+    let frame = next_frame_unacked(ws).await;
+    send_json(
+        ws,
+        serde_json::json!({"type": "ack", "sequence": frame.header.sequence}),
+    )
+    .await;
+    frame
+}
+
+/// The next binary frame, without acknowledging it.
+pub async fn next_frame_unacked(ws: &mut Ws) -> Frame {
+    loop {
+        let msg = tokio::time::timeout(WAIT, ws.next())
+            .await
+            .expect("a frame within the wait")
+            .expect("stream open")
+            .expect("no websocket error");
+        if let Message::Binary(bytes) = msg {
+            return decode_frame(&bytes);
+        }
+    }
+}
+
+pub fn decode_frame(bytes: &[u8]) -> Frame {
+    let header = FrameHeader::decode(bytes).expect("valid frame header");
+    let image = image::load_from_memory(&bytes[FRAME_HEADER_LEN..])
+        .expect("payload decodes")
+        .to_rgb8();
+    Frame { header, image }
+}
+
+/// Reads frames until one answers `input_id` (or a later input).
+pub async fn frame_for_input(ws: &mut Ws, input_id: u64) -> Frame {
+    loop {
+        let frame = next_frame(ws).await;
+        if frame.header.input_id >= input_id {
+            return frame;
+        }
+    }
+}
+
+/// Mean absolute difference per channel, 0–255.
+pub fn mean_abs_diff(a: &image::RgbImage, b: &image::RgbImage) -> f64 {
+    assert_eq!(a.dimensions(), b.dimensions());
+    let sum: u64 = a
+        .as_raw()
+        .iter()
+        .zip(b.as_raw())
+        .map(|(x, y)| x.abs_diff(*y) as u64)
+        .sum();
+    sum as f64 / a.as_raw().len() as f64
+}
+
+/// Standard deviation of the luma-ish channel sum, to tell a picture from a flat fill.
+pub fn pixel_stddev(img: &image::RgbImage) -> f64 {
+    let values: Vec<f64> = img
+        .pixels()
+        .map(|p| p.0.iter().map(|&c| c as f64).sum::<f64>() / 3.0)
+        .collect();
+    let mean = values.iter().sum::<f64>() / values.len() as f64;
+    (values.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / values.len() as f64).sqrt()
+}

@@ -1,0 +1,4 @@
+//! All of isoray's cross-crate and end-to-end tests, in one binary (one link, shared helpers).
+//! Each module is named after what it guards.
+
+mod e2e;
