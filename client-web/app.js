@@ -15,6 +15,8 @@ const state = {
   scene: params.get('scene'),
   orbit: null,          // { target: [x,y,z], yaw, pitch, distance, fov }
   isovalue: params.has('iso') ? Number(params.get('iso')) : null,
+  // Pinned scene time in seconds, or null to follow the live animation.
+  time: params.has('t') && Number.isFinite(Number(params.get('t'))) ? Number(params.get('t')) : null,
   info: null,
   socket: null,
   nextInputId: 1,
@@ -86,6 +88,7 @@ function saveUrl() {
     p.set('cam', [o.yaw, o.pitch, o.distance, ...o.target].map((v) => +v.toFixed(5)).join(','));
   }
   if (state.isovalue !== null) p.set('iso', String(state.isovalue));
+  if (state.time !== null) p.set('t', String(state.time));
   history.replaceState(null, '', `?${p}`);
 }
 
@@ -167,7 +170,7 @@ let lastSize = '';
 function sendSize() {
   const [width, height] = renderSize();
   const key = `${width}x${height}`;
-  if (key === lastSize) return;
+  if (key === lastSize || !state.socket || state.socket.readyState !== WebSocket.OPEN) return;
   lastSize = key;
   send({ type: 'resize', width, height });
 }
@@ -265,6 +268,7 @@ function onText(message) {
     isoSlider.value = String(state.isovalue);
     isoOut.textContent = state.isovalue.toFixed(3);
     state.orbit = state.orbit || orbitFromUrl() || orbitFromPose(message.camera);
+    if (state.time !== null) send({ type: 'time', time: state.time });
     sendSize();
     send({ type: 'camera', ...poseFromOrbit(state.orbit) });
     if (state.isovalue !== message.isovalue) send({ type: 'isovalue', value: state.isovalue });
