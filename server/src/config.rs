@@ -34,6 +34,10 @@ pub struct Config {
     #[arg(long, env = "ISORAY_MAX_FPS", default_value_t = 30.0)]
     pub max_fps: f64,
 
+    /// Milliseconds without input after which a still view gets its lossless frame.
+    #[arg(long, env = "ISORAY_STILL_AFTER_MS", default_value_t = 150)]
+    pub still_after_ms: u64,
+
     /// JPEG quality of streamed frames, 1–100.
     #[arg(long, env = "ISORAY_JPEG_QUALITY", default_value_t = 80)]
     pub jpeg_quality: u8,

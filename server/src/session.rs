@@ -22,7 +22,7 @@ use axum::extract::ws::{CloseFrame, Message, WebSocket};
 use futures_util::{SinkExt, StreamExt};
 use isoray_protocol::{
     ClientMessage, Codec, ErrorMessage, FrameAck, FrameHeader, ServerMessage, SessionInfo,
-    StageTimings, PROTOCOL_VERSION,
+    StageTimings, FLAG_STILL, PROTOCOL_VERSION,
 };
 use isoray_render::View;
 use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
@@ -276,8 +276,10 @@ async fn render_loop(
 ) {
     let fps = app.config().max_fps;
     let frame_interval = Duration::from_secs_f64(1.0 / fps);
-    let quality = app.config().jpeg_quality;
-    let mut last: Option<(u64, f64)> = None;
+    let still_delay = Duration::from_millis(app.config().still_after_ms);
+    // What the last frame showed: settings version, scene time, and whether it was the still.
+    let mut last: Option<(u64, f64, Quality)> = None;
+    let mut last_change = tokio::time::Instant::now();
     let mut next_tick = tokio::time::Instant::now();
     let mut sequence = 0u64;
     loop {
@@ -288,27 +290,42 @@ async fn render_loop(
             continue;
         }
         let current = settings.lock().unwrap_or_else(|e| e.into_inner()).clone();
-        let live = current.pinned_time.is_none();
         let time = current
             .pinned_time
             .unwrap_or_else(|| (app.scenes().live_time() * fps).floor() / fps);
-        let view_changed = last.map(|(v, _)| v) != Some(current.version);
-        let time_changed = last.map(|(_, t)| t) != Some(time);
-        // New input renders at once; animation alone renders at most once per tick.
-        if !view_changed && (!time_changed || tokio::time::Instant::now() < next_tick) {
-            if live {
-                tokio::select! {
-                    () = wake.notified() => {}
-                    () = tokio::time::sleep_until(next_tick) => {}
-                }
+        let now = tokio::time::Instant::now();
+        let view_changed = last.map(|(v, _, _)| v) != Some(current.version);
+        let time_changed = last.map(|(_, t, _)| t) != Some(time);
+        let shown_still = last.is_some_and(|(_, _, q)| q == Quality::Still);
+        if view_changed {
+            last_change = now;
+        }
+        // New input renders at once; animation alone at most once per tick; once input stops
+        // on a still scene, one lossless still frame, then nothing until something changes.
+        let quality = if view_changed || (time_changed && now >= next_tick) {
+            Quality::Interactive
+        } else if !time_changed && !shown_still && now >= last_change + still_delay {
+            Quality::Still
+        } else {
+            let deadline = if time_changed {
+                next_tick
+            } else if !shown_still {
+                last_change + still_delay
             } else {
                 wake.notified().await;
+                continue;
+            };
+            tokio::select! {
+                () = wake.notified() => {}
+                () = tokio::time::sleep_until(deadline) => {}
             }
             continue;
+        };
+        if quality == Quality::Interactive {
+            next_tick = now + frame_interval;
         }
-        next_tick = tokio::time::Instant::now() + frame_interval;
         sequence += 1;
-        last = Some((current.version, time));
+        last = Some((current.version, time, quality));
 
         let (tx, rx) = oneshot::channel();
         let job_entry = Arc::clone(entry);
@@ -331,6 +348,15 @@ async fn render_loop(
     }
 }
 
+/// How a frame is made: fast while the view changes, lossless once it settles.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Quality {
+    /// JPEG at the configured quality.
+    Interactive,
+    /// PNG, bit-exact to the renderer's output, flagged `FLAG_STILL`.
+    Still,
+}
+
 /// Prepares, traces and encodes one frame. Runs on the render pool.
 fn render_frame(
     app: &AppState,
@@ -338,7 +364,7 @@ fn render_frame(
     settings: &Settings,
     time: f64,
     sequence: u64,
-    quality: u8,
+    quality: Quality,
 ) -> Result<Bytes, crate::encode::EncodeError> {
     let state = entry.prepared_at(time);
     let view = View {
@@ -350,15 +376,22 @@ fn render_frame(
     let t0 = Instant::now();
     let fb = app.backend().render(&state.prepared, &view);
     let t1 = Instant::now();
-    let jpeg = crate::encode::jpeg(&fb, quality)?;
+    let (codec, flags, payload) = match quality {
+        Quality::Interactive => (
+            Codec::Jpeg,
+            0,
+            crate::encode::jpeg(&fb, app.config().jpeg_quality)?,
+        ),
+        Quality::Still => (Codec::Png, FLAG_STILL, crate::encode::png(&fb)?),
+    };
     let header = FrameHeader {
         version: PROTOCOL_VERSION,
         sequence,
         input_id: settings.last_input_id,
         width: fb.width,
         height: fb.height,
-        codec: Codec::Jpeg,
-        flags: 0,
+        codec,
+        flags,
         timings: StageTimings {
             update_us: state.update_us,
             build_us: state.build_us,
@@ -367,8 +400,8 @@ fn render_frame(
         },
         scene_time: time,
     };
-    let mut bytes = Vec::with_capacity(isoray_protocol::FRAME_HEADER_LEN + jpeg.len());
+    let mut bytes = Vec::with_capacity(isoray_protocol::FRAME_HEADER_LEN + payload.len());
     bytes.extend_from_slice(&header.encode());
-    bytes.extend_from_slice(&jpeg);
+    bytes.extend_from_slice(&payload);
     Ok(Bytes::from(bytes))
 }

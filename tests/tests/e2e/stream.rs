@@ -113,3 +113,74 @@ pub async fn reqwest_like_get(addr: std::net::SocketAddr, path: &str) -> String 
     let body = response.split("\r\n\r\n").nth(1).expect("body").to_string();
     body
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn still_view_gets_one_lossless_frame_then_silence() {
+    use isoray_protocol::{Codec, FLAG_STILL};
+    use isoray_render::scenes::DemoScene;
+    use isoray_render::{Camera, CpuBackend, View};
+    use std::sync::Arc;
+
+    let server = TestServer::start(&["--still-after-ms", "100"]).await;
+    let (mut ws, _) = server.connect("blobs").await;
+    send_json(&mut ws, json!({"type": "time", "input_id": 1, "time": 4.0})).await;
+    send_json(
+        &mut ws,
+        json!({"type": "resize", "input_id": 2, "width": 120, "height": 90}),
+    )
+    .await;
+    send_json(
+        &mut ws,
+        json!({"type": "camera", "input_id": 3, "eye": [1.0, 1.0, 8.0], "target": [0, 0, 0], "up": [0, 1, 0], "fov_y_deg": 40}),
+    )
+    .await;
+    send_json(
+        &mut ws,
+        json!({"type": "isovalue", "input_id": 4, "value": 0.6}),
+    )
+    .await;
+
+    let mut frame = frame_for_input(&mut ws, 4).await;
+    while frame.header.flags & FLAG_STILL == 0 {
+        assert_eq!(
+            frame.header.codec,
+            Codec::Jpeg,
+            "interactive frames are JPEG"
+        );
+        frame = next_frame(&mut ws).await;
+    }
+    assert_eq!(
+        frame.header.codec,
+        Codec::Png,
+        "the still frame is lossless"
+    );
+    assert_eq!(frame.header.input_id, 4);
+
+    // The same view rendered directly by the engine: the still frame must match it bit for bit.
+    let demo = DemoScene::Blobs;
+    let scene = Arc::new(demo.state_at(4.0)).prepare();
+    let view = View {
+        width: 120,
+        height: 90,
+        camera: Camera {
+            eye: glam::Vec3::new(1.0, 1.0, 8.0),
+            target: glam::Vec3::ZERO,
+            up: glam::Vec3::Y,
+            fov_y_deg: 40.0,
+        },
+        isovalue: 0.6,
+    };
+    let reference = CpuBackend::new(1).expect("pool").render(&scene, &view);
+    assert_eq!(
+        frame.image.as_raw(),
+        &reference.rgb,
+        "the still frame is bit-exact"
+    );
+
+    // Nothing changes, so nothing more is sent.
+    let quiet =
+        tokio::time::timeout(std::time::Duration::from_millis(1500), next_frame(&mut ws)).await;
+    assert!(quiet.is_err(), "a frame arrived although nothing changed");
+    drop(ws);
+    server.stop().await;
+}
