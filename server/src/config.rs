@@ -38,6 +38,18 @@ pub struct Config {
     #[arg(long, env = "ISORAY_STILL_AFTER_MS", default_value_t = 150)]
     pub still_after_ms: u64,
 
+    /// Seconds between websocket pings to each client.
+    #[arg(long, env = "ISORAY_PING_INTERVAL_SECS", default_value_t = 10)]
+    pub ping_interval_secs: u64,
+
+    /// Seconds without any message from a client (pongs included) before its session closes.
+    #[arg(long, env = "ISORAY_IDLE_TIMEOUT_SECS", default_value_t = 30)]
+    pub idle_timeout_secs: u64,
+
+    /// Most concurrent viewer sessions; more are refused with a close reason.
+    #[arg(long, env = "ISORAY_MAX_SESSIONS", default_value_t = 64)]
+    pub max_sessions: usize,
+
     /// JPEG quality of streamed frames, 1–100.
     #[arg(long, env = "ISORAY_JPEG_QUALITY", default_value_t = 80)]
     pub jpeg_quality: u8,
@@ -68,6 +80,15 @@ impl Config {
         }
         if !(self.max_fps.is_finite() && self.max_fps > 0.0 && self.max_fps <= 1000.0) {
             return Err(format!("--max-fps {} must be in (0, 1000]", self.max_fps));
+        }
+        if self.ping_interval_secs == 0 || self.idle_timeout_secs <= self.ping_interval_secs {
+            return Err(format!(
+                "--idle-timeout-secs {} must exceed --ping-interval-secs {} (> 0)",
+                self.idle_timeout_secs, self.ping_interval_secs
+            ));
+        }
+        if self.max_sessions == 0 {
+            return Err("--max-sessions must be at least 1".into());
         }
         if !(1..=100).contains(&self.jpeg_quality) {
             return Err(format!(

@@ -71,9 +71,15 @@ async fn stream(
         code: "not_websocket",
         message: format!("this route streams frames over a websocket: {e}"),
     })?;
-    Ok(ws
-        .max_message_size(MAX_CLIENT_MESSAGE_BYTES)
-        .on_upgrade(move |socket| session::run(socket, state, entry)))
+    let ws = ws.max_message_size(MAX_CLIENT_MESSAGE_BYTES);
+    Ok(match state.admit_session() {
+        Some(ticket) => ws.on_upgrade(move |socket| session::run(socket, state, entry, ticket)),
+        None => {
+            let limit = state.config().max_sessions;
+            tracing::warn!(limit, "session refused: server full");
+            ws.on_upgrade(move |socket| session::refuse(socket, limit))
+        }
+    })
 }
 
 /// Serves `state` on `listener` until `shutdown` completes, then closes sessions and drains.

@@ -16,7 +16,7 @@
 
 use crate::input::{self, Limits, Settings};
 use crate::scenes::{micros, SceneEntry};
-use crate::state::AppState;
+use crate::state::{AppState, SessionTicket};
 use axum::body::Bytes;
 use axum::extract::ws::{CloseFrame, Message, WebSocket};
 use futures_util::{SinkExt, StreamExt};
@@ -88,13 +88,26 @@ impl FrameSlot {
 }
 
 /// Runs a session until the client leaves, the connection fails or the server shuts down.
-pub async fn run(socket: WebSocket, app: AppState, entry: Arc<SceneEntry>) {
-    let (id, stats) = app.sessions().register();
-    let span = tracing::info_span!("session", id, scene = entry.id());
-    run_registered(socket, &app, entry, &stats)
+pub async fn run(socket: WebSocket, app: AppState, entry: Arc<SceneEntry>, ticket: SessionTicket) {
+    let span = tracing::info_span!("session", id = ticket.id, scene = entry.id());
+    run_registered(socket, &app, entry, &ticket.stats)
         .instrument(span)
         .await;
-    app.sessions().unregister(id);
+}
+
+/// Tells a client the server is full, then closes (code 1013, "try again later").
+pub async fn refuse(mut socket: WebSocket, limit: usize) {
+    let error = ServerMessage::Error(ErrorMessage {
+        code: "server_full".into(),
+        message: format!("the server is at its limit of {limit} sessions; try again later"),
+        input_id: None,
+    });
+    let _ = socket.send(Message::Text(to_json(&error).into())).await;
+    let close = CloseFrame {
+        code: 1013,
+        reason: "server full".into(),
+    };
+    let _ = socket.send(Message::Close(Some(close))).await;
 }
 
 async fn run_registered(
@@ -152,28 +165,58 @@ async fn run_registered(
     let (mut sink, stream) = socket.split();
 
     let mut shutdown = app.shutdown_signal();
+    let timing = Heartbeat {
+        ping_every: Duration::from_secs(app.config().ping_interval_secs),
+        idle_after: Duration::from_secs(app.config().idle_timeout_secs),
+    };
     let outcome = async {
         sink.send(Message::Text(to_json(&info).into())).await?;
         tokio::select! {
-            r = read_loop(stream, &settings, &wake, &limits, &control_tx, stats) => r,
-            r = write_loop(&mut sink, control_rx, &slot, &wake, stats) => r,
-            () = render_loop(app, &entry, &settings, &wake, &slot, stats) => Ok(()),
-            _ = async { shutdown.wait_for(|down| *down).await.map(|_| ()) } => {
-                let close = CloseFrame { code: 1001, reason: "server shutting down".into() };
-                let _ = sink.send(Message::Close(Some(close))).await;
-                Ok(())
-            }
+            r = read_loop(stream, &settings, &wake, &limits, &control_tx, stats, timing.idle_after) => r,
+            r = write_loop(&mut sink, control_rx, &slot, &wake, stats, timing.ping_every) => r.map(|()| End::ClientGone),
+            () = render_loop(app, &entry, &settings, &wake, &slot, stats) => Ok(End::ClientGone),
+            _ = async { shutdown.wait_for(|down| *down).await.map(|_| ()) } => Ok(End::Shutdown),
         }
     }
     .await;
 
+    let frames = stats.frames_sent.load(Ordering::Relaxed);
+    let close = |reason: String| {
+        Message::Close(Some(CloseFrame {
+            code: 1001,
+            reason: reason.into(),
+        }))
+    };
     match outcome {
-        Ok(()) => tracing::info!(
-            frames = stats.frames_sent.load(Ordering::Relaxed),
-            "session closed"
-        ),
-        Err(e) => tracing::info!(error = %e, "session ended by a connection error"),
+        Ok(End::ClientGone) => tracing::info!(frames, "session closed by the client"),
+        Ok(End::Shutdown) => {
+            let _ = sink.send(close("server shutting down".into())).await;
+            tracing::info!(frames, "session closed: server shutting down");
+        }
+        Ok(End::Idle) => {
+            let secs = timing.idle_after.as_secs();
+            let _ = sink
+                .send(close(format!("no message from the client for {secs} s")))
+                .await;
+            tracing::info!(frames, "session closed: client idle");
+        }
+        Err(e) => tracing::info!(frames, error = %e, "session ended by a connection error"),
     }
+}
+
+/// Why a session ended.
+enum End {
+    /// The client closed the socket or it went away.
+    ClientGone,
+    /// Nothing arrived from the client (not even a pong) for the idle timeout.
+    Idle,
+    Shutdown,
+}
+
+#[derive(Clone, Copy)]
+struct Heartbeat {
+    ping_every: Duration,
+    idle_after: Duration,
 }
 
 fn to_json(msg: &ServerMessage) -> String {
@@ -189,8 +232,16 @@ async fn read_loop(
     limits: &Limits,
     control: &mpsc::Sender<Message>,
     stats: &SessionStats,
-) -> Result<(), axum::Error> {
-    while let Some(message) = stream.next().await {
+    idle_after: Duration,
+) -> Result<End, axum::Error> {
+    loop {
+        // Browsers answer pings with pongs by themselves, so a live client is never idle.
+        let Ok(message) = tokio::time::timeout(idle_after, stream.next()).await else {
+            return Ok(End::Idle);
+        };
+        let Some(message) = message else {
+            return Ok(End::ClientGone);
+        };
         let result = match message? {
             Message::Text(text) => input::parse(text.as_str()).and_then(|msg| match msg {
                 ClientMessage::Ack(FrameAck { sequence }) => acknowledge(sequence, stats),
@@ -204,7 +255,7 @@ async fn read_loop(
                 message: "binary messages are not part of protocol v1; send JSON text".into(),
                 input_id: None,
             }),
-            Message::Close(_) => return Ok(()),
+            Message::Close(_) => return Ok(End::ClientGone),
             Message::Ping(_) | Message::Pong(_) => continue,
         };
         match result {
@@ -221,7 +272,6 @@ async fn read_loop(
             }
         }
     }
-    Ok(())
 }
 
 /// Records the client's acknowledgement of every frame up to `sequence`.
@@ -246,10 +296,13 @@ async fn write_loop(
     slot: &FrameSlot,
     wake: &Notify,
     stats: &SessionStats,
+    ping_every: Duration,
 ) -> Result<(), axum::Error> {
+    let mut ping = tokio::time::interval_at(tokio::time::Instant::now() + ping_every, ping_every);
     loop {
         tokio::select! {
             biased;
+            _ = ping.tick() => sink.send(Message::Ping(Bytes::from_static(b"isoray"))).await?,
             message = control.recv() => match message {
                 Some(message) => sink.send(message).await?,
                 None => return Ok(()),

@@ -64,6 +64,30 @@ impl AppState {
     pub fn shutdown_signal(&self) -> watch::Receiver<bool> {
         self.inner.shutdown.subscribe()
     }
+
+    /// A place for one more session, or `None` when `--max-sessions` are open. The place is
+    /// given back when the ticket drops, also if the websocket upgrade never completes.
+    pub fn admit_session(&self) -> Option<SessionTicket> {
+        let (id, stats) = self.sessions().try_register(self.config().max_sessions)?;
+        Some(SessionTicket {
+            app: self.clone(),
+            id,
+            stats,
+        })
+    }
+}
+
+/// One registered session; unregisters it on drop.
+pub struct SessionTicket {
+    app: AppState,
+    pub id: u64,
+    pub stats: Arc<SessionStats>,
+}
+
+impl Drop for SessionTicket {
+    fn drop(&mut self) {
+        self.app.sessions().unregister(self.id);
+    }
 }
 
 /// The open sessions and their counters.
@@ -74,14 +98,19 @@ pub struct SessionTable {
 }
 
 impl SessionTable {
-    pub fn register(&self) -> (u64, Arc<SessionStats>) {
+    /// Registers a session unless `limit` are open already.
+    fn try_register(&self, limit: usize) -> Option<(u64, Arc<SessionStats>)> {
+        let mut open = self.lock();
+        if open.len() >= limit {
+            return None;
+        }
         let id = self.next_id.fetch_add(1, Ordering::Relaxed) + 1;
         let stats = Arc::new(SessionStats::default());
-        self.lock().insert(id, Arc::clone(&stats));
-        (id, stats)
+        open.insert(id, Arc::clone(&stats));
+        Some((id, stats))
     }
 
-    pub fn unregister(&self, id: u64) {
+    fn unregister(&self, id: u64) {
         self.lock().remove(&id);
     }
 

@@ -1,6 +1,7 @@
 //! The server run in-process on an ephemeral loopback port, driven over real sockets.
 
 mod bad_input;
+mod lifecycle;
 mod slow_client;
 mod stream;
 mod support;

@@ -1,0 +1,141 @@
+//! Connection life: the session limit, clients that vanish or never answer, and shutdown
+//! while streaming. After each, the session count returns to zero (no leaked task).
+
+use super::support::*;
+use futures_util::StreamExt;
+use serde_json::json;
+use std::time::{Duration, Instant};
+use tokio_tungstenite::tungstenite::Message;
+
+/// Waits until the server has `n` open sessions.
+async fn wait_for_sessions(server: &TestServer, n: usize, within: Duration) {
+    let start = Instant::now();
+    while server.state.sessions().count() != n {
+        assert!(
+            start.elapsed() < within,
+            "expected {n} sessions within {within:?}, have {}",
+            server.state.sessions().count()
+        );
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    }
+}
+
+/// Reads until the close frame and returns its code and reason.
+async fn close_reason(ws: &mut Ws) -> (u16, String) {
+    loop {
+        match tokio::time::timeout(WAIT, ws.next())
+            .await
+            .expect("close within the wait")
+        {
+            Some(Ok(Message::Close(Some(frame)))) => {
+                return (frame.code.into(), frame.reason.to_string())
+            }
+            Some(Ok(_)) => continue,
+            other => panic!("expected a close frame, got {other:?}"),
+        }
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn sessions_beyond_the_limit_get_a_clear_refusal() {
+    let server = TestServer::start(&["--max-sessions", "2"]).await;
+    let (a, _) = server.connect("blobs").await;
+    let (_b, _) = server.connect("blobs").await;
+    let (mut refused, _) =
+        tokio_tungstenite::connect_async(server.url("/api/v1/scenes/blobs/stream"))
+            .await
+            .expect("the upgrade itself succeeds");
+    let error = next_error(&mut refused).await;
+    assert_eq!(error.code, "server_full");
+    assert!(
+        error.message.contains("limit of 2 sessions"),
+        "{}",
+        error.message
+    );
+    assert_eq!(
+        close_reason(&mut refused).await,
+        (1013, "server full".to_string())
+    );
+    assert_eq!(server.state.sessions().count(), 2);
+
+    drop(a);
+    wait_for_sessions(&server, 1, WAIT).await;
+    let (_c, info) = server.connect("blobs").await;
+    assert_eq!(
+        info.scene.id, "blobs",
+        "a place freed by a leaving client is given to the next"
+    );
+    server.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn clients_that_vanish_or_never_answer_are_dropped() {
+    let server =
+        TestServer::start(&["--ping-interval-secs", "1", "--idle-timeout-secs", "2"]).await;
+
+    // Vanishes without a websocket close: the TCP connection just ends.
+    let (mut gone, _) = server.connect("blobs").await;
+    send_json(
+        &mut gone,
+        json!({"type": "resize", "input_id": 1, "width": 64, "height": 64}),
+    )
+    .await;
+    frame_for_input(&mut gone, 1).await;
+    drop(gone);
+    wait_for_sessions(&server, 0, WAIT).await;
+
+    // Never reads, never acknowledges, never answers a ping: silent, like a dead peer.
+    let (silent, _) = server.connect("blobs").await;
+    let opened = Instant::now();
+    wait_for_sessions(&server, 0, Duration::from_secs(10)).await;
+    let after = opened.elapsed();
+    assert!(
+        after >= Duration::from_millis(1900),
+        "closed too early ({after:?})"
+    );
+    println!("silent client dropped after {after:?}");
+    drop(silent);
+
+    // A reading client answers pings by itself and stays well past the idle timeout.
+    let (mut alive, _) = server.connect("blobs").await;
+    let until = Instant::now() + Duration::from_secs(4);
+    while Instant::now() < until {
+        let _ = tokio::time::timeout(Duration::from_millis(200), alive.next()).await;
+    }
+    assert_eq!(
+        server.state.sessions().count(),
+        1,
+        "a responsive client is not idle"
+    );
+    drop(alive);
+    server.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn shutdown_while_streaming_closes_every_session_with_a_reason() {
+    let server = TestServer::start(&[]).await;
+    let mut clients = Vec::new();
+    for _ in 0..3 {
+        let (mut ws, _) = server.connect("blobs").await;
+        send_json(
+            &mut ws,
+            json!({"type": "resize", "input_id": 1, "width": 64, "height": 48}),
+        )
+        .await;
+        frame_for_input(&mut ws, 1).await;
+        clients.push(ws);
+    }
+    let state = server.state.clone();
+    let stopping = tokio::spawn(server.stop());
+    for ws in &mut clients {
+        assert_eq!(
+            close_reason(ws).await,
+            (1001, "server shutting down".to_string())
+        );
+    }
+    tokio::time::timeout(WAIT, stopping)
+        .await
+        .expect("drains")
+        .expect("no panic");
+    assert_eq!(state.sessions().count(), 0);
+}
