@@ -88,7 +88,7 @@ mod tests {
     fn srgb_endpoints_and_midpoint() {
         assert_eq!(linear_to_srgb8(0.0), 0);
         assert_eq!(linear_to_srgb8(1.0), 255);
-        assert_eq!(linear_to_srgb8(0.214), 128, "linear 0.214 is sRGB mid-grey");
+        assert_eq!(linear_to_srgb8(0.5), 188, "linear 0.5 is sRGB 0.735");
         assert_eq!(
             linear_to_srgb8(f32::NAN),
             0,

@@ -22,6 +22,8 @@ pub struct Settings {
     pub last_input_id: InputId,
     /// Bumped by every applied input, so the renderer knows the view changed.
     pub version: u64,
+    /// When the last input was applied (for input-to-frame latency).
+    pub last_input_at: Option<std::time::Instant>,
 }
 
 /// The limits inputs are checked against.
@@ -225,6 +227,7 @@ mod tests {
             pinned_time: None,
             last_input_id: 0,
             version: 0,
+            last_input_at: None,
         }
     }
 

@@ -12,6 +12,7 @@ pub mod config;
 pub mod encode;
 pub mod error;
 pub mod input;
+pub mod metrics;
 pub mod scenes;
 pub mod session;
 pub mod state;
@@ -44,11 +45,22 @@ pub fn app(state: AppState) -> Router {
     Router::new()
         .route("/", get(web::index))
         .route("/healthz", get(|| async { "ok" }))
+        .route("/metrics", get(metrics_text))
         .route("/api/v1/scenes", get(list_scenes))
         .route("/api/v1/scenes/{id}/stream", get(stream))
         .route("/{file}", get(web::asset))
         .layer(TraceLayer::new_for_http())
         .with_state(state)
+}
+
+async fn metrics_text() -> impl axum::response::IntoResponse {
+    (
+        [(
+            axum::http::header::CONTENT_TYPE,
+            "text/plain; version=0.0.4; charset=utf-8",
+        )],
+        metrics::render(),
+    )
 }
 
 async fn list_scenes(State(state): State<AppState>) -> Json<SceneList> {
@@ -77,6 +89,7 @@ async fn stream(
         None => {
             let limit = state.config().max_sessions;
             tracing::warn!(limit, "session refused: server full");
+            ::metrics::counter!(metrics::SESSIONS_REFUSED).increment(1);
             ws.on_upgrade(move |socket| session::refuse(socket, limit))
         }
     })

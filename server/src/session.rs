@@ -15,6 +15,7 @@
 //! next frame rendered shows the newest state.
 
 use crate::input::{self, Limits, Settings};
+use crate::metrics as m;
 use crate::scenes::{micros, SceneEntry};
 use crate::state::{AppState, SessionTicket};
 use axum::body::Bytes;
@@ -52,15 +53,24 @@ pub struct SessionStats {
     pub max_pending_frames: AtomicUsize,
 }
 
+/// A rendered frame waiting for the writer.
+struct SlotFrame {
+    sequence: u64,
+    bytes: Bytes,
+    codec: &'static str,
+    /// When the input this frame first shows arrived, for the latency histogram.
+    input_at: Option<Instant>,
+}
+
 /// The one-frame mailbox between renderer and writer.
 #[derive(Default)]
 struct FrameSlot {
-    frame: Mutex<Option<(u64, Bytes)>>,
+    frame: Mutex<Option<SlotFrame>>,
     ready: Notify,
 }
 
 impl FrameSlot {
-    fn lock(&self) -> std::sync::MutexGuard<'_, Option<(u64, Bytes)>> {
+    fn lock(&self) -> std::sync::MutexGuard<'_, Option<SlotFrame>> {
         // Only plain values live here; a panic elsewhere cannot leave them inconsistent.
         self.frame.lock().unwrap_or_else(|e| e.into_inner())
     }
@@ -69,7 +79,7 @@ impl FrameSlot {
         self.lock().is_none()
     }
 
-    fn put(&self, frame: (u64, Bytes), stats: &SessionStats) {
+    fn put(&self, frame: SlotFrame, stats: &SessionStats) {
         let replaced = self.lock().replace(frame).is_some();
         if !replaced {
             let now = stats.pending_frames.fetch_add(1, Ordering::SeqCst) + 1;
@@ -78,7 +88,7 @@ impl FrameSlot {
         self.ready.notify_one();
     }
 
-    fn take(&self, stats: &SessionStats) -> Option<(u64, Bytes)> {
+    fn take(&self, stats: &SessionStats) -> Option<SlotFrame> {
         let frame = self.lock().take();
         if frame.is_some() {
             stats.pending_frames.fetch_sub(1, Ordering::SeqCst);
@@ -129,6 +139,7 @@ async fn run_registered(
         pinned_time: None,
         last_input_id: 0,
         version: 0,
+        last_input_at: None,
     };
     let limits = Limits {
         max_size: config.max_size,
@@ -247,7 +258,11 @@ async fn read_loop(
                 ClientMessage::Ack(FrameAck { sequence }) => acknowledge(sequence, stats),
                 msg => {
                     let mut s = settings.lock().unwrap_or_else(|e| e.into_inner());
-                    input::apply(&msg, &mut s, limits)
+                    let applied = input::apply(&msg, &mut s, limits);
+                    if applied.is_ok() {
+                        s.last_input_at = Some(Instant::now());
+                    }
+                    applied
                 }
             }),
             Message::Binary(_) => Err(ErrorMessage {
@@ -265,6 +280,7 @@ async fn read_loop(
             }
             Err(error) => {
                 stats.inputs_rejected.fetch_add(1, Ordering::Relaxed);
+                metrics::counter!(m::INPUTS_REJECTED).increment(1);
                 tracing::debug!(code = %error.code, message = %error.message, "input rejected");
                 // A client that floods bad input without reading loses the surplus errors.
                 let _ =
@@ -308,11 +324,17 @@ async fn write_loop(
                 None => return Ok(()),
             },
             () = slot.ready.notified() => {
-                if let Some((sequence, frame)) = slot.take(stats) {
+                if let Some(frame) = slot.take(stats) {
                     wake.notify_one();
-                    stats.last_sent_sequence.store(sequence, Ordering::SeqCst);
-                    sink.send(Message::Binary(frame)).await?;
+                    stats.last_sent_sequence.store(frame.sequence, Ordering::SeqCst);
+                    let len = frame.bytes.len() as u64;
+                    sink.send(Message::Binary(frame.bytes)).await?;
                     stats.frames_sent.fetch_add(1, Ordering::Relaxed);
+                    metrics::counter!(m::FRAMES_SENT, "codec" => frame.codec).increment(1);
+                    metrics::counter!(m::FRAME_BYTES).increment(len);
+                    if let Some(input_at) = frame.input_at {
+                        m::input_to_frame(input_at.elapsed());
+                    }
                 }
             }
         }
@@ -380,17 +402,34 @@ async fn render_loop(
         sequence += 1;
         last = Some((current.version, time, quality));
 
+        let input_at = if view_changed {
+            current.last_input_at
+        } else {
+            None
+        };
+        let codec = match quality {
+            Quality::Interactive => "jpeg",
+            Quality::Still => "png",
+        };
         let (tx, rx) = oneshot::channel();
         let job_entry = Arc::clone(entry);
         let job_app = app.clone();
+        metrics::gauge!(m::RENDER_QUEUE).increment(1.0);
         app.backend().spawn(move || {
             let frame = render_frame(&job_app, &job_entry, &current, time, sequence, quality);
+            metrics::gauge!(m::RENDER_QUEUE).decrement(1.0);
             let _ = tx.send(frame);
         });
         match rx.await {
-            Ok(Ok(frame)) => {
+            Ok(Ok(bytes)) => {
                 stats.frames_rendered.fetch_add(1, Ordering::Relaxed);
-                slot.put((sequence, frame), stats);
+                let frame = SlotFrame {
+                    sequence,
+                    bytes,
+                    codec,
+                    input_at,
+                };
+                slot.put(frame, stats);
             }
             Ok(Err(e)) => {
                 tracing::warn!(error = %e, "frame failed; the session waits for the next change");
@@ -453,6 +492,10 @@ fn render_frame(
         },
         scene_time: time,
     };
+    m::stage("update", header.timings.update_us);
+    m::stage("build", header.timings.build_us);
+    m::stage("trace", header.timings.trace_us);
+    m::stage("encode", header.timings.encode_us);
     let mut bytes = Vec::with_capacity(isoray_protocol::FRAME_HEADER_LEN + payload.len());
     bytes.extend_from_slice(&header.encode());
     bytes.extend_from_slice(&payload);

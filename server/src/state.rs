@@ -28,6 +28,7 @@ impl AppState {
     /// Starts the render pool and loads the built-in scenes.
     pub fn new(config: Config) -> Result<AppState, String> {
         config.validate()?;
+        crate::metrics::handle();
         let backend = CpuBackend::new(config.threads).map_err(|e| e.to_string())?;
         Ok(AppState {
             inner: Arc::new(Inner {
@@ -107,11 +108,14 @@ impl SessionTable {
         let id = self.next_id.fetch_add(1, Ordering::Relaxed) + 1;
         let stats = Arc::new(SessionStats::default());
         open.insert(id, Arc::clone(&stats));
+        metrics::gauge!(crate::metrics::SESSIONS).increment(1.0);
         Some((id, stats))
     }
 
     fn unregister(&self, id: u64) {
-        self.lock().remove(&id);
+        if self.lock().remove(&id).is_some() {
+            metrics::gauge!(crate::metrics::SESSIONS).decrement(1.0);
+        }
     }
 
     /// The counters of every open session, by id.

@@ -2,6 +2,7 @@
 
 mod bad_input;
 mod lifecycle;
+mod metrics;
 mod slow_client;
 mod stream;
 mod support;

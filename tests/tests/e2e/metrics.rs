@@ -1,0 +1,53 @@
+//! `/metrics` exposes what operators need: sessions, frames, bytes, stage times, latency.
+
+use super::stream::reqwest_like_get;
+use super::support::*;
+use serde_json::json;
+
+/// The value of the first sample line of `name` with all of `labels`, if any.
+fn sample(text: &str, name: &str, labels: &[&str]) -> Option<f64> {
+    text.lines()
+        .filter(|l| !l.starts_with('#'))
+        .find(|l| l.starts_with(name) && labels.iter().all(|lab| l.contains(lab)))
+        .and_then(|l| l.rsplit(' ').next())
+        .and_then(|v| v.parse().ok())
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn metrics_count_what_a_session_did() {
+    let server = TestServer::start(&["--still-after-ms", "50"]).await;
+    let (mut ws, _) = server.connect("blobs").await;
+    send_json(&mut ws, json!({"type": "time", "input_id": 1, "time": 1.0})).await;
+    send_json(
+        &mut ws,
+        json!({"type": "resize", "input_id": 2, "width": 48, "height": 32}),
+    )
+    .await;
+    for id in 3..8u64 {
+        send_json(
+            &mut ws,
+            json!({"type": "isovalue", "input_id": id, "value": 0.3 + id as f64 * 0.05}),
+        )
+        .await;
+        frame_for_input(&mut ws, id).await;
+    }
+    send_text(&mut ws, "not json").await;
+    next_error(&mut ws).await;
+
+    let text = reqwest_like_get(server.addr, "/metrics").await;
+    let open = sample(&text, "isoray_sessions", &[]).expect("sessions gauge");
+    assert!(open >= 1.0, "{text}");
+    let jpeg =
+        sample(&text, "isoray_frames_sent_total", &["codec=\"jpeg\""]).expect("frame counter");
+    assert!(jpeg >= 5.0, "five inputs, five frames at least: {jpeg}");
+    assert!(sample(&text, "isoray_frame_bytes_total", &[]).expect("bytes") > 0.0);
+    let traced =
+        sample(&text, "isoray_stage_seconds_count", &["stage=\"trace\""]).expect("trace histogram");
+    assert!(traced >= 5.0);
+    let latency =
+        sample(&text, "isoray_input_to_frame_seconds_count", &[]).expect("latency histogram");
+    assert!(latency >= 5.0, "every answered input is timed: {latency}");
+    assert!(sample(&text, "isoray_inputs_rejected_total", &[]).expect("rejections") >= 1.0);
+    drop(ws);
+    server.stop().await;
+}
