@@ -34,6 +34,10 @@ pub struct Config {
     #[arg(long, env = "ISORAY_MAX_FPS", default_value_t = 30.0)]
     pub max_fps: f64,
 
+    /// Smallest resolution scale of interactive frames (the still frame is always full size).
+    #[arg(long, env = "ISORAY_MIN_SCALE", default_value_t = 0.25)]
+    pub min_scale: f64,
+
     /// Milliseconds without input after which a still view gets its lossless frame.
     #[arg(long, env = "ISORAY_STILL_AFTER_MS", default_value_t = 150)]
     pub still_after_ms: u64,
@@ -86,6 +90,9 @@ impl Config {
                 "--idle-timeout-secs {} must exceed --ping-interval-secs {} (> 0)",
                 self.idle_timeout_secs, self.ping_interval_secs
             ));
+        }
+        if !(self.min_scale > 0.0 && self.min_scale <= 1.0) {
+            return Err(format!("--min-scale {} must be in (0, 1]", self.min_scale));
         }
         if self.max_sessions == 0 {
             return Err("--max-sessions must be at least 1".into());

@@ -8,6 +8,11 @@
 //! - the writer takes frames from the slot and error messages from a small queue and sends
 //!   them.
 //!
+//! Adaptive resolution: while the view moves, frames are rendered at a scale chosen so that
+//! tracing plus encoding fits [`FRAME_BUDGET_SHARE`] of the frame interval, measured from the
+//! previous frame (so a busy pool lowers every session's scale alike); the still frame is
+//! always full size.
+//!
 //! Flow control: the slot holds at most one frame, and the renderer starts a frame only while
 //! fewer than [`FRAME_WINDOW`] sent frames await the client's `ack`. A client that stops
 //! reading stops acknowledging, so the renderer stops: it costs one frame of memory and no
@@ -26,7 +31,7 @@ use isoray_protocol::{
     StageTimings, FLAG_STILL, PROTOCOL_VERSION,
 };
 use isoray_render::View;
-use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
+use std::sync::atomic::{AtomicU32, AtomicU64, AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 use tokio::sync::{mpsc, oneshot, Notify};
@@ -50,6 +55,8 @@ pub struct SessionStats {
     pub last_acked_sequence: AtomicU64,
     /// Frames rendered but not yet handed to the socket, now and at most.
     pub pending_frames: AtomicUsize,
+    /// Resolution scale of interactive frames, in thousandths (1000 = full size).
+    pub scale_permille: AtomicU32,
     pub max_pending_frames: AtomicUsize,
 }
 
@@ -352,6 +359,9 @@ async fn render_loop(
     let fps = app.config().max_fps;
     let frame_interval = Duration::from_secs_f64(1.0 / fps);
     let still_delay = Duration::from_millis(app.config().still_after_ms);
+    // Interactive frames aim to be traced and encoded within this share of a frame interval.
+    let budget_us = frame_interval.as_secs_f64() * 1e6 * FRAME_BUDGET_SHARE;
+    let mut scale = 1.0f64;
     // What the last frame showed: settings version, scene time, and whether it was the still.
     let mut last: Option<(u64, f64, Quality)> = None;
     let mut last_change = tokio::time::Instant::now();
@@ -411,18 +421,43 @@ async fn render_loop(
             Quality::Interactive => "jpeg",
             Quality::Still => "png",
         };
+        let full = (current.width, current.height);
+        let (width, height) = match quality {
+            Quality::Interactive => scaled_size(full.0, full.1, scale),
+            Quality::Still => full,
+        };
         let (tx, rx) = oneshot::channel();
         let job_entry = Arc::clone(entry);
         let job_app = app.clone();
         metrics::gauge!(m::RENDER_QUEUE).increment(1.0);
         app.backend().spawn(move || {
-            let frame = render_frame(&job_app, &job_entry, &current, time, sequence, quality);
+            let frame = render_frame(
+                &job_app,
+                &job_entry,
+                &current,
+                time,
+                sequence,
+                quality,
+                (width, height),
+            );
             metrics::gauge!(m::RENDER_QUEUE).decrement(1.0);
             let _ = tx.send(frame);
         });
         match rx.await {
-            Ok(Ok(bytes)) => {
+            Ok(Ok((bytes, timings))) => {
                 stats.frames_rendered.fetch_add(1, Ordering::Relaxed);
+                if quality == Quality::Interactive {
+                    let spent_us = (timings.trace_us + timings.encode_us).max(1) as f64;
+                    let per_pixel_us = spent_us / (width as f64 * height as f64);
+                    let full_pixels = full.0 as f64 * full.1 as f64;
+                    let wanted = (budget_us / per_pixel_us / full_pixels).sqrt();
+                    let min = app.config().min_scale;
+                    // Halfway towards the measured scale: steady under noise, quick to follow.
+                    scale = (0.5 * scale + 0.5 * wanted).clamp(min, 1.0);
+                    stats
+                        .scale_permille
+                        .store((scale * 1000.0).round() as u32, Ordering::Relaxed);
+                }
                 let frame = SlotFrame {
                     sequence,
                     bytes,
@@ -438,6 +473,18 @@ async fn render_loop(
             Err(_) => return, // the pool dropped the job: the server is going down
         }
     }
+}
+
+/// Share of the frame interval an interactive frame may spend tracing and encoding.
+const FRAME_BUDGET_SHARE: f64 = 0.7;
+
+/// The requested size scaled by `scale`, keeping the aspect ratio, never below 8 pixels.
+fn scaled_size(width: u32, height: u32, scale: f64) -> (u32, u32) {
+    if scale >= 1.0 {
+        return (width, height);
+    }
+    let s = |v: u32| ((v as f64 * scale).round() as u32).clamp(8.min(v), v);
+    (s(width), s(height))
 }
 
 /// How a frame is made: fast while the view changes, lossless once it settles.
@@ -457,11 +504,12 @@ fn render_frame(
     time: f64,
     sequence: u64,
     quality: Quality,
-) -> Result<Bytes, crate::encode::EncodeError> {
+    (width, height): (u32, u32),
+) -> Result<(Bytes, StageTimings), crate::encode::EncodeError> {
     let state = entry.prepared_at(time);
     let view = View {
-        width: settings.width,
-        height: settings.height,
+        width,
+        height,
         camera: settings.camera,
         isovalue: settings.isovalue,
     };
@@ -499,5 +547,5 @@ fn render_frame(
     let mut bytes = Vec::with_capacity(isoray_protocol::FRAME_HEADER_LEN + payload.len());
     bytes.extend_from_slice(&header.encode());
     bytes.extend_from_slice(&payload);
-    Ok(Bytes::from(bytes))
+    Ok((Bytes::from(bytes), header.timings))
 }

@@ -5,7 +5,8 @@ use serde_json::json;
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn camera_and_isovalue_produce_answering_frames() {
-    let server = TestServer::start(&[]).await;
+    // Adaptive resolution off: every frame has exactly the requested size.
+    let server = TestServer::start(&["--min-scale", "1"]).await;
     let (mut ws, info) = server.connect("blobs").await;
     assert_eq!(info.protocol_version, 1);
     assert_eq!(info.scene.kind, "metaballs");
@@ -181,6 +182,57 @@ async fn still_view_gets_one_lossless_frame_then_silence() {
     let quiet =
         tokio::time::timeout(std::time::Duration::from_millis(1500), next_frame(&mut ws)).await;
     assert!(quiet.is_err(), "a frame arrived although nothing changed");
+    drop(ws);
+    server.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn moving_views_trade_resolution_for_frame_rate_and_settle_at_full_size() {
+    use isoray_protocol::FLAG_STILL;
+    // A 240 fps target leaves about 3 ms per frame: far less than a 480×360 frame takes here,
+    // so the controller must lower the resolution while the camera moves.
+    let server = TestServer::start(&["--max-fps", "240", "--still-after-ms", "300"]).await;
+    let (mut ws, _) = server.connect("blobs").await;
+    send_json(&mut ws, json!({"type": "time", "input_id": 1, "time": 2.0})).await;
+    send_json(
+        &mut ws,
+        json!({"type": "resize", "input_id": 2, "width": 480, "height": 360}),
+    )
+    .await;
+    let mut sizes = Vec::new();
+    for id in 3..23u64 {
+        let angle = id as f64 * 0.05;
+        send_json(
+            &mut ws,
+            json!({"type": "camera", "input_id": id, "eye": [7.5 * angle.sin(), 1.5, 7.5 * angle.cos()], "target": [0, 0, 0], "up": [0, 1, 0]}),
+        )
+        .await;
+        let frame = frame_for_input(&mut ws, id).await;
+        sizes.push((frame.header.width, frame.header.height));
+        assert_eq!(
+            frame.image.dimensions(),
+            (frame.header.width, frame.header.height)
+        );
+    }
+    let (w, h) = *sizes.last().expect("frames");
+    println!("interactive sizes while moving: {sizes:?}");
+    assert!(
+        w < 480 && h < 360,
+        "the controller lowered the resolution: {sizes:?}"
+    );
+    assert!(
+        (w as f64 / h as f64 - 480.0 / 360.0).abs() < 0.05,
+        "aspect ratio kept"
+    );
+    let mut frame = next_frame(&mut ws).await;
+    while frame.header.flags & FLAG_STILL == 0 {
+        frame = next_frame(&mut ws).await;
+    }
+    assert_eq!(
+        (frame.header.width, frame.header.height),
+        (480, 360),
+        "the still frame is full size"
+    );
     drop(ws);
     server.stop().await;
 }
