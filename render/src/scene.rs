@@ -1,6 +1,12 @@
 //! The closed set of primitive kinds, and a scene prepared for tracing.
+//!
+//! Preparing a state builds its acceleration structure from scratch (for metaballs the Fitted
+//! BVH of fitted-bvh-metaballs.txt by default, see [`crate::metaball::tree`]); the prepared
+//! state is then shared, read-only, by every view of it.
 
-use crate::metaball::{MetaballError, MetaballScene};
+use crate::metaball::{
+    MetaballError, MetaballScene, PrepareOptions, PreparedMetaballs, RayCounters,
+};
 use crate::ray::{Hit, Ray};
 use crate::shade::Lighting;
 use std::sync::Arc;
@@ -48,9 +54,26 @@ impl Scene {
         }
     }
 
-    /// Builds what tracing needs (acceleration structures) for this state.
+    /// Builds what tracing needs (acceleration structures) for this state: the Fitted BVH
+    /// with every optimisation, for the state's lowest isovalue, and Bézier clipping.
     pub fn prepare(self: Arc<Self>) -> PreparedScene {
-        PreparedScene { scene: self }
+        let options = match &self.geometry {
+            Geometry::Metaballs(m) => PrepareOptions::fitted(m.min_isovalue),
+        };
+        self.prepare_with(options)
+    }
+
+    /// [`Scene::prepare`] with a chosen acceleration structure and root finder.
+    pub fn prepare_with(self: Arc<Self>, options: PrepareOptions) -> PreparedScene {
+        let prepared = match &self.geometry {
+            Geometry::Metaballs(m) => {
+                PreparedGeometry::Metaballs(Arc::new(PreparedMetaballs::new(m.clone(), options)))
+            }
+        };
+        PreparedScene {
+            scene: self,
+            prepared,
+        }
     }
 }
 
@@ -58,6 +81,13 @@ impl Scene {
 #[derive(Clone, Debug)]
 pub struct PreparedScene {
     scene: Arc<Scene>,
+    prepared: PreparedGeometry,
+}
+
+/// The prepared form of each primitive kind.
+#[derive(Clone, Debug)]
+pub enum PreparedGeometry {
+    Metaballs(Arc<PreparedMetaballs>),
 }
 
 impl PreparedScene {
@@ -65,10 +95,37 @@ impl PreparedScene {
         &self.scene
     }
 
+    pub fn geometry(&self) -> &PreparedGeometry {
+        &self.prepared
+    }
+
+    /// Milliseconds spent building the acceleration structure.
+    pub fn build_ms(&self) -> f64 {
+        match &self.prepared {
+            PreparedGeometry::Metaballs(m) => m.build_ms(),
+        }
+    }
+
     /// The first crossing of the isosurface along `ray` within `[t_min, t_max]`.
     pub fn first_hit(&self, ray: &Ray, t_min: f32, t_max: f32, isovalue: f32) -> Option<Hit> {
-        match &self.scene.geometry {
-            Geometry::Metaballs(m) => m.first_hit(ray, t_min, t_max, isovalue),
+        match &self.prepared {
+            PreparedGeometry::Metaballs(m) => m.first_hit(ray, t_min, t_max, isovalue),
+        }
+    }
+
+    /// [`PreparedScene::first_hit`], adding traversal and root-finder counts to `counters`.
+    pub fn first_hit_counted(
+        &self,
+        ray: &Ray,
+        t_min: f32,
+        t_max: f32,
+        isovalue: f32,
+        counters: &mut RayCounters,
+    ) -> Option<Hit> {
+        match &self.prepared {
+            PreparedGeometry::Metaballs(m) => {
+                m.first_hit_counted(ray, t_min, t_max, isovalue, counters)
+            }
         }
     }
 }

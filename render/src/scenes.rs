@@ -1,50 +1,131 @@
 //! Built-in, deterministic, animated scenes: a pure function of time, no files, no randomness
 //! beyond a fixed-seed generator, so every run and every thread count sees the same states.
+//!
+//! Besides the small `Blobs` demo, these are the test scenes of fitted-bvh-metaballs.txt §6
+//! (Table 1, Fig. 8) with the paper's ball counts, rebuilt as generators: Scattered (30,000
+//! and 100,000 balls in a cube, each bobbing), Tornado (4,000 and 128,000 balls swirling up a
+//! widening funnel), Molecule (5,440 atoms of a synthetic folded chain, element radii and CPK
+//! colours, slowly turning and vibrating) and Pool (10,000 balls of a dense fluid slab under
+//! travelling waves). All use Wyvill's kernel at `T = 0.5`.
 
 use crate::camera::Camera;
+use crate::metaball::pdb::Element;
 use crate::metaball::{Kernel, Metaball, MetaballScene};
 use crate::scene::{Geometry, Scene};
 use crate::shade::Lighting;
-use glam::Vec3;
+use glam::{Quat, Vec3};
 
 /// The demo scenes the server offers without any pushed data.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum DemoScene {
     /// Forty-eight Wyvill blobs drifting on Lissajous paths and merging.
     Blobs,
+    /// fitted-bvh-metaballs.txt "Scattered metaballs", 30,000 balls.
+    Scattered30k,
+    /// The same, 100,000 balls.
+    Scattered100k,
+    /// fitted-bvh-metaballs.txt "Tornado", 4,000 balls.
+    Tornado4k,
+    /// The same, 128,000 balls.
+    Tornado128k,
+    /// fitted-bvh-metaballs.txt "Molecule", 5,440 atoms.
+    Molecule,
+    /// fitted-bvh-metaballs.txt "Pool", 10,000 balls.
+    Pool,
 }
 
 impl DemoScene {
-    pub const ALL: [DemoScene; 1] = [DemoScene::Blobs];
+    pub const ALL: [DemoScene; 7] = [
+        DemoScene::Blobs,
+        DemoScene::Scattered30k,
+        DemoScene::Scattered100k,
+        DemoScene::Tornado4k,
+        DemoScene::Tornado128k,
+        DemoScene::Molecule,
+        DemoScene::Pool,
+    ];
+
+    /// The scenes of the Fitted BVH paper's Table 1.
+    pub const PAPER: [DemoScene; 6] = [
+        DemoScene::Scattered30k,
+        DemoScene::Scattered100k,
+        DemoScene::Tornado4k,
+        DemoScene::Tornado128k,
+        DemoScene::Molecule,
+        DemoScene::Pool,
+    ];
 
     /// Stable identifier used in URLs.
     pub fn id(self) -> &'static str {
         match self {
             DemoScene::Blobs => "blobs",
+            DemoScene::Scattered30k => "scattered-30k",
+            DemoScene::Scattered100k => "scattered-100k",
+            DemoScene::Tornado4k => "tornado-4k",
+            DemoScene::Tornado128k => "tornado-128k",
+            DemoScene::Molecule => "molecule",
+            DemoScene::Pool => "pool",
         }
     }
 
     pub fn name(self) -> &'static str {
         match self {
             DemoScene::Blobs => "Blobs",
+            DemoScene::Scattered30k => "Scattered 30k",
+            DemoScene::Scattered100k => "Scattered 100k",
+            DemoScene::Tornado4k => "Tornado 4k",
+            DemoScene::Tornado128k => "Tornado 128k",
+            DemoScene::Molecule => "Molecule",
+            DemoScene::Pool => "Pool",
         }
     }
 
     pub fn description(self) -> &'static str {
         match self {
             DemoScene::Blobs => "48 metaballs (Wyvill kernel) on Lissajous paths",
+            DemoScene::Scattered30k => "30,000 scattered metaballs (Fitted BVH paper, Table 1)",
+            DemoScene::Scattered100k => "100,000 scattered metaballs (Fitted BVH paper, Table 1)",
+            DemoScene::Tornado4k => "4,000 metaballs in a tornado (Fitted BVH paper, Table 1)",
+            DemoScene::Tornado128k => "128,000 metaballs in a tornado (Fitted BVH paper, Table 1)",
+            DemoScene::Molecule => {
+                "5,440-atom synthetic molecule, CPK colours (Fitted BVH paper, Table 1)"
+            }
+            DemoScene::Pool => "10,000 metaballs of a fluid pool (Fitted BVH paper, Table 1)",
+        }
+    }
+
+    /// Number of balls in every state.
+    pub fn ball_count(self) -> usize {
+        match self {
+            DemoScene::Blobs => 48,
+            DemoScene::Scattered30k => 30_000,
+            DemoScene::Scattered100k => 100_000,
+            DemoScene::Tornado4k => 4_000,
+            DemoScene::Tornado128k => 128_000,
+            DemoScene::Molecule => 5_440,
+            DemoScene::Pool => 10_000,
         }
     }
 
     /// A camera that frames the scene.
     pub fn default_camera(self) -> Camera {
+        let look = |eye: Vec3, target: Vec3, fov_y_deg: f32| Camera {
+            eye,
+            target,
+            up: Vec3::Y,
+            fov_y_deg,
+        };
         match self {
-            DemoScene::Blobs => Camera {
-                eye: Vec3::new(0.0, 1.5, 7.5),
-                target: Vec3::ZERO,
-                up: Vec3::Y,
-                fov_y_deg: 45.0,
-            },
+            DemoScene::Blobs => look(Vec3::new(0.0, 1.5, 7.5), Vec3::ZERO, 45.0),
+            DemoScene::Scattered30k | DemoScene::Scattered100k => {
+                let half = 0.5 * scattered_side(self.ball_count());
+                look(Vec3::new(0.4, 0.5, 2.6) * half * 1.25, Vec3::ZERO, 45.0)
+            }
+            DemoScene::Tornado4k | DemoScene::Tornado128k => {
+                look(Vec3::new(0.0, 12.0, 42.0), Vec3::new(0.0, 10.0, 0.0), 45.0)
+            }
+            DemoScene::Molecule => look(Vec3::new(0.0, 10.0, 95.0), Vec3::ZERO, 45.0),
+            DemoScene::Pool => look(Vec3::new(0.0, 14.0, 26.0), Vec3::new(0.0, 1.0, 0.0), 50.0),
         }
     }
 
@@ -54,16 +135,32 @@ impl DemoScene {
     }
 
     pub fn isovalue_slider(self) -> (f32, f32) {
-        (0.05, 1.5)
+        match self {
+            DemoScene::Blobs => (0.05, 1.5),
+            _ => (MIN_ISOVALUE, 1.5),
+        }
     }
 
     /// The scene at `time` seconds.
     pub fn state_at(self, time: f64) -> Scene {
-        match self {
+        let metaballs = match self {
             DemoScene::Blobs => blobs(48, time),
+            DemoScene::Scattered30k | DemoScene::Scattered100k => {
+                scattered(self.ball_count(), time)
+            }
+            DemoScene::Tornado4k | DemoScene::Tornado128k => tornado(self.ball_count(), time),
+            DemoScene::Molecule => molecule(self.ball_count(), time),
+            DemoScene::Pool => pool(time),
+        };
+        Scene {
+            geometry: Geometry::Metaballs(metaballs),
+            lighting: Lighting::default(),
         }
     }
 }
+
+/// The lowest isovalue the paper scenes are built for (the slider's minimum).
+const MIN_ISOVALUE: f32 = 0.25;
 
 /// A small fixed-seed generator (SplitMix64) so scenes never depend on a platform RNG.
 pub struct SplitMix64(pub u64);
@@ -86,6 +183,20 @@ impl SplitMix64 {
     pub fn range(&mut self, lo: f32, hi: f32) -> f32 {
         lo + (hi - lo) * self.next_f32()
     }
+
+    /// Uniform in the unit ball.
+    pub fn in_unit_ball(&mut self) -> Vec3 {
+        loop {
+            let v = Vec3::new(
+                self.range(-1.0, 1.0),
+                self.range(-1.0, 1.0),
+                self.range(-1.0, 1.0),
+            );
+            if v.length_squared() <= 1.0 {
+                return v;
+            }
+        }
+    }
 }
 
 const PALETTE: [Vec3; 6] = [
@@ -97,7 +208,20 @@ const PALETTE: [Vec3; 6] = [
     Vec3::new(0.85, 0.80, 0.70),
 ];
 
-fn blobs(count: usize, time: f64) -> Scene {
+/// `sin(f·time + p)` with the angle in `f64`, so long-running servers keep smooth motion.
+fn wave(f: f32, time: f64, p: f32) -> f32 {
+    ((f as f64) * time + p as f64).sin() as f32
+}
+
+fn with_floor(kernel: Kernel, balls: Vec<Metaball>, min_isovalue: f32) -> MetaballScene {
+    MetaballScene {
+        kernel,
+        balls,
+        min_isovalue,
+    }
+}
+
+fn blobs(count: usize, time: f64) -> MetaballScene {
     let mut rng = SplitMix64(0x0015_03A7);
     let balls = (0..count)
         .map(|i| {
@@ -113,26 +237,164 @@ fn blobs(count: usize, time: f64) -> Scene {
             );
             let amp = Vec3::new(2.2, 1.4, 1.6);
             let radius = rng.range(0.7, 1.1);
-            // Angles in f64 so that long-running servers keep smooth motion.
-            let angle = |f: f32, p: f32| ((f as f64) * time + p as f64).sin() as f32;
-            Metaball {
-                center: amp
-                    * Vec3::new(
-                        angle(freq.x, phase.x),
-                        angle(freq.y, phase.y),
-                        angle(freq.z, phase.z),
-                    ),
-                radius,
-                strength: 1.0,
-                color: PALETTE[i % PALETTE.len()],
-            }
+            let center = amp
+                * Vec3::new(
+                    wave(freq.x, time, phase.x),
+                    wave(freq.y, time, phase.y),
+                    wave(freq.z, time, phase.z),
+                );
+            Metaball::sphere(center, radius, 1.0, PALETTE[i % PALETTE.len()])
         })
         .collect();
-    Scene {
-        geometry: Geometry::Metaballs(MetaballScene {
-            kernel: Kernel::Wyvill,
-            balls,
-        }),
-        lighting: Lighting::default(),
+    with_floor(Kernel::Wyvill, balls, 0.05)
+}
+
+/// Side of the Scattered cube: about three overlapping neighbours per ball of radius 1.
+fn scattered_side(count: usize) -> f32 {
+    let neighbour_volume = 4.0 / 3.0 * std::f32::consts::PI * 8.0;
+    (count as f32 * neighbour_volume / 3.0).cbrt()
+}
+
+fn scattered(count: usize, time: f64) -> MetaballScene {
+    let mut rng = SplitMix64(0x5CA7_7E2D ^ count as u64);
+    let half = 0.5 * scattered_side(count);
+    let balls = (0..count)
+        .map(|i| {
+            let home = Vec3::new(
+                rng.range(-half, half),
+                rng.range(-half, half),
+                rng.range(-half, half),
+            );
+            let freq = rng.range(0.3, 0.9);
+            let phase = rng.range(0.0, 6.3);
+            let dir = rng.in_unit_ball();
+            let radius = rng.range(0.8, 1.2);
+            Metaball::sphere(
+                home + 0.6 * dir * wave(freq, time, phase),
+                radius,
+                1.0,
+                PALETTE[i % PALETTE.len()],
+            )
+        })
+        .collect();
+    with_floor(Kernel::Wyvill, balls, MIN_ISOVALUE)
+}
+
+fn tornado(count: usize, time: f64) -> MetaballScene {
+    let mut rng = SplitMix64(0x7023_AD00 ^ count as u64);
+    let height = 20.0f32;
+    // Ball radius shrinks with the count so the funnel keeps its density of overlaps.
+    let radius = 1.0 * (4000.0 / count as f32).cbrt();
+    let balls = (0..count)
+        .map(|_| {
+            let h = height * rng.next_f32().powf(0.8);
+            let funnel = 1.0 + 0.45 * h;
+            let r = funnel * (0.75 + 0.25 * rng.next_f32());
+            let speed = 1.2 / (0.4 + 0.1 * h);
+            let angle = rng.range(0.0, std::f32::consts::TAU) + (speed as f64 * time) as f32;
+            let wobble = 0.8 * wave(0.3, time, h * 0.35);
+            let center = Vec3::new(r * angle.cos() + wobble, h, r * angle.sin());
+            let color = Vec3::new(0.55, 0.5, 0.45).lerp(Vec3::new(0.85, 0.8, 0.75), h / height);
+            Metaball::sphere(center, radius * rng.range(0.85, 1.15), 1.0, color)
+        })
+        .collect();
+    with_floor(Kernel::Wyvill, balls, MIN_ISOVALUE)
+}
+
+/// A folded chain: a persistent random walk with 1.5 Å bonds confined to a globule, its
+/// atoms cycling through a protein-like element mix, turning about `y` and vibrating.
+fn molecule(count: usize, time: f64) -> MetaballScene {
+    let mut rng = SplitMix64(0x0000_0A70_3540);
+    let globule = 1.05 * (count as f32 * 28.0 * 3.0 / (4.0 * std::f32::consts::PI)).cbrt();
+    let pattern = [
+        Element::N,
+        Element::C,
+        Element::C,
+        Element::O,
+        Element::C,
+        Element::C,
+        Element::N,
+        Element::C,
+        Element::C,
+        Element::O,
+        Element::C,
+        Element::S,
+    ];
+    let mut pos = Vec3::ZERO;
+    let mut heading = Vec3::X;
+    let spin = Quat::from_rotation_y((0.15 * time) as f32);
+    let balls = (0..count)
+        .map(|i| {
+            heading = (heading + 0.9 * rng.in_unit_ball()).normalize_or(Vec3::Y);
+            let next = pos + 1.5 * heading;
+            if next.length() > globule {
+                // Turn back inwards at the globule's wall.
+                heading = (-next.normalize() + 0.5 * rng.in_unit_ball()).normalize_or(Vec3::Y);
+            }
+            pos += 1.5 * heading;
+            let element = pattern[i % pattern.len()];
+            let jiggle = 0.15
+                * Vec3::new(
+                    wave(2.1, time, i as f32 * 0.7),
+                    wave(2.3, time, i as f32 * 1.3),
+                    wave(1.9, time, i as f32 * 0.4),
+                );
+            // The support is twice the van der Waals radius, so at T = 0.5 a lone atom's
+            // surface is its van der Waals sphere (f(R/2) = 1/2).
+            Metaball::sphere(
+                spin * (pos + jiggle),
+                2.0 * element.van_der_waals_radius(),
+                1.0,
+                element.cpk_color(),
+            )
+        })
+        .collect();
+    with_floor(Kernel::Wyvill, balls, MIN_ISOVALUE)
+}
+
+/// 10,000 balls: a 50 × 40 × 5 jittered lattice of spacing 0.45 under two travelling waves.
+fn pool(time: f64) -> MetaballScene {
+    let (nx, nz, ny) = (50usize, 40usize, 5usize);
+    let spacing = 0.45f32;
+    let mut rng = SplitMix64(0x0000_9001);
+    let mut balls = Vec::with_capacity(nx * ny * nz);
+    for iy in 0..ny {
+        for iz in 0..nz {
+            for ix in 0..nx {
+                let x = (ix as f32 - 0.5 * nx as f32) * spacing;
+                let z = (iz as f32 - 0.5 * nz as f32) * spacing;
+                let depth = iy as f32 / (ny - 1) as f32;
+                let swell =
+                    0.9 * wave(0.9, time, 0.45 * x) + 0.5 * wave(1.3, time, 0.6 * z + 0.3 * x);
+                let y = iy as f32 * spacing + depth * swell;
+                let jitter = 0.12 * rng.in_unit_ball();
+                let color = Vec3::new(0.10, 0.35, 0.75).lerp(Vec3::new(0.55, 0.8, 0.95), depth);
+                balls.push(Metaball::sphere(
+                    Vec3::new(x, y, z) + jitter,
+                    rng.range(0.55, 0.65),
+                    1.0,
+                    color,
+                ));
+            }
+        }
+    }
+    with_floor(Kernel::Wyvill, balls, MIN_ISOVALUE)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn paper_scenes_have_the_paper_counts_and_are_valid_and_deterministic() {
+        for demo in DemoScene::ALL {
+            let a = demo.state_at(1.5);
+            assert_eq!(a.primitive_count(), demo.ball_count(), "{demo:?}");
+            a.validate(1_000_000).expect("valid");
+            if demo.ball_count() <= 10_000 {
+                assert_eq!(a, demo.state_at(1.5));
+                assert_ne!(a, demo.state_at(2.5), "{demo:?} is animated");
+            }
+        }
     }
 }

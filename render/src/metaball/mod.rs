@@ -1,57 +1,95 @@
 //! Metaballs: balls of finite support whose summed field defines the surface `F(p) = T`.
 //!
-//! How it works (foundation): each ball `i` has centre `c_i`, radius `R_i` and strength `q_i`
-//! and contributes `q_i · f(|p - c_i|² / R_i²)` inside its sphere and nothing outside. The
-//! kernel `f` is Wyvill's degree-six polynomial (bezier-clipping-metaballs.txt §2, Fig. 1):
-//! `f(s) = 1 - 22/9 s + 17/9 s² - 4/9 s³` with `s = r²/R²`, so `f(0) = 1`, `f(R) = 0`,
-//! `f'(R) = 0` and `f(R/2) = 1/2`. The first root along a ray is found by [`march`]: the
-//! ray is clipped to the union of the spheres it crosses and each span is marched with a step
-//! below the smallest radius there, then refined by bisection.
+//! How it works: each ball `i` has centre `p_i`, radius `R_i` and strength `q_i` (negative
+//! carves) and contributes `q_i · f(s)` with `s = |p - p_i|² / R_i²` inside its support and
+//! nothing outside (bezier-clipping-metaballs.txt §2, eq. 5). An ellipsoidal ball uses
+//! `s = |M (p - p_i)|²`, `M` the inverse of its rotated, scaled frame (ibid. §3.3); its
+//! `radius` is then the largest semi-axis, so the sphere of radius `R_i` still bounds it.
+//! The modules:
+//! - [`kernel`]: the falloffs `f` (Wyvill, degree four, `(1-s)^α`, the tutorial's).
+//! - [`roots`]: the root finders along one ray (marching, projections + secant, Bézier
+//!   clipping, sphere tracing), generic over `f32` and `f64`.
+//! - [`tree`]: the BVH with split metaballs and the Fitted BVH (fitted-bvh-metaballs.txt).
+//! - [`engine`]: a state prepared for tracing: per-ball data, the acceleration structure, and
+//!   the traversal modes (brute force, sorted active list, BVH, FBVH).
+//! - [`reference`]: the `f64` reference hit used by tests.
+//! - [`pdb`]: atoms of a PDB file as balls.
 
-pub mod march;
+pub mod engine;
+pub mod kernel;
+pub mod pdb;
+pub mod reference;
+pub mod roots;
+pub mod tree;
+
+pub use engine::{Accel, AccelKind, PrepareOptions, PreparedMetaballs, RayCounters};
+pub use kernel::Kernel;
+pub use roots::RootFinder;
+pub use tree::{BuildOptions, TreeKind};
 
 use crate::ray::{Hit, Ray};
-use glam::Vec3;
+use glam::{Mat3, Quat, Vec3};
 
-/// The radial falloff shared by every ball of a set.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Kernel {
-    /// Wyvill, McPheeters and Wyvill's degree-six polynomial in `r²/R²`.
-    Wyvill,
-}
-
-impl Kernel {
-    /// The kernel at `s = r² / R²`, for `s` in `[0, 1]`; zero beyond.
-    #[inline]
-    pub fn value(self, s: f32) -> f32 {
-        if s >= 1.0 {
-            return 0.0;
-        }
-        match self {
-            Kernel::Wyvill => 1.0 + s * (-22.0 / 9.0 + s * (17.0 / 9.0 - s * (4.0 / 9.0))),
-        }
-    }
-
-    /// `df/ds` at `s`, zero beyond the support.
-    #[inline]
-    pub fn derivative(self, s: f32) -> f32 {
-        if s >= 1.0 {
-            return 0.0;
-        }
-        match self {
-            Kernel::Wyvill => -22.0 / 9.0 + s * (34.0 / 9.0 - s * (12.0 / 9.0)),
-        }
-    }
+/// A ball's shape of support.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Shape {
+    /// The sphere of radius `radius`.
+    Sphere,
+    /// An ellipsoid with semi-axes `radius · axes` along the columns of `rotation`; every
+    /// component of `axes` lies in `(0, 1]`, so `radius` bounds it.
+    Ellipsoid { axes: Vec3, rotation: Quat },
 }
 
 /// One ball. `strength` may be negative (it then carves the surface).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Metaball {
     pub center: Vec3,
+    /// Radius of support (of the bounding sphere, for an ellipsoid).
     pub radius: f32,
     pub strength: f32,
     /// Linear-light colour, blended by each ball's share of the field.
     pub color: Vec3,
+    pub shape: Shape,
+}
+
+impl Metaball {
+    /// A spherical ball.
+    pub fn sphere(center: Vec3, radius: f32, strength: f32, color: Vec3) -> Metaball {
+        Metaball {
+            center,
+            radius,
+            strength,
+            color,
+            shape: Shape::Sphere,
+        }
+    }
+
+    /// `M` with `s = |M (p - center)|²`: `I / R` for a sphere.
+    pub fn normalizing(&self) -> Mat3 {
+        match self.shape {
+            Shape::Sphere => Mat3::from_diagonal(Vec3::splat(1.0 / self.radius)),
+            Shape::Ellipsoid { axes, rotation } => {
+                Mat3::from_diagonal((self.radius * axes).recip())
+                    * Mat3::from_quat(rotation.normalize()).transpose()
+            }
+        }
+    }
+
+    /// The smallest semi-axis.
+    pub fn min_semi_axis(&self) -> f32 {
+        match self.shape {
+            Shape::Sphere => self.radius,
+            Shape::Ellipsoid { axes, .. } => self.radius * axes.min_element(),
+        }
+    }
+
+    /// `s` at `p` (≥ 1 outside the support).
+    pub fn s_at(&self, p: Vec3) -> f32 {
+        match self.shape {
+            Shape::Sphere => (p - self.center).length_squared() / (self.radius * self.radius),
+            Shape::Ellipsoid { .. } => (self.normalizing() * (p - self.center)).length_squared(),
+        }
+    }
 }
 
 /// A problem with metaball data, naming the offending ball.
@@ -61,8 +99,12 @@ pub enum MetaballError {
     NotFinite { index: usize, field: &'static str },
     #[error("ball {index}: radius {radius} must be positive")]
     BadRadius { index: usize, radius: f32 },
+    #[error("ball {index}: ellipsoid axes must lie in (0, 1] and the rotation be non-zero")]
+    BadEllipsoid { index: usize },
     #[error("{count} balls exceed the limit of {limit}")]
     TooMany { count: usize, limit: usize },
+    #[error("kernel {kernel:?} is not supported (Power needs alpha in 1..=4)")]
+    BadKernel { kernel: Kernel },
 }
 
 /// The balls of one state and their kernel.
@@ -70,9 +112,22 @@ pub enum MetaballError {
 pub struct MetaballScene {
     pub kernel: Kernel,
     pub balls: Vec<Metaball>,
+    /// The lowest isovalue this state is meant to be viewed at. The Fitted BVH's tighter
+    /// boxes and split-metaball discarding (fitted-bvh-metaballs.txt §5.3) are built for it;
+    /// a lower isovalue falls back to a structure built without them.
+    pub min_isovalue: f32,
 }
 
 impl MetaballScene {
+    /// Balls with Wyvill's kernel, viewed from isovalue 0.05 up.
+    pub fn new(kernel: Kernel, balls: Vec<Metaball>) -> MetaballScene {
+        MetaballScene {
+            kernel,
+            balls,
+            min_isovalue: 0.05,
+        }
+    }
+
     /// Checks every ball; the first bad one is named in the error.
     pub fn validate(&self, limit: usize) -> Result<(), MetaballError> {
         if self.balls.len() > limit {
@@ -81,31 +136,24 @@ impl MetaballScene {
                 limit,
             });
         }
+        if !self.kernel.is_supported() {
+            return Err(MetaballError::BadKernel {
+                kernel: self.kernel,
+            });
+        }
         for (index, ball) in self.balls.iter().enumerate() {
-            let finite = |v: Vec3| v.is_finite();
-            if !finite(ball.center) {
-                return Err(MetaballError::NotFinite {
-                    index,
-                    field: "center",
-                });
+            let not_finite = |field| Err(MetaballError::NotFinite { index, field });
+            if !ball.center.is_finite() {
+                return not_finite("center");
             }
             if !ball.strength.is_finite() {
-                return Err(MetaballError::NotFinite {
-                    index,
-                    field: "strength",
-                });
+                return not_finite("strength");
             }
-            if !finite(ball.color) {
-                return Err(MetaballError::NotFinite {
-                    index,
-                    field: "color",
-                });
+            if !ball.color.is_finite() {
+                return not_finite("color");
             }
             if !ball.radius.is_finite() {
-                return Err(MetaballError::NotFinite {
-                    index,
-                    field: "radius",
-                });
+                return not_finite("radius");
             }
             if ball.radius <= 0.0 {
                 return Err(MetaballError::BadRadius {
@@ -113,15 +161,24 @@ impl MetaballScene {
                     radius: ball.radius,
                 });
             }
+            if let Shape::Ellipsoid { axes, rotation } = ball.shape {
+                let axes_ok =
+                    axes.is_finite() && axes.min_element() > 0.0 && axes.max_element() <= 1.0;
+                let rotation_ok = rotation.is_finite() && rotation.length_squared() > 1e-12;
+                if !axes_ok || !rotation_ok || ball.min_semi_axis() <= 0.0 {
+                    return Err(MetaballError::BadEllipsoid { index });
+                }
+            }
         }
         Ok(())
     }
 
     /// Isovalues with a possibly non-empty surface: the field never exceeds the sum of the
-    /// positive strengths, and at zero the surface is the support boundary itself.
+    /// positive strengths times the kernel's peak, and at zero the surface is the support
+    /// boundary itself.
     pub fn isovalue_range(&self) -> (f32, f32) {
         let positive: f32 = self.balls.iter().map(|b| b.strength.max(0.0)).sum();
-        (0.0, positive)
+        (0.0, positive * self.kernel.peak())
     }
 
     /// The field at `p`, summing over `balls` (all of them, or an active subset).
@@ -130,28 +187,35 @@ impl MetaballScene {
             .iter()
             .map(|&i| {
                 let b = &self.balls[i as usize];
-                b.strength
-                    * self
-                        .kernel
-                        .value((p - b.center).length_squared() / (b.radius * b.radius))
+                b.strength * self.kernel.value(b.s_at(p))
             })
             .sum()
     }
 
     /// Outward unit normal (against the field gradient) and blended colour at `p`.
-    pub fn surface_at(&self, balls: &[u32], p: Vec3) -> (Vec3, Vec3) {
+    pub fn surface_at(&self, balls: impl IntoIterator<Item = u32>, p: Vec3) -> (Vec3, Vec3) {
         let mut gradient = Vec3::ZERO;
         let mut color = Vec3::ZERO;
         let mut weight = 0.0f32;
-        for &i in balls {
+        for i in balls {
             let b = &self.balls[i as usize];
-            let inv_r2 = 1.0 / (b.radius * b.radius);
             let d = p - b.center;
-            let s = d.length_squared() * inv_r2;
+            // s and ds/dp = 2 Mᵀ M d.
+            let (s, ds) = match b.shape {
+                Shape::Sphere => {
+                    let inv_r2 = 1.0 / (b.radius * b.radius);
+                    (d.length_squared() * inv_r2, 2.0 * inv_r2 * d)
+                }
+                Shape::Ellipsoid { .. } => {
+                    let m = b.normalizing();
+                    let md = m * d;
+                    (md.length_squared(), 2.0 * (m.transpose() * md))
+                }
+            };
             if s >= 1.0 {
                 continue;
             }
-            gradient += b.strength * self.kernel.derivative(s) * 2.0 * inv_r2 * d;
+            gradient += b.strength * self.kernel.derivative(s) * ds;
             let w = (b.strength * self.kernel.value(s)).max(0.0);
             color += w * b.color;
             weight += w;
@@ -181,9 +245,10 @@ impl MetaballScene {
         }))
     }
 
-    /// The first crossing of the isosurface along `ray` within `[t_min, t_max]`.
+    /// The first crossing of the isosurface along `ray` within `[t_min, t_max]`, by brute
+    /// force and Bézier clipping, without preparing anything (tests, one-off queries).
     pub fn first_hit(&self, ray: &Ray, t_min: f32, t_max: f32, isovalue: f32) -> Option<Hit> {
-        march::first_hit(self, ray, t_min, t_max, isovalue)
+        engine::first_hit_unprepared(self, ray, t_min, t_max, isovalue)
     }
 }
 
@@ -206,29 +271,9 @@ mod tests {
     use super::*;
 
     #[test]
-    fn wyvill_kernel_has_its_defining_values() {
-        let k = Kernel::Wyvill;
-        assert!((k.value(0.0) - 1.0).abs() < 1e-6);
-        assert!(k.value(1.0).abs() < 1e-6);
-        assert!((k.value(0.25) - 0.5).abs() < 1e-6, "f(R/2) = 1/2");
-        assert!(
-            k.derivative(1.0 - 1e-7).abs() < 1e-5,
-            "flat at the support boundary"
-        );
-    }
-
-    #[test]
     fn validation_names_the_offending_ball() {
-        let good = Metaball {
-            center: Vec3::ZERO,
-            radius: 1.0,
-            strength: 1.0,
-            color: Vec3::ONE,
-        };
-        let mut scene = MetaballScene {
-            kernel: Kernel::Wyvill,
-            balls: vec![good; 3],
-        };
+        let good = Metaball::sphere(Vec3::ZERO, 1.0, 1.0, Vec3::ONE);
+        let mut scene = MetaballScene::new(Kernel::Wyvill, vec![good; 3]);
         assert_eq!(scene.validate(10), Ok(()));
         scene.balls[2].center.x = f32::NAN;
         assert_eq!(
@@ -239,14 +284,60 @@ mod tests {
             })
         );
         scene.balls[2] = good;
+        scene.balls[1].center.y = f32::INFINITY;
+        assert_eq!(
+            scene.validate(10),
+            Err(MetaballError::NotFinite {
+                index: 1,
+                field: "center"
+            })
+        );
+        scene.balls[1] = good;
         scene.balls[1].radius = 0.0;
         assert!(matches!(
             scene.validate(10),
             Err(MetaballError::BadRadius { index: 1, .. })
         ));
+        scene.balls[1].radius = -2.0;
+        assert!(matches!(
+            scene.validate(10),
+            Err(MetaballError::BadRadius { index: 1, .. })
+        ));
+        scene.balls[1] = good;
+        scene.balls[0].shape = Shape::Ellipsoid {
+            axes: Vec3::new(1.0, 0.0, 0.5),
+            rotation: Quat::IDENTITY,
+        };
+        assert_eq!(
+            scene.validate(10),
+            Err(MetaballError::BadEllipsoid { index: 0 })
+        );
+        scene.balls[0] = good;
         assert!(matches!(
             scene.validate(2),
-            Err(MetaballError::TooMany { .. })
+            Err(MetaballError::TooMany { count: 3, limit: 2 })
         ));
+        scene.kernel = Kernel::Power { alpha: 7 };
+        assert!(matches!(
+            scene.validate(10),
+            Err(MetaballError::BadKernel { .. })
+        ));
+    }
+
+    #[test]
+    fn single_ball_hit_matches_the_analytic_radius() {
+        // One Wyvill ball of radius 2 at T = 0.5 is a sphere of radius 1 (f(R/2) = 1/2).
+        let scene = MetaballScene::new(
+            Kernel::Wyvill,
+            vec![Metaball::sphere(Vec3::ZERO, 2.0, 1.0, Vec3::ONE)],
+        );
+        let ray = Ray::new(Vec3::new(0.0, 0.0, 5.0), Vec3::NEG_Z);
+        let hit = scene
+            .first_hit(&ray, 0.0, 100.0, 0.5)
+            .expect("the ray hits the ball");
+        assert!((hit.t - 4.0).abs() < 1e-3, "t = {}", hit.t);
+        assert!((hit.normal - Vec3::Z).length() < 1e-3);
+        let miss = Ray::new(Vec3::new(0.0, 1.5, 5.0), Vec3::NEG_Z);
+        assert!(scene.first_hit(&miss, 0.0, 100.0, 0.5).is_none());
     }
 }

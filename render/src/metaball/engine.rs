@@ -1,0 +1,525 @@
+//! A metaball state prepared for tracing: per-ball data for the `f32` hot path, the chosen
+//! acceleration structure, and the traversal modes that feed the root finders.
+//!
+//! How it works: a traversal mode picks which balls a root finder sees on which stretch of
+//! the ray, and counts what fitted-bvh-metaballs.txt Table 3 counts (node traversals, leaf
+//! intersection tests, metaballs considered):
+//! - [`Accel::BruteForce`]: every ball the ray crosses, one search over `[t_min, t_max]`.
+//! - [`Accel::ActiveList`]: metaballs-tutorial.txt §III: all entries and exits sorted, and
+//!   one search per stretch between them with only the balls active there.
+//! - [`Accel::Tree`] with a BVH (fitted-bvh-metaballs.txt §4): every leaf the ray crosses,
+//!   nearest first, searched over its box with its balls and split balls where one of its own
+//!   balls covers the ray; the nearest hit wins and prunes farther nodes.
+//! - [`Accel::Tree`] with a Fitted BVH (§5.2): leaves front to back; the first hit ends it.
+
+use super::roots::{self, FindParams, KernelPoly, RayBall, RootFinder, Scratch};
+use super::tree::{BuildOptions, Tree, TreeBall, TreeKind, TreeStats};
+use super::{MetaballScene, Shape};
+use crate::ray::{Hit, Ray};
+use glam::{Mat3, Vec3};
+use std::cell::RefCell;
+use std::sync::{Arc, OnceLock};
+
+/// The closed set of acceleration modes.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Accel {
+    BruteForce,
+    ActiveList,
+    Tree(Tree),
+}
+
+/// Which acceleration mode to build.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum AccelKind {
+    BruteForce,
+    ActiveList,
+    Tree(BuildOptions),
+}
+
+/// How to prepare a state.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PrepareOptions {
+    pub accel: AccelKind,
+    pub finder: RootFinder,
+    /// Absolute tolerance on hit distances, world units.
+    pub tolerance: f32,
+}
+
+impl PrepareOptions {
+    /// The Fitted BVH with every optimisation, for `scene.min_isovalue`, and Bézier clipping.
+    pub fn fitted(min_isovalue: f32) -> PrepareOptions {
+        PrepareOptions {
+            accel: AccelKind::Tree(BuildOptions::fitted(min_isovalue)),
+            finder: RootFinder::BezierClipping,
+            tolerance: 1e-4,
+        }
+    }
+
+    pub fn with_accel(self, accel: AccelKind) -> PrepareOptions {
+        PrepareOptions { accel, ..self }
+    }
+
+    pub fn with_finder(self, finder: RootFinder) -> PrepareOptions {
+        PrepareOptions { finder, ..self }
+    }
+}
+
+/// Per-ray counters (fitted-bvh-metaballs.txt Table 3, plus root-finder iterations).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct RayCounters {
+    pub rays: u64,
+    pub hits: u64,
+    pub node_traversals: u64,
+    pub leaf_tests: u64,
+    pub metaballs_considered: u64,
+    pub iterations: u64,
+    /// Iterations of the searches that produced the hits.
+    pub hit_iterations: u64,
+}
+
+impl RayCounters {
+    pub fn add(&mut self, o: &RayCounters) {
+        self.rays += o.rays;
+        self.hits += o.hits;
+        self.node_traversals += o.node_traversals;
+        self.leaf_tests += o.leaf_tests;
+        self.metaballs_considered += o.metaballs_considered;
+        self.iterations += o.iterations;
+        self.hit_iterations += o.hit_iterations;
+    }
+}
+
+/// The hot-path copy of one ball.
+#[derive(Clone, Copy, Debug)]
+struct Ball {
+    center: Vec3,
+    inv_r2: f32,
+    radius: f32,
+    strength: f32,
+    lipschitz: f32,
+    min_radius: f32,
+    /// Index into `frames` for an ellipsoid, `u32::MAX` for a sphere.
+    frame: u32,
+}
+
+/// A metaball state ready to trace.
+#[derive(Debug)]
+pub struct PreparedMetaballs {
+    scene: MetaballScene,
+    balls: Vec<Ball>,
+    frames: Vec<Mat3>,
+    options: PrepareOptions,
+    accel: Accel,
+    build_ms: f64,
+    /// Built on first use when a query's isovalue is below the one the §5.3 optimisations
+    /// were built for: the same structure without them.
+    fallback: OnceLock<Accel>,
+}
+
+thread_local! {
+    static SCRATCH: RefCell<(Vec<RayBall<f32>>, Scratch<f32>, Vec<(u32, f32, f32)>)> =
+        RefCell::new(Default::default());
+}
+
+impl PreparedMetaballs {
+    /// Prepares `scene` (already validated) with `options`.
+    pub fn new(scene: MetaballScene, options: PrepareOptions) -> PreparedMetaballs {
+        let started = std::time::Instant::now();
+        let slope = scene.kernel.max_slope();
+        let mut frames = Vec::new();
+        let balls = scene
+            .balls
+            .iter()
+            .map(|b| {
+                let frame = match b.shape {
+                    Shape::Sphere => u32::MAX,
+                    Shape::Ellipsoid { .. } => {
+                        frames.push(b.normalizing());
+                        (frames.len() - 1) as u32
+                    }
+                };
+                Ball {
+                    center: b.center,
+                    inv_r2: 1.0 / (b.radius * b.radius),
+                    radius: b.radius,
+                    strength: b.strength,
+                    lipschitz: b.strength.abs() * slope / b.min_semi_axis(),
+                    min_radius: b.min_semi_axis(),
+                    frame,
+                }
+            })
+            .collect();
+        let accel = build_accel(&scene, options.accel);
+        PreparedMetaballs {
+            scene,
+            balls,
+            frames,
+            options,
+            accel,
+            build_ms: started.elapsed().as_secs_f64() * 1e3,
+            fallback: OnceLock::new(),
+        }
+    }
+
+    pub fn scene(&self) -> &MetaballScene {
+        &self.scene
+    }
+
+    pub fn options(&self) -> &PrepareOptions {
+        &self.options
+    }
+
+    pub fn accel(&self) -> &Accel {
+        &self.accel
+    }
+
+    /// Wall time of [`PreparedMetaballs::new`], milliseconds.
+    pub fn build_ms(&self) -> f64 {
+        self.build_ms
+    }
+
+    pub fn tree_stats(&self) -> Option<TreeStats> {
+        match &self.accel {
+            Accel::Tree(t) => Some(t.stats()),
+            _ => None,
+        }
+    }
+
+    /// The first hit along `ray` in `[t_min, t_max]`.
+    pub fn first_hit(&self, ray: &Ray, t_min: f32, t_max: f32, isovalue: f32) -> Option<Hit> {
+        let mut counters = RayCounters::default();
+        self.first_hit_counted(ray, t_min, t_max, isovalue, &mut counters)
+    }
+
+    /// [`PreparedMetaballs::first_hit`], adding to `counters`.
+    pub fn first_hit_counted(
+        &self,
+        ray: &Ray,
+        t_min: f32,
+        t_max: f32,
+        isovalue: f32,
+        counters: &mut RayCounters,
+    ) -> Option<Hit> {
+        counters.rays += 1;
+        if !(isovalue > 0.0) || !isovalue.is_finite() || !(t_min < t_max) {
+            return None;
+        }
+        let accel = match (&self.options.accel, &self.accel) {
+            (AccelKind::Tree(opts), Accel::Tree(_))
+                if opts.depends_on_isovalue() && isovalue < opts.isovalue =>
+            {
+                self.fallback.get_or_init(|| {
+                    let relaxed = BuildOptions {
+                        tight_boxes: false,
+                        discard_split: false,
+                        ..*opts
+                    };
+                    build_accel(&self.scene, AccelKind::Tree(relaxed))
+                })
+            }
+            (_, accel) => accel,
+        };
+        let params = FindParams {
+            kernel: KernelPoly::new(self.scene.kernel),
+            isovalue,
+            tolerance: self.options.tolerance,
+            owners_only: false,
+        };
+        SCRATCH.with(|cell| {
+            let mut guard = cell.borrow_mut();
+            let (gathered, scratch, stack) = &mut *guard;
+            let t = self.trace(
+                accel, ray, t_min, t_max, &params, gathered, scratch, stack, counters,
+            )?;
+            counters.hits += 1;
+            let position = ray.at(t);
+            let (normal, albedo) = self
+                .scene
+                .surface_at(gathered.iter().map(|b| b.ball), position);
+            Some(Hit {
+                t,
+                position,
+                normal,
+                albedo,
+            })
+        })
+    }
+
+    /// The hit distance; on return `gathered` holds the balls of the search that hit.
+    #[allow(clippy::too_many_arguments)]
+    fn trace(
+        &self,
+        accel: &Accel,
+        ray: &Ray,
+        t_min: f32,
+        t_max: f32,
+        params: &FindParams<f32>,
+        gathered: &mut Vec<RayBall<f32>>,
+        scratch: &mut Scratch<f32>,
+        stack: &mut Vec<(u32, f32, f32)>,
+        counters: &mut RayCounters,
+    ) -> Option<f32> {
+        let finder = self.options.finder;
+        let mut record = |found: roots::Found<f32>, counters: &mut RayCounters, n: usize| {
+            counters.leaf_tests += 1;
+            counters.metaballs_considered += n as u64;
+            counters.iterations += found.iterations as u64;
+            if found.t.is_some() {
+                counters.hit_iterations += found.hit_iterations as u64;
+            }
+            found.t
+        };
+        match accel {
+            Accel::BruteForce => {
+                gathered.clear();
+                for i in 0..self.balls.len() as u32 {
+                    self.gather(ray, i, true, t_min, t_max, gathered);
+                }
+                let found = roots::find_first(finder, params, gathered, t_min, t_max, scratch);
+                record(found, counters, gathered.len())
+            }
+            Accel::ActiveList => {
+                gathered.clear();
+                for i in 0..self.balls.len() as u32 {
+                    self.gather(ray, i, true, t_min, t_max, gathered);
+                }
+                // Sorted entries and exits; each stretch searched with its active balls.
+                let mut events: Vec<(f32, u32)> = Vec::with_capacity(gathered.len() * 2);
+                for (k, b) in gathered.iter().enumerate() {
+                    events.push((b.t0.max(t_min), (k as u32) << 1));
+                    events.push((b.t1.min(t_max), ((k as u32) << 1) | 1));
+                }
+                events.sort_unstable_by(|x, y| x.0.total_cmp(&y.0).then(x.1.cmp(&y.1)));
+                let mut active: Vec<u32> = Vec::new();
+                let mut section: Vec<RayBall<f32>> = Vec::new();
+                let mut e = 0;
+                while e < events.len() {
+                    let t = events[e].0;
+                    while e < events.len() && events[e].0 <= t {
+                        let k = events[e].1 >> 1;
+                        if events[e].1 & 1 == 0 {
+                            active.push(k);
+                        } else if let Some(p) = active.iter().position(|&a| a == k) {
+                            active.swap_remove(p);
+                        }
+                        e += 1;
+                    }
+                    if e >= events.len() || active.is_empty() {
+                        continue;
+                    }
+                    section.clear();
+                    // Ball order fixed by index, so the sum is the same whatever the sort.
+                    active.sort_unstable();
+                    section.extend(active.iter().map(|&k| gathered[k as usize]));
+                    let found =
+                        roots::find_first(finder, params, &section, t, events[e].0, scratch);
+                    if let Some(t) = record(found, counters, section.len()) {
+                        *gathered = section;
+                        return Some(t);
+                    }
+                }
+                None
+            }
+            Accel::Tree(tree) => self.trace_tree(
+                tree,
+                ray,
+                t_min,
+                t_max,
+                params,
+                gathered,
+                scratch,
+                stack,
+                counters,
+                &mut record,
+            ),
+        }
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    fn trace_tree(
+        &self,
+        tree: &Tree,
+        ray: &Ray,
+        t_min: f32,
+        t_max: f32,
+        params: &FindParams<f32>,
+        gathered: &mut Vec<RayBall<f32>>,
+        scratch: &mut Scratch<f32>,
+        stack: &mut Vec<(u32, f32, f32)>,
+        counters: &mut RayCounters,
+        record: &mut impl FnMut(roots::Found<f32>, &mut RayCounters, usize) -> Option<f32>,
+    ) -> Option<f32> {
+        let finder = self.options.finder;
+        let inv_dir = ray.dir.recip();
+        let fitted = tree.kind == TreeKind::Fitted;
+        let leaf_params = FindParams {
+            owners_only: !fitted,
+            ..*params
+        };
+        let mut best: Option<f32> = None;
+        let mut best_balls: Vec<RayBall<f32>> = Vec::new();
+        stack.clear();
+        let root = &tree.nodes[0];
+        if let Some((a, b)) = root.bounds.ray_range(ray.origin, inv_dir, t_min, t_max) {
+            stack.push((0, a, b));
+        }
+        while let Some((i, near, far)) = stack.pop() {
+            let limit = best.unwrap_or(t_max);
+            if near > limit {
+                continue;
+            }
+            counters.node_traversals += 1;
+            let node = &tree.nodes[i as usize];
+            if node.is_leaf() {
+                let leaf = tree.leaf_balls(node);
+                if leaf.is_empty() {
+                    continue;
+                }
+                let far = far.min(limit);
+                gathered.clear();
+                for (k, &b) in leaf.iter().enumerate() {
+                    self.gather(
+                        ray,
+                        b,
+                        fitted || k < node.owned as usize,
+                        near,
+                        far,
+                        gathered,
+                    );
+                }
+                if gathered.is_empty() {
+                    continue;
+                }
+                let found = roots::find_first(finder, &leaf_params, gathered, near, far, scratch);
+                if let Some(t) = record(found, counters, gathered.len()) {
+                    if fitted {
+                        return Some(t);
+                    }
+                    if best.is_none_or(|b| t < b) {
+                        best = Some(t);
+                        std::mem::swap(&mut best_balls, gathered);
+                    }
+                }
+                continue;
+            }
+            let c = node.first;
+            let l = tree.nodes[c as usize].bounds.ray_range(
+                ray.origin,
+                inv_dir,
+                near.max(t_min),
+                limit,
+            );
+            let r = tree.nodes[c as usize + 1].bounds.ray_range(
+                ray.origin,
+                inv_dir,
+                near.max(t_min),
+                limit,
+            );
+            // Push the farther child first so the nearer one is popped first.
+            match (l, r) {
+                (Some(l), Some(r)) => {
+                    let (first, second) = if l.0 <= r.0 {
+                        ((c, l), (c + 1, r))
+                    } else {
+                        ((c + 1, r), (c, l))
+                    };
+                    stack.push((second.0, second.1 .0, second.1 .1));
+                    stack.push((first.0, first.1 .0, first.1 .1));
+                }
+                (Some(l), None) => stack.push((c, l.0, l.1)),
+                (None, Some(r)) => stack.push((c + 1, r.0, r.1)),
+                (None, None) => {}
+            }
+        }
+        if best.is_some() {
+            *gathered = best_balls;
+        }
+        best
+    }
+
+    /// Appends ball `i` if the ray's stretch `[lo, hi]` crosses its support.
+    #[inline]
+    fn gather(
+        &self,
+        ray: &Ray,
+        i: u32,
+        owner: bool,
+        lo: f32,
+        hi: f32,
+        out: &mut Vec<RayBall<f32>>,
+    ) {
+        let b = &self.balls[i as usize];
+        let (a, bq, c) = if b.frame == u32::MAX {
+            let e = ray.origin - b.center;
+            // The direction has unit length.
+            (
+                b.inv_r2,
+                2.0 * e.dot(ray.dir) * b.inv_r2,
+                e.length_squared() * b.inv_r2,
+            )
+        } else {
+            let m = self.frames[b.frame as usize];
+            let e = m * (ray.origin - b.center);
+            let g = m * ray.dir;
+            (g.length_squared(), 2.0 * e.dot(g), e.length_squared())
+        };
+        let disc = bq * bq - 4.0 * a * (c - 1.0);
+        if disc <= 0.0 {
+            return;
+        }
+        let sq = disc.sqrt();
+        // Numerically stable roots of a t² + b t + (c - 1).
+        let qq = -0.5 * (bq + sq.copysign(bq));
+        let (r0, r1) = (qq / a, (c - 1.0) / qq);
+        let (t0, t1) = (r0.min(r1), r0.max(r1));
+        if t1 < lo || t0 > hi {
+            return;
+        }
+        out.push(RayBall {
+            ball: i,
+            t0,
+            t1,
+            a,
+            b: bq,
+            c,
+            q: b.strength,
+            lipschitz: b.lipschitz,
+            min_radius: b.min_radius.min(b.radius),
+            owner,
+        });
+    }
+}
+
+fn build_accel(scene: &MetaballScene, kind: AccelKind) -> Accel {
+    match kind {
+        AccelKind::BruteForce => Accel::BruteForce,
+        AccelKind::ActiveList => Accel::ActiveList,
+        AccelKind::Tree(opts) => {
+            let balls: Vec<TreeBall> = scene
+                .balls
+                .iter()
+                .map(|b| TreeBall {
+                    center: b.center,
+                    radius: b.radius,
+                    strength: b.strength,
+                })
+                .collect();
+            Accel::Tree(Tree::build(&balls, scene.kernel, opts))
+        }
+    }
+}
+
+/// Brute force and Bézier clipping on an unprepared scene.
+pub fn first_hit_unprepared(
+    scene: &MetaballScene,
+    ray: &Ray,
+    t_min: f32,
+    t_max: f32,
+    isovalue: f32,
+) -> Option<Hit> {
+    let opts = PrepareOptions::fitted(scene.min_isovalue).with_accel(AccelKind::BruteForce);
+    PreparedMetaballs::new(scene.clone(), opts).first_hit(ray, t_min, t_max, isovalue)
+}
+
+/// Shares a prepared state.
+pub type SharedMetaballs = Arc<PreparedMetaballs>;

@@ -1,0 +1,671 @@
+//! The root finders: the first point along a ray segment where the summed field reaches the
+//! isovalue, each with a tolerance and an iteration count, generic over `f32` (the hot path)
+//! and `f64` (the reference).
+//!
+//! How it works: the acceleration layer hands a finder the balls whose support the ray
+//! crosses, each as a [`RayBall`]: its entry/exit `[t0, t1]` and the quadratic
+//! `s(t) = a t² + b t + c = |M (o + t d - p)|²` (`M = I/R` for a sphere, the inverse of the
+//! scaled rotation for an ellipsoid, bezier-clipping-metaballs.txt §3.3). The hit is the
+//! smallest `t` in `[lo, hi]` with `F(t) ≥ T` (`F(lo) ≥ T` gives `lo`).
+//! - [`RootFinder::March`]: metaballs-tutorial.txt §II–III: walk the sorted entry/exit
+//!   sections with the active list, step a quarter of the smallest active radius, then bisect.
+//! - [`RootFinder::Secant`]: fitted-bvh-metaballs.txt §3: evaluate `F` at the projections of the
+//!   owners' centres on the ray, take `b` as the first with `F ≥ T` and `a` as the sample
+//!   before it, then the secant method (Illinois variant, so it keeps a bracket). Rays that
+//!   graze the surface between projections are missed, as in the paper.
+//! - [`RootFinder::BezierClipping`]: bezier-clipping-metaballs.txt §3.2: sort the entry/exit
+//!   points, and in each section between consecutive ones express every active ball's field
+//!   over the section as a polynomial of degree `2·deg_w` and add them up. The paper adds the
+//!   balls' Bézier control points; adding power coefficients and converting the sum once is
+//!   the same by linearity and cheaper. The convex hull of the control points clips the
+//!   parameter range; when it shrinks by less than 20% the curve is split in half by de
+//!   Casteljau and the nearer half is searched first, so the first root comes out first.
+//! - [`RootFinder::SphereTracing`]: per section, step `(T - F)/L` with `L = Σ |q_i|·L_k/R_i`
+//!   the Lipschitz bound of the active balls (`L_k` the kernel's steepest slope).
+
+use super::kernel::MAX_W_DEGREE;
+use std::fmt::Debug;
+use std::ops::{Add, Div, Mul, Neg, Sub};
+
+/// Highest Bernstein degree along a ray: `2 · MAX_W_DEGREE`.
+pub const MAX_DEGREE: usize = 2 * MAX_W_DEGREE;
+
+/// Iterations a finder may spend on one ray before it gives up (a miss).
+pub const ITERATION_CAP: u32 = 20_000;
+
+/// The closed set of root finders.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum RootFinder {
+    /// (a) fixed-step marching over the active sections, refined by bisection.
+    March,
+    /// (b) centre projections bracket the first root, the secant method narrows it.
+    Secant,
+    /// (c) Bézier clipping over the sorted entry/exit sections.
+    BezierClipping,
+    /// (d) sphere tracing with a Lipschitz bound per section.
+    SphereTracing,
+}
+
+impl RootFinder {
+    pub const ALL: [RootFinder; 4] = [
+        RootFinder::March,
+        RootFinder::Secant,
+        RootFinder::BezierClipping,
+        RootFinder::SphereTracing,
+    ];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            RootFinder::March => "march+bisect",
+            RootFinder::Secant => "projections+secant",
+            RootFinder::BezierClipping => "bezier clipping",
+            RootFinder::SphereTracing => "sphere tracing",
+        }
+    }
+}
+
+/// The scalar arithmetic the finders need, for `f32` and `f64`.
+pub trait Real:
+    Copy
+    + Debug
+    + Default
+    + PartialOrd
+    + Add<Output = Self>
+    + Sub<Output = Self>
+    + Mul<Output = Self>
+    + Div<Output = Self>
+    + Neg<Output = Self>
+{
+    fn of(v: f64) -> Self;
+    fn to_f64(self) -> f64;
+    fn sqrt(self) -> Self;
+    fn abs(self) -> Self;
+    fn min(self, o: Self) -> Self;
+    fn max(self, o: Self) -> Self;
+}
+
+macro_rules! real {
+    ($t:ty) => {
+        impl Real for $t {
+            #[inline]
+            fn of(v: f64) -> Self {
+                v as $t
+            }
+            #[inline]
+            fn to_f64(self) -> f64 {
+                self as f64
+            }
+            #[inline]
+            fn sqrt(self) -> Self {
+                <$t>::sqrt(self)
+            }
+            #[inline]
+            fn abs(self) -> Self {
+                <$t>::abs(self)
+            }
+            #[inline]
+            fn min(self, o: Self) -> Self {
+                <$t>::min(self, o)
+            }
+            #[inline]
+            fn max(self, o: Self) -> Self {
+                <$t>::max(self, o)
+            }
+        }
+    };
+}
+real!(f32);
+real!(f64);
+
+/// One ball as one ray sees it.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct RayBall<R> {
+    /// Index of the ball in its scene.
+    pub ball: u32,
+    /// Where the ray enters and leaves the support.
+    pub t0: R,
+    pub t1: R,
+    /// `s(t) = a t² + b t + c`.
+    pub a: R,
+    pub b: R,
+    pub c: R,
+    /// Strength `q_i`.
+    pub q: R,
+    /// `|q_i| · L_k / (smallest semi-axis)`: this ball's bound on `|dF/dt|`.
+    pub lipschitz: R,
+    /// Smallest semi-axis, for the marching step.
+    pub min_radius: R,
+    /// Whether this ball's centre projection is a secant sample point, and (for the BVH with
+    /// split metaballs) whether its support marks where this leaf's field is complete.
+    pub owner: bool,
+}
+
+impl<R: Real> RayBall<R> {
+    /// The ball's term of the field at `t`.
+    #[inline]
+    pub fn term(&self, k: &KernelPoly<R>, t: R) -> R {
+        let s = (self.a * t + self.b) * t + self.c;
+        if s >= R::of(1.0) {
+            return R::default();
+        }
+        self.q * k.at_w(R::of(1.0) - s)
+    }
+
+    /// The parameter of the centre's projection: where `s` is smallest.
+    #[inline]
+    pub fn projection(&self) -> R {
+        -self.b / (R::of(2.0) * self.a)
+    }
+}
+
+/// A kernel as `Σ c_k w^k`, in the finder's precision.
+#[derive(Clone, Copy, Debug)]
+pub struct KernelPoly<R> {
+    pub c: [R; MAX_W_DEGREE + 1],
+    pub degree: usize,
+}
+
+impl<R: Real> KernelPoly<R> {
+    pub fn new(kernel: super::Kernel) -> Self {
+        let c64 = kernel.w_coefficients();
+        let mut c = [R::default(); MAX_W_DEGREE + 1];
+        for (d, s) in c.iter_mut().zip(c64) {
+            *d = R::of(s);
+        }
+        KernelPoly {
+            c,
+            degree: kernel.w_degree(),
+        }
+    }
+
+    #[inline]
+    pub fn at_w(&self, w: R) -> R {
+        let mut acc = self.c[self.degree];
+        let mut k = self.degree;
+        while k > 0 {
+            k -= 1;
+            acc = acc * w + self.c[k];
+        }
+        acc
+    }
+}
+
+/// What a finder needs besides the balls.
+#[derive(Clone, Copy, Debug)]
+pub struct FindParams<R> {
+    pub kernel: KernelPoly<R>,
+    pub isovalue: R,
+    /// Absolute tolerance on the hit distance, world units.
+    pub tolerance: R,
+    /// Only search where an owner's support covers the ray (the BVH's leaves, whose field is
+    /// complete only inside their own balls).
+    pub owners_only: bool,
+}
+
+/// The outcome of one search.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Found<R> {
+    pub t: Option<R>,
+    /// Iterations spent in total.
+    pub iterations: u32,
+    /// Iterations spent on the section or bracket that produced the hit.
+    pub hit_iterations: u32,
+}
+
+/// Reusable buffers, one set per thread.
+#[derive(Debug, Default)]
+pub struct Scratch<R> {
+    events: Vec<(R, u32)>,
+    active: Vec<u32>,
+    samples: Vec<R>,
+}
+
+#[inline]
+fn field<R: Real>(k: &KernelPoly<R>, balls: &[RayBall<R>], active: &[u32], t: R) -> R {
+    let mut f = R::default();
+    for &i in active {
+        f = f + balls[i as usize].term(k, t);
+    }
+    f
+}
+
+#[inline]
+fn field_all<R: Real>(k: &KernelPoly<R>, balls: &[RayBall<R>], t: R) -> R {
+    let mut f = R::default();
+    for b in balls {
+        f = f + b.term(k, t);
+    }
+    f
+}
+
+/// The first `t` in `[lo, hi]` with `F(t) ≥ T`, by `finder`.
+pub fn find_first<R: Real>(
+    finder: RootFinder,
+    p: &FindParams<R>,
+    balls: &[RayBall<R>],
+    lo: R,
+    hi: R,
+    scratch: &mut Scratch<R>,
+) -> Found<R> {
+    if balls.is_empty() || !(lo < hi) {
+        return Found::default();
+    }
+    match finder {
+        RootFinder::Secant => secant(p, balls, lo, hi, scratch),
+        RootFinder::March => walk_sections(p, balls, lo, hi, scratch, march_section),
+        RootFinder::BezierClipping => walk_sections(p, balls, lo, hi, scratch, bezier_section),
+        RootFinder::SphereTracing => walk_sections(p, balls, lo, hi, scratch, trace_section),
+    }
+}
+
+type SectionFn<R> = fn(&FindParams<R>, &[RayBall<R>], &[u32], R, R, &mut u32) -> Option<R>;
+
+/// Sorts the entry/exit points in `[lo, hi]` and calls `section` on each stretch between
+/// consecutive ones with the balls active there (the tutorial's active list).
+fn walk_sections<R: Real>(
+    p: &FindParams<R>,
+    balls: &[RayBall<R>],
+    lo: R,
+    hi: R,
+    scratch: &mut Scratch<R>,
+    section: SectionFn<R>,
+) -> Found<R> {
+    let events = &mut scratch.events;
+    events.clear();
+    for (i, b) in balls.iter().enumerate() {
+        let (t0, t1) = (b.t0.max(lo), b.t1.min(hi));
+        if t0 < t1 {
+            events.push((t0, (i as u32) << 1));
+            events.push((t1, ((i as u32) << 1) | 1));
+        }
+    }
+    events.sort_unstable_by(|x, y| {
+        x.0.partial_cmp(&y.0)
+            .unwrap_or(std::cmp::Ordering::Equal)
+            .then(x.1.cmp(&y.1))
+    });
+    let active = &mut scratch.active;
+    active.clear();
+    let mut owners = 0u32;
+    let mut found = Found::default();
+    let mut e = 0;
+    while e < events.len() {
+        let t = events[e].0;
+        // Apply every event at this parameter.
+        while e < events.len() && !(t < events[e].0) {
+            let (_, code) = events[e];
+            let i = code >> 1;
+            let owner = balls[i as usize].owner;
+            if code & 1 == 0 {
+                active.push(i);
+                owners += owner as u32;
+            } else if let Some(pos) = active.iter().position(|&a| a == i) {
+                active.swap_remove(pos);
+                owners -= owner as u32;
+            }
+            e += 1;
+        }
+        if e >= events.len() || active.is_empty() || (p.owners_only && owners == 0) {
+            continue;
+        }
+        let next = events[e].0;
+        let mut iters = 0;
+        let hit = section(p, balls, active, t, next, &mut iters);
+        found.iterations += iters;
+        if hit.is_some() {
+            found.t = hit;
+            found.hit_iterations = iters;
+            return found;
+        }
+        if found.iterations > ITERATION_CAP {
+            return found;
+        }
+    }
+    found
+}
+
+/// (a) Fixed steps of a quarter of the smallest active radius, then bisection to tolerance.
+fn march_section<R: Real>(
+    p: &FindParams<R>,
+    balls: &[RayBall<R>],
+    active: &[u32],
+    a: R,
+    b: R,
+    iters: &mut u32,
+) -> Option<R> {
+    let mut step = R::of(f64::INFINITY);
+    for &i in active {
+        step = step.min(balls[i as usize].min_radius);
+    }
+    let step = step * R::of(0.25);
+    let g = |t: R| field(&p.kernel, balls, active, t) - p.isovalue;
+    let mut t0 = a;
+    *iters += 1;
+    if g(t0) >= R::default() {
+        return Some(t0);
+    }
+    while t0 < b {
+        let t1 = (t0 + step).min(b);
+        *iters += 1;
+        if g(t1) >= R::default() {
+            let (mut lo, mut hi) = (t0, t1);
+            while hi - lo > p.tolerance && *iters < ITERATION_CAP {
+                let mid = R::of(0.5) * (lo + hi);
+                *iters += 1;
+                if g(mid) < R::default() {
+                    lo = mid;
+                } else {
+                    hi = mid;
+                }
+            }
+            return Some(hi);
+        }
+        t0 = t1;
+    }
+    None
+}
+
+/// (d) Sphere tracing: safe steps `(T - F) / L` until within tolerance.
+fn trace_section<R: Real>(
+    p: &FindParams<R>,
+    balls: &[RayBall<R>],
+    active: &[u32],
+    a: R,
+    b: R,
+    iters: &mut u32,
+) -> Option<R> {
+    let mut lipschitz = R::default();
+    for &i in active {
+        lipschitz = lipschitz + balls[i as usize].lipschitz;
+    }
+    let mut t = a;
+    loop {
+        *iters += 1;
+        let gap = p.isovalue - field(&p.kernel, balls, active, t);
+        if gap <= R::default() {
+            return Some(t);
+        }
+        let step = gap / lipschitz;
+        if step < p.tolerance {
+            // Within tolerance of the surface (or of a tangency: sphere tracing cannot tell).
+            return Some(t + step);
+        }
+        t = t + step;
+        if t >= b || *iters > ITERATION_CAP {
+            return None;
+        }
+    }
+}
+
+/// (b) fitted-bvh-metaballs.txt §3: bracket by centre projections, then the secant method.
+fn secant<R: Real>(
+    p: &FindParams<R>,
+    balls: &[RayBall<R>],
+    lo: R,
+    hi: R,
+    scratch: &mut Scratch<R>,
+) -> Found<R> {
+    let g = |t: R| field_all(&p.kernel, balls, t) - p.isovalue;
+    let mut found = Found::default();
+    let samples = &mut scratch.samples;
+    samples.clear();
+    samples.extend(
+        balls
+            .iter()
+            .filter(|b| b.owner)
+            .map(|b| b.projection())
+            .filter(|&t| lo < t && t < hi),
+    );
+    samples.sort_unstable_by(|x, y| x.partial_cmp(y).unwrap_or(std::cmp::Ordering::Equal));
+    let (mut a, mut ga) = (lo, g(lo));
+    if ga >= R::default() {
+        found.t = Some(lo);
+        return found;
+    }
+    let mut bracket = None;
+    for &t in samples.iter() {
+        let gt = g(t);
+        if gt >= R::default() {
+            bracket = Some((t, gt));
+            break;
+        }
+        (a, ga) = (t, gt);
+    }
+    let Some((mut b, mut gb)) = bracket else {
+        return found;
+    };
+    // Illinois regula falsi: the secant step, halving the stale end's weight.
+    let mut side = 0i8;
+    let mut iters = 0;
+    while b - a > p.tolerance && iters < 200 {
+        iters += 1;
+        let mut c = b - gb * (b - a) / (gb - ga);
+        if !(a < c && c < b) {
+            c = R::of(0.5) * (a + b);
+        }
+        let gc = g(c);
+        if gc >= R::default() {
+            (b, gb) = (c, gc);
+            if side == 1 {
+                ga = ga * R::of(0.5);
+            }
+            side = 1;
+        } else {
+            (a, ga) = (c, gc);
+            if side == -1 {
+                gb = gb * R::of(0.5);
+            }
+            side = -1;
+        }
+        if gc.abs() == R::default() {
+            break;
+        }
+    }
+    found.t = Some(b);
+    found.iterations = iters;
+    found.hit_iterations = iters;
+    found
+}
+
+/// (c) The section's field minus `T` as a Bernstein polynomial, then Bézier clipping.
+fn bezier_section<R: Real>(
+    p: &FindParams<R>,
+    balls: &[RayBall<R>],
+    active: &[u32],
+    a: R,
+    b: R,
+    iters: &mut u32,
+) -> Option<R> {
+    let h = b - a;
+    let degree = 2 * p.kernel.degree;
+    let mut poly = [R::default(); MAX_DEGREE + 1];
+    for &i in active {
+        let ball = &balls[i as usize];
+        // s(a + h v) = s0 + s1 v + s2 v², so w = 1 - s in power form.
+        let s0 = (ball.a * a + ball.b) * a + ball.c;
+        let s1 = (R::of(2.0) * ball.a * a + ball.b) * h;
+        let s2 = ball.a * h * h;
+        let w = [R::of(1.0) - s0, -s1, -s2];
+        let mut wk = [R::default(); MAX_DEGREE + 1];
+        wk[0] = R::of(1.0);
+        let mut len = 1;
+        for k in 1..=p.kernel.degree {
+            // wk ← wk · w
+            let mut next = [R::default(); MAX_DEGREE + 1];
+            for (j, &x) in wk.iter().enumerate().take(len) {
+                for (l, &y) in w.iter().enumerate() {
+                    next[j + l] = next[j + l] + x * y;
+                }
+            }
+            wk = next;
+            len += 2;
+            let ck = p.kernel.c[k] * ball.q;
+            if ck != R::default() {
+                for j in 0..len {
+                    poly[j] = poly[j] + ck * wk[j];
+                }
+            }
+        }
+    }
+    poly[0] = poly[0] - p.isovalue;
+    let mut bern = [R::default(); MAX_DEGREE + 1];
+    power_to_bernstein(&poly, degree, &mut bern);
+    let tol_v = p.tolerance / h;
+    bezier_first_root(&bern, degree, tol_v, iters).map(|v| a + h * v)
+}
+
+const BINOMIAL: [[f64; MAX_DEGREE + 1]; MAX_DEGREE + 1] = {
+    let mut c = [[0.0; MAX_DEGREE + 1]; MAX_DEGREE + 1];
+    let mut n = 0;
+    while n <= MAX_DEGREE {
+        c[n][0] = 1.0;
+        let mut k = 1;
+        while k <= n {
+            c[n][k] = c[n - 1][k - 1] + if k < n { c[n - 1][k] } else { 0.0 };
+            k += 1;
+        }
+        n += 1;
+    }
+    c
+};
+
+/// `b_j = Σ_{i ≤ j} C(j, i) / C(n, i) · p_i` for `p(v) = Σ p_i v^i` on `[0, 1]`.
+fn power_to_bernstein<R: Real>(poly: &[R], n: usize, out: &mut [R]) {
+    for j in 0..=n {
+        let mut acc = R::default();
+        for (i, &pi) in poly.iter().enumerate().take(j + 1) {
+            acc = acc + R::of(BINOMIAL[j][i] / BINOMIAL[n][i]) * pi;
+        }
+        out[j] = acc;
+    }
+}
+
+/// De Casteljau at `v`: the control points of `[0, v]` into `left`, `[v, 1]` into `right`.
+fn de_casteljau<R: Real>(b: &[R], n: usize, v: R, left: &mut [R], right: &mut [R]) {
+    let mut tmp = [R::default(); MAX_DEGREE + 1];
+    tmp[..=n].copy_from_slice(&b[..=n]);
+    let u = R::of(1.0) - v;
+    for r in 0..=n {
+        left[r] = tmp[0];
+        right[n - r] = tmp[n - r];
+        for i in 0..n - r {
+            tmp[i] = u * tmp[i] + v * tmp[i + 1];
+        }
+    }
+}
+
+/// The smallest `v ∈ [0, 1]` where the Bernstein polynomial `b` reaches zero from below
+/// (`b_0 ≥ 0` gives 0), to within `tol_v`; `None` when it stays negative.
+pub fn bezier_first_root<R: Real>(
+    b: &[R; MAX_DEGREE + 1],
+    n: usize,
+    tol_v: R,
+    iters: &mut u32,
+) -> Option<R> {
+    let zero = R::default();
+    let nf = R::of(n as f64);
+    // Pending halves, nearest last popped first: (coefficients, lo, hi).
+    let mut stack: [([R; MAX_DEGREE + 1], R, R); 48] = [([zero; MAX_DEGREE + 1], zero, zero); 48];
+    let mut depth = 0usize;
+    let mut cur = (*b, zero, R::of(1.0));
+    loop {
+        let (ref mut c, ref mut lo, ref mut hi) = cur;
+        *iters += 1;
+        let mut done = *iters > ITERATION_CAP;
+        if c[0] >= zero {
+            return Some(*lo);
+        }
+        if !done && c[..=n].iter().all(|&x| x < zero) {
+            done = true; // the hull lies below the axis: no root here
+        }
+        if !done {
+            // Where the convex hull of (k/n, c_k) meets the axis: over every segment from a
+            // negative to a non-negative control point.
+            let (mut xl, mut xr) = (R::of(1.0), zero);
+            for i in 0..=n {
+                if c[i] >= zero {
+                    continue;
+                }
+                for j in 0..=n {
+                    if c[j] < zero {
+                        continue;
+                    }
+                    let (xi, xj) = (R::of(i as f64) / nf, R::of(j as f64) / nf);
+                    let x = xi + (xj - xi) * (-c[i]) / (c[j] - c[i]);
+                    xl = xl.min(x);
+                    xr = xr.max(x);
+                }
+            }
+            let (xl, xr) = (xl.max(zero), xr.min(R::of(1.0)));
+            let width = *hi - *lo;
+            if width * (xr - xl) <= tol_v || width <= tol_v {
+                return Some(*lo + width * xl);
+            }
+            let mut left = [zero; MAX_DEGREE + 1];
+            let mut right = [zero; MAX_DEGREE + 1];
+            if xr - xl > R::of(0.8) && depth < stack.len() {
+                // Clipping stalls (several roots or a flat stretch): split in half.
+                de_casteljau(c, n, R::of(0.5), &mut left, &mut right);
+                let mid = *lo + width * R::of(0.5);
+                stack[depth] = (right, mid, *hi);
+                depth += 1;
+                *c = left;
+                *hi = mid;
+            } else {
+                // Keep [xl, xr]: cut at xr, then cut the left part at xl / xr.
+                de_casteljau(c, n, xr, &mut left, &mut right);
+                let inner = if xr > zero { xl / xr } else { zero };
+                let mut l2 = [zero; MAX_DEGREE + 1];
+                de_casteljau(&left, n, inner, &mut l2, c);
+                let new_lo = *lo + width * xl;
+                *hi = *lo + width * xr;
+                *lo = new_lo;
+            }
+            continue;
+        }
+        if depth == 0 || *iters > ITERATION_CAP {
+            return None;
+        }
+        depth -= 1;
+        cur = stack[depth];
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn bezier_clipping_finds_the_smallest_root_of_a_cubic() {
+        // (v - 0.2)(v - 0.5)(v - 0.9) · -1: negative at 0, roots at 0.2, 0.5, 0.9.
+        let poly = [0.09, -0.73, 1.6, -1.0, 0.0, 0.0, 0.0, 0.0, 0.0];
+        let mut b = [0.0f64; MAX_DEGREE + 1];
+        power_to_bernstein(&poly, 3, &mut b);
+        let mut iters = 0;
+        let v = bezier_first_root(
+            &[-b[0], -b[1], -b[2], -b[3], 0.0, 0.0, 0.0, 0.0, 0.0],
+            3,
+            1e-12,
+            &mut iters,
+        )
+        .expect("a root");
+        assert!((v - 0.2).abs() < 1e-9, "v = {v}");
+        assert!(iters < 40, "{iters} iterations");
+    }
+
+    #[test]
+    fn de_casteljau_halves_evaluate_like_the_whole() {
+        let b = [0.1f64, -0.5, 0.3, 0.9, 0.0, 0.0, 0.0, 0.0, 0.0];
+        let mut l = [0.0; MAX_DEGREE + 1];
+        let mut r = [0.0; MAX_DEGREE + 1];
+        de_casteljau(&b, 3, 0.3, &mut l, &mut r);
+        assert!((l[3] - r[0]).abs() < 1e-12);
+        let eval = |c: &[f64], v: f64| {
+            (0..=3)
+                .map(|k| BINOMIAL[3][k] * v.powi(k as i32) * (1.0 - v).powi(3 - k as i32) * c[k])
+                .sum::<f64>()
+        };
+        assert!((eval(&b, 0.15) - eval(&l, 0.5)).abs() < 1e-12);
+        assert!((eval(&b, 0.65) - eval(&r, 0.5)).abs() < 1e-12);
+    }
+}
