@@ -6,6 +6,7 @@
 //! values such as finiteness and ranges at its boundary). `PROTOCOL.md` beside this crate is
 //! the human-readable description; the tests below pin the JSON shapes it documents.
 
+pub mod api;
 pub mod frame;
 
 pub use frame::{

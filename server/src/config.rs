@@ -3,6 +3,7 @@
 
 use clap::Parser;
 use std::net::SocketAddr;
+use std::path::PathBuf;
 
 /// isoray: a remote ray tracer for dynamic implicit surfaces and isosurfaces.
 #[derive(Clone, Debug, Parser)]
@@ -61,6 +62,80 @@ pub struct Config {
     /// Most primitives a scene may hold.
     #[arg(long, env = "ISORAY_MAX_PRIMITIVES", default_value_t = 2_000_000)]
     pub max_primitives: usize,
+
+    /// Directory of the scene store (pushed scenes and their steps). Default: `isoray` under
+    /// the user's data directory (`$XDG_DATA_HOME`, else `~/.local/share`), created on demand;
+    /// if it cannot be used the server logs a warning and serves its demos only.
+    #[arg(long, env = "ISORAY_DATA_DIR")]
+    pub data_dir: Option<PathBuf>,
+
+    /// Serve the built-in demos only: no scene store, no pushes.
+    #[arg(long, env = "ISORAY_DEMOS_ONLY")]
+    pub demos_only: bool,
+
+    /// Token that may push to and delete any scene (`Authorization: Bearer ...`), besides each
+    /// scene's own write token. Unset: only per-scene tokens.
+    #[arg(long, env = "ISORAY_ADMIN_TOKEN", hide_env_values = true)]
+    pub admin_token: Option<String>,
+
+    /// Token needed to view scenes, render, and list or fetch steps (header, or `?token=` on
+    /// the websocket). Unset: viewing is open.
+    #[arg(long, env = "ISORAY_VIEW_TOKEN", hide_env_values = true)]
+    pub view_token: Option<String>,
+
+    /// Largest binary step body (.npy or raw), in bytes.
+    #[arg(long, env = "ISORAY_MAX_PUSH_BYTES", default_value_t = 512 << 20)]
+    pub max_push_bytes: u64,
+
+    /// Largest JSON body (scene creation, JSON steps, render requests), in bytes.
+    #[arg(long, env = "ISORAY_MAX_JSON_BYTES", default_value_t = 32 << 20)]
+    pub max_json_bytes: u64,
+
+    /// Seconds a push may take to arrive before it is abandoned.
+    #[arg(long, env = "ISORAY_PUSH_TIMEOUT_SECS", default_value_t = 300)]
+    pub push_timeout_secs: u64,
+
+    /// Highest step index a push may use.
+    #[arg(long, env = "ISORAY_MAX_STEP_INDEX", default_value_t = 1_000_000)]
+    pub max_step_index: u64,
+
+    /// Retention: most steps kept per scene (the oldest go first).
+    #[arg(long, env = "ISORAY_MAX_STEPS_PER_SCENE", default_value_t = 1000)]
+    pub max_steps_per_scene: usize,
+
+    /// Retention: most bytes of steps kept per scene.
+    #[arg(long, env = "ISORAY_MAX_SCENE_BYTES", default_value_t = 8 << 30)]
+    pub max_scene_bytes: u64,
+
+    /// Retention: most bytes of steps in the whole store.
+    #[arg(long, env = "ISORAY_MAX_STORE_BYTES", default_value_t = 32 << 30)]
+    pub max_store_bytes: u64,
+
+    /// Bytes of prepared stored steps kept in memory across all scenes.
+    #[arg(long, env = "ISORAY_CACHE_BYTES", default_value_t = 1 << 30)]
+    pub cache_bytes: u64,
+
+    /// Writes (creates, pushes, deletes) per second each client address may make on average.
+    #[arg(long, env = "ISORAY_WRITE_RATE", default_value_t = 50.0)]
+    pub write_rate: f64,
+
+    /// Writes a client may make in a burst above that rate.
+    #[arg(long, env = "ISORAY_WRITE_BURST", default_value_t = 200)]
+    pub write_burst: u32,
+}
+
+/// `isoray` under the user's data directory: `$XDG_DATA_HOME/isoray`, else
+/// `~/.local/share/isoray`.
+pub fn default_data_dir() -> Option<PathBuf> {
+    let from_env = |name: &str| {
+        std::env::var_os(name)
+            .filter(|v| !v.is_empty())
+            .map(PathBuf::from)
+    };
+    from_env("XDG_DATA_HOME")
+        .filter(|p| p.is_absolute())
+        .or_else(|| from_env("HOME").map(|h| h.join(".local").join("share")))
+        .map(|d| d.join("isoray"))
 }
 
 impl Default for Config {
@@ -102,6 +177,26 @@ impl Config {
                 "--jpeg-quality {} must be in 1..=100",
                 self.jpeg_quality
             ));
+        }
+        if !(self.write_rate.is_finite() && self.write_rate > 0.0) || self.write_burst == 0 {
+            return Err("--write-rate must be positive and --write-burst at least 1".into());
+        }
+        if self.max_push_bytes == 0 || self.max_json_bytes == 0 || self.push_timeout_secs == 0 {
+            return Err(
+                "--max-push-bytes, --max-json-bytes and --push-timeout-secs must be positive"
+                    .into(),
+            );
+        }
+        if self.max_steps_per_scene == 0 {
+            return Err("--max-steps-per-scene must be at least 1".into());
+        }
+        for (name, token) in [
+            ("--admin-token", &self.admin_token),
+            ("--view-token", &self.view_token),
+        ] {
+            if token.as_ref().is_some_and(|t| t.len() < 16) {
+                return Err(format!("{name} must be at least 16 characters"));
+            }
         }
         Ok(())
     }

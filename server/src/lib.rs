@@ -8,6 +8,7 @@
 //! Architecture invariant: no handler renders or encodes; those run on the render pool and
 //! come back through channels (see `session`).
 
+pub mod api;
 pub mod config;
 pub mod encode;
 pub mod error;
@@ -16,6 +17,7 @@ pub mod metrics;
 pub mod scenes;
 pub mod session;
 pub mod state;
+pub mod store;
 mod web;
 
 pub use config::Config;
@@ -26,9 +28,8 @@ use axum::extract::ws::WebSocketUpgrade;
 use axum::extract::{Path, State};
 use axum::response::Response;
 use axum::routing::get;
-use axum::{Json, Router};
+use axum::Router;
 use error::AppError;
-use isoray_protocol::SceneList;
 use std::future::Future;
 use std::time::Duration;
 use tokio::net::TcpListener;
@@ -46,9 +47,9 @@ pub fn app(state: AppState) -> Router {
         .route("/", get(web::index))
         .route("/healthz", get(|| async { "ok" }))
         .route("/metrics", get(metrics_text))
-        .route("/api/v1/scenes", get(list_scenes))
         .route("/api/v1/scenes/{id}/stream", get(stream))
         .route("/{file}", get(web::asset))
+        .merge(api::router(state.config()))
         .layer(TraceLayer::new_for_http())
         .with_state(state)
 }
@@ -61,12 +62,6 @@ async fn metrics_text() -> impl axum::response::IntoResponse {
         )],
         metrics::render(),
     )
-}
-
-async fn list_scenes(State(state): State<AppState>) -> Json<SceneList> {
-    Json(SceneList {
-        scenes: state.scenes().summaries(),
-    })
 }
 
 async fn stream(
@@ -103,13 +98,16 @@ pub async fn serve(
 ) -> std::io::Result<()> {
     let signal_state = state.clone();
     let router = app(state.clone());
-    axum::serve(listener, router)
-        .with_graceful_shutdown(async move {
-            shutdown.await;
-            tracing::info!("shutting down: closing sessions");
-            signal_state.begin_shutdown();
-        })
-        .await?;
+    axum::serve(
+        listener,
+        router.into_make_service_with_connect_info::<std::net::SocketAddr>(),
+    )
+    .with_graceful_shutdown(async move {
+        shutdown.await;
+        tracing::info!("shutting down: closing sessions");
+        signal_state.begin_shutdown();
+    })
+    .await?;
     // Upgraded websockets outlive the HTTP server's own drain; wait for them here.
     let deadline = tokio::time::Instant::now() + DRAIN_TIMEOUT;
     while state.sessions().count() > 0 && tokio::time::Instant::now() < deadline {

@@ -506,7 +506,7 @@ fn render_frame(
     quality: Quality,
     (width, height): (u32, u32),
 ) -> Result<(Bytes, StageTimings), crate::encode::EncodeError> {
-    let state = entry.prepared_at(time);
+    let state = entry.prepared_at(time, settings.pinned_time.is_none());
     let view = View {
         width,
         height,

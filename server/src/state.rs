@@ -30,11 +30,12 @@ impl AppState {
         config.validate()?;
         crate::metrics::handle();
         let backend = CpuBackend::new(config.threads).map_err(|e| e.to_string())?;
+        let scenes = SceneRegistry::from_config(&config);
         Ok(AppState {
             inner: Arc::new(Inner {
+                scenes,
                 config,
                 backend,
-                scenes: SceneRegistry::with_demos(),
                 sessions: SessionTable::default(),
                 shutdown: watch::Sender::new(false),
             }),
