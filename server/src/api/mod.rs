@@ -303,8 +303,8 @@ async fn blocking<T: Send + 'static>(
     path = "/api/v1/scenes",
     tag = "scenes",
     responses(
-        (status = 200, body = SceneInfoList),
-        (status = 401, body = ApiErrorBody), (status = 403, body = ApiErrorBody)
+        (status = 200, description = "OK", body = SceneInfoList),
+        (status = 401, description = "Token missing", body = ApiErrorBody), (status = 403, description = "Token wrong", body = ApiErrorBody)
     )
 )]
 async fn list_scenes(
@@ -324,11 +324,11 @@ async fn list_scenes(
     tag = "scenes",
     request_body = CreateScene,
     responses(
-        (status = 201, body = CreatedScene),
+        (status = 201, description = "Created", body = CreatedScene),
         (status = 400, description = "Invalid field", body = ApiErrorBody),
-        (status = 413, body = ApiErrorBody),
+        (status = 413, description = "Body too large", body = ApiErrorBody),
         (status = 422, description = "Kind not supported yet", body = ApiErrorBody),
-        (status = 429, body = ApiErrorBody),
+        (status = 429, description = "Too many writes", body = ApiErrorBody),
         (status = 503, description = "No scene store", body = ApiErrorBody)
     )
 )]
@@ -401,7 +401,7 @@ async fn create_scene(
     path = "/api/v1/scenes/{id}",
     tag = "scenes",
     params(("id" = String, Path, description = "Scene id")),
-    responses((status = 200, body = SceneInfo), (status = 404, body = ApiErrorBody))
+    responses((status = 200, description = "OK", body = SceneInfo), (status = 404, description = "Not found", body = ApiErrorBody))
 )]
 async fn get_scene(
     State(app): State<AppState>,
@@ -422,9 +422,9 @@ async fn get_scene(
     security(("bearer" = [])),
     responses(
         (status = 204, description = "Deleted"),
-        (status = 401, body = ApiErrorBody), (status = 403, body = ApiErrorBody),
-        (status = 404, body = ApiErrorBody), (status = 409, body = ApiErrorBody),
-        (status = 429, body = ApiErrorBody)
+        (status = 401, description = "Token missing", body = ApiErrorBody), (status = 403, description = "Token wrong", body = ApiErrorBody),
+        (status = 404, description = "Not found", body = ApiErrorBody), (status = 409, description = "Conflict", body = ApiErrorBody),
+        (status = 429, description = "Too many writes", body = ApiErrorBody)
     )
 )]
 async fn delete_scene(
@@ -458,7 +458,7 @@ async fn delete_scene(
     path = "/api/v1/scenes/{id}/steps",
     tag = "scenes",
     params(("id" = String, Path, description = "Scene id")),
-    responses((status = 200, body = StepList), (status = 404, body = ApiErrorBody))
+    responses((status = 200, description = "OK", body = StepList), (status = 404, description = "Not found", body = ApiErrorBody))
 )]
 async fn list_steps(
     State(app): State<AppState>,
@@ -495,7 +495,7 @@ fn step_of(
     path = "/api/v1/scenes/{id}/steps/{index}",
     tag = "scenes",
     params(("id" = String, Path, description = "Scene id"), ("index" = u64, Path, description = "Step index")),
-    responses((status = 200, body = StepInfo), (status = 404, body = ApiErrorBody))
+    responses((status = 200, description = "OK", body = StepInfo), (status = 404, description = "Not found", body = ApiErrorBody))
 )]
 async fn get_step(
     State(app): State<AppState>,
@@ -523,7 +523,7 @@ impl AsRef<[u8]> for StepPayload {
     params(("id" = String, Path, description = "Scene id"), ("index" = u64, Path, description = "Step index")),
     responses(
         (status = 200, description = "The step as .npy", content_type = "application/x-npy"),
-        (status = 404, body = ApiErrorBody)
+        (status = 404, description = "Not found", body = ApiErrorBody)
     )
 )]
 async fn get_step_data(
@@ -558,8 +558,8 @@ async fn get_step_data(
     security(("bearer" = [])),
     responses(
         (status = 204, description = "Deleted"),
-        (status = 401, body = ApiErrorBody), (status = 403, body = ApiErrorBody),
-        (status = 404, body = ApiErrorBody), (status = 429, body = ApiErrorBody)
+        (status = 401, description = "Token missing", body = ApiErrorBody), (status = 403, description = "Token wrong", body = ApiErrorBody),
+        (status = 404, description = "Not found", body = ApiErrorBody), (status = 429, description = "Too many writes", body = ApiErrorBody)
     )
 )]
 async fn delete_step(
@@ -633,13 +633,13 @@ enum PushFormat {
         (status = 200, description = "Unchanged or replaced", body = PushResult),
         (status = 201, description = "Created", body = PushResult),
         (status = 400, description = "Invalid body; names the field or byte offset", body = ApiErrorBody),
-        (status = 401, body = ApiErrorBody), (status = 403, body = ApiErrorBody),
-        (status = 404, body = ApiErrorBody),
-        (status = 408, body = ApiErrorBody),
+        (status = 401, description = "Token missing", body = ApiErrorBody), (status = 403, description = "Token wrong", body = ApiErrorBody),
+        (status = 404, description = "Not found", body = ApiErrorBody),
+        (status = 408, description = "Body too slow", body = ApiErrorBody),
         (status = 409, description = "Different content at this index", body = ApiErrorBody),
-        (status = 413, body = ApiErrorBody),
-        (status = 415, body = ApiErrorBody),
-        (status = 429, body = ApiErrorBody)
+        (status = 413, description = "Body too large", body = ApiErrorBody),
+        (status = 415, description = "Unsupported media type", body = ApiErrorBody),
+        (status = 429, description = "Too many writes", body = ApiErrorBody)
     )
 )]
 async fn push_step(
@@ -863,8 +863,8 @@ fn serde_urlencoded_lite(query: &str) -> Result<PushQuery, ApiError> {
     request_body = RenderRequest,
     responses(
         (status = 200, description = "The image", content(("image/png"), ("image/jpeg"))),
-        (status = 400, body = ApiErrorBody),
-        (status = 404, body = ApiErrorBody)
+        (status = 400, description = "Invalid request", body = ApiErrorBody),
+        (status = 404, description = "Not found", body = ApiErrorBody)
     )
 )]
 async fn render(
