@@ -283,12 +283,16 @@ fn scattered(count: usize, time: f64) -> MetaballScene {
 fn tornado(count: usize, time: f64) -> MetaballScene {
     let mut rng = SplitMix64(0x7023_AD00 ^ count as u64);
     let height = 20.0f32;
-    // Ball radius shrinks with the count so the funnel keeps its density of overlaps.
-    let radius = 1.0 * (4000.0 / count as f32).cbrt();
+    let widen = 0.45f32;
+    // Heights drawn with density ∝ funnel radius², so balls fill the shell evenly; the ball
+    // radius shrinks with the count so every ball has about a dozen overlapping neighbours.
+    let top = (1.0 + widen * height).powi(3);
+    let radius = 0.45 * (4000.0 / count as f32).cbrt();
     let balls = (0..count)
         .map(|_| {
-            let h = height * rng.next_f32().powf(0.8);
-            let funnel = 1.0 + 0.45 * h;
+            let u = rng.next_f32();
+            let h = ((1.0 + u * (top - 1.0)).cbrt() - 1.0) / widen;
+            let funnel = 1.0 + widen * h;
             let r = funnel * (0.75 + 0.25 * rng.next_f32());
             let speed = 1.2 / (0.4 + 0.1 * h);
             let angle = rng.range(0.0, std::f32::consts::TAU) + (speed as f64 * time) as f32;

@@ -242,9 +242,21 @@ struct Ctx<'a> {
     /// Algorithm 1: overlapping-sphere neighbours (CSR).
     neighbour_start: Vec<u32>,
     neighbours: Vec<u32>,
+    /// The largest positive strength of the whole set: a node's `q_max` is at most this.
+    q_max: f32,
+    /// `sqrt(s*)` for `n = 0..S_TABLE` positive balls of strength `q_max`.
+    root_s_star: Vec<f32>,
 }
 
+/// Node sizes whose `r_max` comes from a table rather than a bisection.
+const S_TABLE: usize = 4096;
+/// Split-metaball discarding (§5.3.2) costs `n × split` per node; it runs on nodes up to this
+/// size, where leaves form and it pays.
+const DISCARD_MAX_BALLS: usize = 512;
+
 const MAX_DEPTH: usize = 64;
+/// Most SAH bins per axis.
+const MAX_BINS: usize = 16;
 /// Nodes with more balls than this build their children in parallel.
 const PARALLEL_BALLS: usize = 2048;
 /// Cost of one traversal step relative to one field term, for the SAH.
@@ -253,12 +265,22 @@ const TRAVERSAL_COST: f32 = 2.0;
 impl Tree {
     /// Builds the structure over `balls`.
     pub fn build(balls: &[TreeBall], kernel: Kernel, opts: BuildOptions) -> Tree {
+        let q_max = balls.iter().fold(0.0f32, |m, b| m.max(b.strength));
+        let root_s_star = if opts.depends_on_isovalue() && opts.isovalue > 0.0 && q_max > 0.0 {
+            (0..S_TABLE)
+                .map(|n| kernel.s_at_value(opts.isovalue / (n.max(1) as f32 * q_max)).sqrt())
+                .collect()
+        } else {
+            Vec::new()
+        };
         let mut ctx = Ctx {
             balls,
             kernel,
             opts,
             neighbour_start: Vec::new(),
             neighbours: Vec::new(),
+            q_max,
+            root_s_star,
         };
         if opts.kind == TreeKind::Bvh {
             (ctx.neighbour_start, ctx.neighbours) = neighbour_lists(balls);
@@ -274,7 +296,7 @@ impl Tree {
                 let bounds = owned
                     .iter()
                     .fold(Aabb::EMPTY, |b, &i| b.union(ctx.ball_box(i, r_max)));
-                ctx.build_fitted(owned, Vec::new(), bounds, 0)
+                ctx.build_fitted(owned, Vec::new(), bounds, r_max, 0)
             }
         };
         let mut tree = Tree {
@@ -438,27 +460,36 @@ impl Ctx<'_> {
     }
 
     /// §5.3.1: no surface made by these balls lies farther than `r_max` from all centres.
+    /// Uses the whole set's largest strength, which only makes `r_max` larger (safe).
     fn r_max(&self, owned: &[u32], split: &[u32]) -> f32 {
         if !self.opts.depends_on_isovalue() || self.opts.isovalue <= 0.0 {
             return f32::INFINITY;
         }
-        let (mut n, mut r_k, mut q_max) = (0u32, 0.0f32, 0.0f32);
+        let (mut n, mut r_k) = (0usize, 0.0f32);
         for &i in owned.iter().chain(split) {
             let b = &self.balls[i as usize];
-            if b.strength > 0.0 {
-                n += 1;
-                q_max = q_max.max(b.strength);
-            }
+            n += (b.strength > 0.0) as usize;
             r_k = r_k.max(b.radius);
         }
-        if n == 0 {
+        if n == 0 || self.q_max <= 0.0 {
             return 0.0;
         }
-        let s_star = self
-            .kernel
-            .s_at_value(self.opts.isovalue / (n as f32 * q_max));
+        let root = match self.root_s_star.get(n) {
+            Some(&r) => r,
+            None => self
+                .kernel
+                .s_at_value(self.opts.isovalue / (n as f32 * self.q_max))
+                .sqrt(),
+        };
         // A hair of margin against rounding in the inverse.
-        r_k * s_star.sqrt() * 1.0001 + 1e-6
+        r_k * root * 1.0001 + 1e-6
+    }
+
+    fn leaf_cost_f(&self, n: f32) -> f32 {
+        match self.opts.leaf_cost {
+            LeafCost::Squared => n * n,
+            LeafCost::Linear => n,
+        }
     }
 
     fn leaf_cost(&self, n: usize) -> f32 {
@@ -476,7 +507,8 @@ impl Ctx<'_> {
         bounds: &Aabb,
         r_max: f32,
     ) -> Option<(usize, f32, f32)> {
-        let bins = self.opts.bins.max(2);
+        // Small nodes need few bins: two per ball separates every pair of centres' halves.
+        let bins = self.opts.bins.min(2 * owned.len()).clamp(2, MAX_BINS);
         let (cmin, cmax) = owned.iter().fold(
             (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)),
             |(lo, hi), &i| {
@@ -486,22 +518,27 @@ impl Ctx<'_> {
         );
         let parent_area = bounds.area().max(1e-20);
         let mut best: Option<(usize, f32, f32)> = None;
-        for axis in 0..3 {
+        let extent = cmax - cmin;
+        let scale = Vec3::splat(bins as f32) / extent.max(Vec3::splat(1e-30));
+        // As in Wald 2007, which the paper follows: bin along the centroids' longest axis.
+        let axis = extent.max_position();
+        let mut count = [0usize; MAX_BINS];
+        let mut boxes = [Aabb::EMPTY; MAX_BINS];
+        let k_max = bins - 1;
+        for &i in owned {
+            let c = self.balls[i as usize].center[axis];
+            let k = (((c - cmin[axis]) * scale[axis]) as usize).min(k_max);
+            count[k] += 1;
+            boxes[k] = boxes[k].union(self.ball_box(i, r_max));
+        }
+        {
             let (lo, hi) = (cmin[axis], cmax[axis]);
             if !(hi - lo > 1e-6 * (1.0 + hi.abs().max(lo.abs()))) {
-                continue;
+                return None;
             }
-            let scale = bins as f32 / (hi - lo);
-            let mut count = vec![0usize; bins];
-            let mut boxes = vec![Aabb::EMPTY; bins];
-            for &i in owned {
-                let c = self.balls[i as usize].center[axis];
-                let k = (((c - lo) * scale) as usize).min(bins - 1);
-                count[k] += 1;
-                boxes[k] = boxes[k].union(self.ball_box(i, r_max));
-            }
+            let scale = scale[axis];
             // Sweep from the right, then from the left.
-            let mut right = vec![(0usize, Aabb::EMPTY); bins];
+            let mut right = [(0usize, Aabb::EMPTY); MAX_BINS];
             let mut acc = (0usize, Aabb::EMPTY);
             for k in (1..bins).rev() {
                 acc = (acc.0 + count[k], acc.1.union(boxes[k]));
@@ -526,9 +563,7 @@ impl Ctx<'_> {
                 // Split balls of each child, estimated as the parent's share by area.
                 let nl = left.0 as f32 + split_count as f32 * pl;
                 let nr = nr as f32 + split_count as f32 * pr;
-                let cost = TRAVERSAL_COST
-                    + pl * self.leaf_cost(nl.round() as usize)
-                    + pr * self.leaf_cost(nr.round() as usize);
+                let cost = TRAVERSAL_COST + pl * self.leaf_cost_f(nl) + pr * self.leaf_cost_f(nr);
                 if best.is_none_or(|b| cost < b.2) {
                     best = Some((axis, plane, cost));
                 }
@@ -627,6 +662,7 @@ impl Ctx<'_> {
         owned: Vec<u32>,
         split: Vec<u32>,
         bounds: Aabb,
+        r_max: f32,
         depth: usize,
     ) -> BuildNode {
         let n = owned.len() + split.len();
@@ -638,7 +674,6 @@ impl Ctx<'_> {
         if owned.len() <= 1 || depth >= MAX_DEPTH || bounds.is_empty() {
             return leaf(owned, split);
         }
-        let r_max = self.r_max(&owned, &split);
         let Some((axis, plane, cost)) = self.best_split(&owned, split.len(), &bounds, r_max) else {
             return leaf(owned, split);
         };
@@ -648,7 +683,7 @@ impl Ctx<'_> {
         let (lo, ro) = self.partition(owned, axis, plane);
         let (lh, rh) = split_box(&bounds, axis, plane);
         let big = n > PARALLEL_BALLS;
-        let child = |own: &[u32], half: Aabb, other: &[u32]| -> (Vec<u32>, Aabb) {
+        let child = |own: &[u32], half: Aabb, other: &[u32]| -> (Vec<u32>, Aabb, f32) {
             let mut child_split: Vec<u32> = split
                 .iter()
                 .chain(other)
@@ -659,24 +694,28 @@ impl Ctx<'_> {
                 })
                 .collect();
             let mut fitted = half;
+            let r_child = self.r_max(own, &child_split);
             if self.opts.fit_boxes {
-                let r_child = self.r_max(own, &child_split);
                 let balls_box = own
                     .iter()
                     .chain(&child_split)
                     .fold(Aabb::EMPTY, |b, &i| b.union(self.ball_box(i, r_child)));
                 fitted = half.intersection(balls_box);
             }
-            if self.opts.discard_split && !child_split.is_empty() {
-                child_split = self.discard(own, child_split, &fitted);
+            if self.opts.discard_split
+                && !child_split.is_empty()
+                && own.len() + child_split.len() <= DISCARD_MAX_BALLS
+            {
+                child_split = self.discard(own, child_split, &fitted, r_child);
             }
-            (child_split, fitted)
+            (child_split, fitted, r_child)
         };
-        let ((ls, lb), (rs, rb)) = self.fork(big, || child(&lo, lh, &ro), || child(&ro, rh, &lo));
+        let ((ls, lb, lr), (rs, rb, rr)) =
+            self.fork(big, || child(&lo, lh, &ro), || child(&ro, rh, &lo));
         let (left, right) = self.fork(
             big,
-            || self.build_fitted(lo, ls, lb, depth + 1),
-            || self.build_fitted(ro, rs, rb, depth + 1),
+            || self.build_fitted(lo, ls, lb, lr, depth + 1),
+            || self.build_fitted(ro, rs, rb, rr, depth + 1),
         );
         BuildNode::Interior {
             bounds,
@@ -685,12 +724,10 @@ impl Ctx<'_> {
     }
 
     /// §5.3.2: drop positive split balls that cannot shape the surface inside `bounds`.
-    fn discard(&self, owned: &[u32], split: Vec<u32>, bounds: &Aabb) -> Vec<u32> {
-        let r_max = self.r_max(owned, &split);
+    fn discard(&self, owned: &[u32], split: Vec<u32>, bounds: &Aabb, r_max: f32) -> Vec<u32> {
         if !r_max.is_finite() {
             return split;
         }
-        let all: Vec<u32> = owned.iter().chain(&split).copied().collect();
         split
             .iter()
             .copied()
@@ -699,7 +736,7 @@ impl Ctx<'_> {
                 if b.strength <= 0.0 || bounds.overlaps_sphere(b.center, r_max) {
                     return true;
                 }
-                all.iter().any(|&j| {
+                owned.iter().chain(&split).any(|&j| {
                     if j == i {
                         return false;
                     }
