@@ -1,4 +1,5 @@
 //! All of isoray's cross-crate and end-to-end tests, in one binary (one link, shared helpers).
 //! Each module is named after what it guards.
 
+mod api;
 mod e2e;
