@@ -155,7 +155,9 @@ fn pick(scenes: &[String]) -> Vec<DemoScene> {
 
 /// Build ms (median) and 640×480 render ms of the FBVH with each step off, and of the BVH.
 fn build_ablation(demos: &[DemoScene], runs: usize) {
-    println!("| scene | structure | build ms | render ms | nodes | leaves | owned/leaf | split/leaf |");
+    println!(
+        "| scene | structure | build ms | render ms | nodes | leaves | owned/leaf | split/leaf |"
+    );
     println!("|---|---|---:|---:|---:|---:|---:|---:|");
     for &demo in demos {
         let state = Arc::new(demo.state_at(1.0));
@@ -163,10 +165,34 @@ fn build_ablation(demos: &[DemoScene], runs: usize) {
         let full = BuildOptions::fitted(floor);
         let variants: [(&str, BuildOptions); 6] = [
             ("FBVH, all of §5", full),
-            ("FBVH without fitting (§5.1.2)", BuildOptions { fit_boxes: false, ..full }),
-            ("FBVH without tight boxes (§5.3.1)", BuildOptions { tight_boxes: false, ..full }),
-            ("FBVH without discarding (§5.3.2)", BuildOptions { discard_split: false, ..full }),
-            ("FBVH with SAH leaf cost n", BuildOptions { leaf_cost: LeafCost::Linear, ..full }),
+            (
+                "FBVH without fitting (§5.1.2)",
+                BuildOptions {
+                    fit_boxes: false,
+                    ..full
+                },
+            ),
+            (
+                "FBVH without tight boxes (§5.3.1)",
+                BuildOptions {
+                    tight_boxes: false,
+                    ..full
+                },
+            ),
+            (
+                "FBVH without discarding (§5.3.2)",
+                BuildOptions {
+                    discard_split: false,
+                    ..full
+                },
+            ),
+            (
+                "FBVH with SAH leaf cost n",
+                BuildOptions {
+                    leaf_cost: LeafCost::Linear,
+                    ..full
+                },
+            ),
             ("BVH (split metaballs)", BuildOptions::bvh()),
         ];
         for (name, opts) in variants {
@@ -268,8 +294,16 @@ fn metaballs(
         let modes: [(&str, AccelKind, u32); 4] = [
             ("brute force", AccelKind::BruteForce, stride),
             ("active list", AccelKind::ActiveList, stride),
-            ("BVH (split metaballs)", AccelKind::Tree(BuildOptions::bvh()), 1),
-            ("FBVH", AccelKind::Tree(BuildOptions::fitted(isovalue_floor)), 1),
+            (
+                "BVH (split metaballs)",
+                AccelKind::Tree(BuildOptions::bvh()),
+                1,
+            ),
+            (
+                "FBVH",
+                AccelKind::Tree(BuildOptions::fitted(isovalue_floor)),
+                1,
+            ),
         ];
         for (name, kind, stride) in modes {
             let options = PrepareOptions::fitted(isovalue_floor)
@@ -297,7 +331,12 @@ fn metaballs(
                     iterations_per_hit: per(c.hit_iterations, c.hits),
                     iterations_per_ray: per(c.iterations, c.rays),
                 });
-                eprintln!("{:>15} finder {:<20} render {:>9.1} ms", demo.id(), f.name(), row.render_ms);
+                eprintln!(
+                    "{:>15} finder {:<20} render {:>9.1} ms",
+                    demo.id(),
+                    f.name(),
+                    row.render_ms
+                );
             }
         }
     }

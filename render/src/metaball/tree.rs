@@ -268,7 +268,11 @@ impl Tree {
         let q_max = balls.iter().fold(0.0f32, |m, b| m.max(b.strength));
         let root_s_star = if opts.depends_on_isovalue() && opts.isovalue > 0.0 && q_max > 0.0 {
             (0..S_TABLE)
-                .map(|n| kernel.s_at_value(opts.isovalue / (n.max(1) as f32 * q_max)).sqrt())
+                .map(|n| {
+                    kernel
+                        .s_at_value(opts.isovalue / (n.max(1) as f32 * q_max))
+                        .sqrt()
+                })
                 .collect()
         } else {
             Vec::new()
