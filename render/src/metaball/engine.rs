@@ -116,8 +116,12 @@ pub struct PreparedMetaballs {
     fallback: OnceLock<Accel>,
 }
 
+/// Per-thread buffers of a ray query: the balls along the ray, the root finder's scratch and
+/// the (ball, entry, exit) intervals.
+type RayScratch = (Vec<RayBall<f32>>, Scratch<f32>, Vec<(u32, f32, f32)>);
+
 thread_local! {
-    static SCRATCH: RefCell<(Vec<RayBall<f32>>, Scratch<f32>, Vec<(u32, f32, f32)>)> =
+    static SCRATCH: RefCell<RayScratch> =
         RefCell::new(Default::default());
 }
 
