@@ -93,8 +93,7 @@ impl RayCounters {
 #[derive(Clone, Copy, Debug)]
 struct Ball {
     center: Vec3,
-    inv_r2: f32,
-    radius: f32,
+    inv_r: f32,
     strength: f32,
     lipschitz: f32,
     min_radius: f32,
@@ -144,8 +143,7 @@ impl PreparedMetaballs {
                 };
                 Ball {
                     center: b.center,
-                    inv_r2: 1.0 / (b.radius * b.radius),
-                    radius: b.radius,
+                    inv_r: 1.0 / b.radius,
                     strength: b.strength,
                     lipschitz: b.strength.abs() * slope / b.min_semi_axis(),
                     min_radius: b.min_semi_axis(),
@@ -453,29 +451,16 @@ impl PreparedMetaballs {
         out: &mut Vec<RayBall<f32>>,
     ) {
         let b = &self.balls[i as usize];
-        let (a, bq, c) = if b.frame == u32::MAX {
-            let e = ray.origin - b.center;
-            // The direction has unit length.
-            (
-                b.inv_r2,
-                2.0 * e.dot(ray.dir) * b.inv_r2,
-                e.length_squared() * b.inv_r2,
-            )
+        let (e, g) = if b.frame == u32::MAX {
+            let inv_r = b.inv_r;
+            ((ray.origin - b.center) * inv_r, ray.dir * inv_r)
         } else {
             let m = self.frames[b.frame as usize];
-            let e = m * (ray.origin - b.center);
-            let g = m * ray.dir;
-            (g.length_squared(), 2.0 * e.dot(g), e.length_squared())
+            (m * (ray.origin - b.center), m * ray.dir)
         };
-        let disc = bq * bq - 4.0 * a * (c - 1.0);
-        if disc <= 0.0 {
+        let Some((t0, t1, a, tc, s_min)) = RayBall::along(e.to_array(), g.to_array()) else {
             return;
-        }
-        let sq = disc.sqrt();
-        // Numerically stable roots of a t² + b t + (c - 1).
-        let qq = -0.5 * (bq + sq.copysign(bq));
-        let (r0, r1) = (qq / a, (c - 1.0) / qq);
-        let (t0, t1) = (r0.min(r1), r0.max(r1));
+        };
         if t1 < lo || t0 > hi {
             return;
         }
@@ -484,11 +469,11 @@ impl PreparedMetaballs {
             t0,
             t1,
             a,
-            b: bq,
-            c,
+            tc,
+            s_min,
             q: b.strength,
             lipschitz: b.lipschitz,
-            min_radius: b.min_radius.min(b.radius),
+            min_radius: b.min_radius,
             owner,
         });
     }

@@ -21,7 +21,13 @@
 //!   parameter range; when it shrinks by less than 20% the curve is split in half by de
 //!   Casteljau and the nearer half is searched first, so the first root comes out first.
 //! - [`RootFinder::SphereTracing`]: per section, step `(T - F)/L` with `L = Σ |q_i|·L_k/R_i`
-//!   the Lipschitz bound of the active balls (`L_k` the kernel's steepest slope).
+//!   the Lipschitz bound of the active balls (`L_k` the kernel's steepest slope), never less
+//!   than the tolerance, and bisect the last step.
+//!
+//! What each finder can miss (the "grazing" rays of the tests): marching skips a stretch
+//! inside the surface shorter than its step; the secant method one that holds no centre
+//! projection; sphere tracing one shorter than its tolerance; Bézier clipping nothing beyond
+//! the rounding of the field itself.
 
 use super::kernel::MAX_W_DEGREE;
 use std::fmt::Debug;
@@ -118,6 +124,10 @@ real!(f32);
 real!(f64);
 
 /// One ball as one ray sees it.
+///
+/// `s(t) = a (t - tc)² + s_min`: the quadratic is kept centred on the projection `tc` of the
+/// ball's centre, so that `s` near the ball stays accurate in `f32` however far the ray's
+/// origin is (the expanded `a t² + b t + c` cancels catastrophically at large `t`).
 #[derive(Clone, Copy, Debug, Default)]
 pub struct RayBall<R> {
     /// Index of the ball in its scene.
@@ -125,10 +135,12 @@ pub struct RayBall<R> {
     /// Where the ray enters and leaves the support.
     pub t0: R,
     pub t1: R,
-    /// `s(t) = a t² + b t + c`.
+    /// Curvature of `s` along the ray (`|M d|²`).
     pub a: R,
-    pub b: R,
-    pub c: R,
+    /// The parameter of the centre's projection: where `s` is smallest.
+    pub tc: R,
+    /// `s` at `tc`, in `[0, 1)`.
+    pub s_min: R,
     /// Strength `q_i`.
     pub q: R,
     /// `|q_i| · L_k / (smallest semi-axis)`: this ball's bound on `|dF/dt|`.
@@ -141,20 +153,46 @@ pub struct RayBall<R> {
 }
 
 impl<R: Real> RayBall<R> {
+    /// The ball as seen along `o + t d`, from `e = M (o - p)` and `g = M d` (`M` maps the
+    /// ball's support to the unit sphere); `None` when the ray misses the support.
+    #[inline]
+    pub fn along(e: [R; 3], g: [R; 3]) -> Option<(R, R, R, R, R)> {
+        let dot = |x: [R; 3], y: [R; 3]| x[0] * y[0] + x[1] * y[1] + x[2] * y[2];
+        let a = dot(g, g);
+        if !(a > R::default()) {
+            return None;
+        }
+        let tc = -dot(e, g) / a;
+        let q = [e[0] + tc * g[0], e[1] + tc * g[1], e[2] + tc * g[2]];
+        let s_min = dot(q, q);
+        if !(s_min < R::of(1.0)) {
+            return None;
+        }
+        let half = ((R::of(1.0) - s_min) / a).sqrt();
+        Some((tc - half, tc + half, a, tc, s_min))
+    }
+
+    /// `s` at `t`.
+    #[inline]
+    pub fn s_at(&self, t: R) -> R {
+        let u = t - self.tc;
+        self.a * u * u + self.s_min
+    }
+
     /// The ball's term of the field at `t`.
     #[inline]
     pub fn term(&self, k: &KernelPoly<R>, t: R) -> R {
-        let s = (self.a * t + self.b) * t + self.c;
+        let s = self.s_at(t);
         if s >= R::of(1.0) {
             return R::default();
         }
         self.q * k.at_w(R::of(1.0) - s)
     }
 
-    /// The parameter of the centre's projection: where `s` is smallest.
+    /// The parameter of the centre's projection.
     #[inline]
     pub fn projection(&self) -> R {
-        -self.b / (R::of(2.0) * self.a)
+        self.tc
     }
 }
 
@@ -218,6 +256,7 @@ pub struct Scratch<R> {
     events: Vec<(R, u32)>,
     active: Vec<u32>,
     samples: Vec<R>,
+    domains: Vec<(R, R)>,
 }
 
 #[inline]
@@ -346,26 +385,21 @@ fn march_section<R: Real>(
     }
     while t0 < b {
         let t1 = (t0 + step).min(b);
+        if !(t1 > t0) || *iters > ITERATION_CAP {
+            return None; // the precision (or the budget) is exhausted
+        }
         *iters += 1;
         if g(t1) >= R::default() {
-            let (mut lo, mut hi) = (t0, t1);
-            while hi - lo > p.tolerance && *iters < ITERATION_CAP {
-                let mid = R::of(0.5) * (lo + hi);
-                *iters += 1;
-                if g(mid) < R::default() {
-                    lo = mid;
-                } else {
-                    hi = mid;
-                }
-            }
-            return Some(hi);
+            return Some(bisect(&g, t0, t1, p.tolerance, iters));
         }
         t0 = t1;
     }
     None
 }
 
-/// (d) Sphere tracing: safe steps `(T - F) / L` until within tolerance.
+/// (d) Sphere tracing: steps of `(T - F) / L`, which cannot pass a root, but never shorter
+/// than the tolerance (so a near-tangency cannot stall it; only a stretch inside the surface
+/// shorter than the tolerance can be stepped over); the last step is refined by bisection.
 fn trace_section<R: Real>(
     p: &FindParams<R>,
     balls: &[RayBall<R>],
@@ -378,26 +412,58 @@ fn trace_section<R: Real>(
     for &i in active {
         lipschitz = lipschitz + balls[i as usize].lipschitz;
     }
+    let g = |t: R| field(&p.kernel, balls, active, t) - p.isovalue;
     let mut t = a;
+    let mut prev: Option<R> = None;
     loop {
         *iters += 1;
-        let gap = p.isovalue - field(&p.kernel, balls, active, t);
-        if gap <= R::default() {
-            return Some(t);
+        let gt = g(t);
+        if gt >= R::default() {
+            return Some(match prev {
+                None => t,
+                Some(lo) => bisect(&g, lo, t, p.tolerance, iters),
+            });
         }
-        let step = gap / lipschitz;
-        if step < p.tolerance {
-            // Within tolerance of the surface (or of a tangency: sphere tracing cannot tell).
-            return Some(t + step);
-        }
-        t = t + step;
-        if t >= b || *iters > ITERATION_CAP {
+        if !(t < b) || *iters > ITERATION_CAP {
             return None;
         }
+        let step = (-gt / lipschitz).max(p.tolerance);
+        let next = (t + step).min(b);
+        if !(next > t) {
+            return None; // the precision is exhausted
+        }
+        prev = Some(t);
+        t = next;
     }
 }
 
+/// Narrows `[lo, hi]` with `g(lo) < 0 ≤ g(hi)` to the tolerance; returns the upper end.
+#[inline]
+fn bisect<R: Real>(g: &impl Fn(R) -> R, lo: R, hi: R, tolerance: R, iters: &mut u32) -> R {
+    let (mut lo, mut hi) = (lo, hi);
+    while hi - lo > tolerance && *iters < ITERATION_CAP {
+        let mid = R::of(0.5) * (lo + hi);
+        if !(lo < mid && mid < hi) {
+            break; // the precision is exhausted
+        }
+        *iters += 1;
+        if g(mid) < R::default() {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    hi
+}
+
 /// (b) fitted-bvh-metaballs.txt §3: bracket by centre projections, then the secant method.
+///
+/// The search runs over `[lo, hi]`, or (for a BVH leaf, `owners_only`) over each stretch of
+/// it that the leaf's own balls cover, where the leaf's field is complete. In each stretch,
+/// `a` starts at its entry and `b` is the first projection with `F ≥ T`, or the stretch's end
+/// (our addition: without it a root between the last projection and a leaf's exit would be
+/// reported at the next leaf's entry, inside the surface); then Illinois regula falsi keeps
+/// `g(a) < 0 ≤ g(b)` and narrows to the tolerance.
 fn secant<R: Real>(
     p: &FindParams<R>,
     balls: &[RayBall<R>],
@@ -417,53 +483,99 @@ fn secant<R: Real>(
             .filter(|&t| lo < t && t < hi),
     );
     samples.sort_unstable_by(|x, y| x.partial_cmp(y).unwrap_or(std::cmp::Ordering::Equal));
-    let (mut a, mut ga) = (lo, g(lo));
-    if ga >= R::default() {
-        found.t = Some(lo);
+    let domains = &mut scratch.domains;
+    domains.clear();
+    if p.owners_only {
+        domains.extend(
+            balls
+                .iter()
+                .filter(|b| b.owner)
+                .map(|b| (b.t0.max(lo), b.t1.min(hi)))
+                .filter(|(a, b)| a < b),
+        );
+        domains.sort_unstable_by(|x, y| x.0.partial_cmp(&y.0).unwrap_or(std::cmp::Ordering::Equal));
+        // Merge overlapping stretches in place.
+        let mut merged = 0;
+        for k in 0..domains.len() {
+            let d = domains[k];
+            if merged > 0 && !(domains[merged - 1].1 < d.0) {
+                domains[merged - 1].1 = domains[merged - 1].1.max(d.1);
+            } else {
+                domains[merged] = d;
+                merged += 1;
+            }
+        }
+        domains.truncate(merged);
+    } else {
+        domains.push((lo, hi));
+    }
+    let mut next_sample = 0;
+    for &(d0, d1) in domains.iter() {
+        let (mut a, mut ga) = (d0, g(d0));
+        found.iterations += 1;
+        if ga >= R::default() {
+            found.t = Some(d0);
+            return found;
+        }
+        let mut bracket = None;
+        while next_sample < samples.len() && !(d0 < samples[next_sample]) {
+            next_sample += 1;
+        }
+        while next_sample < samples.len() && samples[next_sample] < d1 {
+            let t = samples[next_sample];
+            next_sample += 1;
+            found.iterations += 1;
+            let gt = g(t);
+            if gt >= R::default() {
+                bracket = Some((t, gt));
+                break;
+            }
+            (a, ga) = (t, gt);
+        }
+        if bracket.is_none() {
+            // The stretch's end is a sample too, so a root just before a leaf or section
+            // boundary is bracketed here rather than reported at the next one's entry.
+            found.iterations += 1;
+            let g1 = g(d1);
+            if g1 >= R::default() {
+                bracket = Some((d1, g1));
+            }
+        }
+        let Some((mut b, mut gb)) = bracket else {
+            continue;
+        };
+        // Illinois regula falsi: the secant step, halving the stale end's weight.
+        let mut side = 0i8;
+        let mut iters = 0;
+        while b - a > p.tolerance && iters < 200 {
+            iters += 1;
+            let mut c = b - gb * (b - a) / (gb - ga);
+            if !(a < c && c < b) {
+                c = R::of(0.5) * (a + b);
+                if !(a < c && c < b) {
+                    break; // the precision is exhausted
+                }
+            }
+            let gc = g(c);
+            if gc >= R::default() {
+                (b, gb) = (c, gc);
+                if side == 1 {
+                    ga = ga * R::of(0.5);
+                }
+                side = 1;
+            } else {
+                (a, ga) = (c, gc);
+                if side == -1 {
+                    gb = gb * R::of(0.5);
+                }
+                side = -1;
+            }
+        }
+        found.t = Some(b);
+        found.iterations += iters;
+        found.hit_iterations = iters;
         return found;
     }
-    let mut bracket = None;
-    for &t in samples.iter() {
-        let gt = g(t);
-        if gt >= R::default() {
-            bracket = Some((t, gt));
-            break;
-        }
-        (a, ga) = (t, gt);
-    }
-    let Some((mut b, mut gb)) = bracket else {
-        return found;
-    };
-    // Illinois regula falsi: the secant step, halving the stale end's weight.
-    let mut side = 0i8;
-    let mut iters = 0;
-    while b - a > p.tolerance && iters < 200 {
-        iters += 1;
-        let mut c = b - gb * (b - a) / (gb - ga);
-        if !(a < c && c < b) {
-            c = R::of(0.5) * (a + b);
-        }
-        let gc = g(c);
-        if gc >= R::default() {
-            (b, gb) = (c, gc);
-            if side == 1 {
-                ga = ga * R::of(0.5);
-            }
-            side = 1;
-        } else {
-            (a, ga) = (c, gc);
-            if side == -1 {
-                gb = gb * R::of(0.5);
-            }
-            side = -1;
-        }
-        if gc.abs() == R::default() {
-            break;
-        }
-    }
-    found.t = Some(b);
-    found.iterations = iters;
-    found.hit_iterations = iters;
     found
 }
 
@@ -482,8 +594,9 @@ fn bezier_section<R: Real>(
     for &i in active {
         let ball = &balls[i as usize];
         // s(a + h v) = s0 + s1 v + s2 v², so w = 1 - s in power form.
-        let s0 = (ball.a * a + ball.b) * a + ball.c;
-        let s1 = (R::of(2.0) * ball.a * a + ball.b) * h;
+        let d = a - ball.tc;
+        let s0 = ball.a * d * d + ball.s_min;
+        let s1 = R::of(2.0) * ball.a * d * h;
         let s2 = ball.a * h * h;
         let w = [R::of(1.0) - s0, -s1, -s2];
         let mut wk = [R::default(); MAX_DEGREE + 1];

@@ -1,0 +1,459 @@
+//! The metaball engine against its `f64` reference and against itself.
+//!
+//! - `root_finders_agree_with_the_f64_reference`: every root finder (marching + bisection,
+//!   projections + secant, Bézier clipping, sphere tracing), under brute force and under the
+//!   sorted active list, and Bézier clipping under the BVH and the Fitted BVH, on seeded random
+//!   rays through random scenes of every kernel, with negative strengths and rotated
+//!   ellipsoids, compared with `f64` Bézier clipping at a `1e-9` tolerance.
+//! - `accelerations_render_the_same_image_on_every_paper_scene`: brute force, active list,
+//!   BVH with split metaballs and Fitted BVH give the same hit/miss per pixel and the same
+//!   depth (within tolerance) on every scene of fitted-bvh-metaballs.txt's Table 1.
+//!
+//! How "agree" is decided, per ray (`T` the isovalue, `ε` the rounding budget of the `f32`
+//! field, below). The `f64` reference gives `lo = t(T - ε)`, the first point where the field
+//! reaches `T - ε`, and `u1 = t(T + ε)` with the end `u2` of that first stretch at or above
+//! `T + ε`. Wherever the `f32` field is within `ε` of the exact one, a point where the `f32`
+//! field reaches `T` lies at or after `lo`, and every point of `[u1, u2]` is one. So:
+//! - if the field never reaches `T - ε`, the finder must miss;
+//! - if the stretch `[u1, u2]` exists and the finder can resolve it, the finder must hit, at
+//!   a distance in `[lo - tol, u1 + tol]` (`tol` its stated tolerance);
+//! - otherwise the ray is *grazing*: it only touches the surface within the rounding budget,
+//!   or it crosses a stretch inside the surface that the finder is documented to skip. A
+//!   grazing ray may hit or miss, but a hit must still lie at or after `lo - tol`.
+//!
+//! What a finder can resolve: Bézier clipping any stretch; marching a stretch at least as long
+//! as its largest step (a quarter of the largest smallest semi-axis); sphere tracing a stretch
+//! at least as long as its tolerance; the secant method a stretch that holds a centre
+//! projection where the exact field is at least `T + 2ε`.
+//!
+//! The rounding budget `ε`: the `f32` quadratic `s(t)` of a ball at distance `D` and smallest
+//! semi-axis `r` is off by about `6·10⁻⁷ D / r` (a few ulps of `D`), and the kernel turns that
+//! into at most `max|df/ds|` times as much field, so `ε = 10⁻⁶ max|df/ds| Σ |q_i| (D_i / r_i
+//! + 1)` over the balls the ray crosses.
+//!
+//! Both tests print their figures with `eprintln!` (shown on failure, or with
+//! `--nocapture`), and assert.
+
+use glam::{Quat, Vec3};
+use isoray_render::metaball::reference::ReferenceRay;
+use isoray_render::metaball::{
+    AccelKind, BuildOptions, Kernel, Metaball, MetaballScene, PrepareOptions, PreparedMetaballs,
+    RootFinder, Shape,
+};
+use isoray_render::scenes::SplitMix64;
+use isoray_render::Ray;
+use std::collections::BTreeMap;
+
+/// The tolerance every finder is run with, world units.
+const TOLERANCE: f32 = 1e-4;
+/// Far end of every ray.
+const T_MAX: f32 = 1.0e4;
+
+/// Balls of `kernel` in a 6-unit cube: a quarter carve (negative strength), a third are
+/// rotated ellipsoids. Returns the scene and its isovalue.
+fn random_scene(kernel: Kernel, seed: u64) -> (MetaballScene, f32) {
+    let mut rng = SplitMix64(seed);
+    let balls = (0..48)
+        .map(|_| {
+            let center = Vec3::new(
+                rng.range(-3.0, 3.0),
+                rng.range(-3.0, 3.0),
+                rng.range(-3.0, 3.0),
+            );
+            let radius = rng.range(0.8, 1.6);
+            let strength = if rng.next_f32() < 0.25 {
+                rng.range(-1.0, -0.3)
+            } else {
+                rng.range(0.6, 1.4)
+            };
+            let shape = if rng.next_f32() < 0.35 {
+                let axis = rng.in_unit_ball().normalize_or(Vec3::X);
+                Shape::Ellipsoid {
+                    axes: Vec3::new(1.0, rng.range(0.35, 1.0), rng.range(0.35, 1.0)),
+                    rotation: Quat::from_axis_angle(axis, rng.range(0.0, std::f32::consts::TAU)),
+                }
+            } else {
+                Shape::Sphere
+            };
+            let color = Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32());
+            Metaball {
+                center,
+                radius,
+                strength,
+                color,
+                shape,
+            }
+        })
+        .collect();
+    let isovalue = 0.35 * kernel.peak();
+    let scene = MetaballScene {
+        kernel,
+        balls,
+        min_isovalue: isovalue,
+    };
+    scene.validate(usize::MAX).expect("a valid random scene");
+    (scene, isovalue)
+}
+
+/// Seeded rays: from a 14-unit sphere towards the cube, from inside the cube in any
+/// direction, and from 150 units away (where `f32` distances lose digits).
+fn random_rays(seed: u64, count: usize) -> Vec<Ray> {
+    let mut rng = SplitMix64(seed);
+    (0..count)
+        .map(|i| {
+            let target = Vec3::new(
+                rng.range(-3.0, 3.0),
+                rng.range(-3.0, 3.0),
+                rng.range(-3.0, 3.0),
+            );
+            let unit = rng.in_unit_ball().normalize_or(Vec3::Y);
+            match i % 4 {
+                0 | 1 => Ray::new(14.0 * unit, target - 14.0 * unit),
+                2 => Ray::new(
+                    Vec3::new(
+                        rng.range(-3.5, 3.5),
+                        rng.range(-3.5, 3.5),
+                        rng.range(-3.5, 3.5),
+                    ),
+                    rng.in_unit_ball().normalize_or(Vec3::Z),
+                ),
+                _ => Ray::new(150.0 * unit, target - 150.0 * unit),
+            }
+        })
+        .collect()
+}
+
+/// Largest `|df/ds|` of the kernel on `[0, 1]`.
+fn max_ds_slope(kernel: Kernel) -> f64 {
+    (0..=1000)
+        .map(|i| kernel.derivative(i as f32 / 1000.0).abs() as f64)
+        .fold(0.0, f64::max)
+}
+
+/// What one variant may miss, besides rays within the rounding budget.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Resolves {
+    Everything,
+    /// Stretches at least this long.
+    Longer(f64),
+    /// Stretches holding a centre projection with the field at least `T + 2ε`.
+    Projection,
+}
+
+struct Variant {
+    name: String,
+    options: PrepareOptions,
+    resolves: Resolves,
+}
+
+fn variants(scene: &MetaballScene, isovalue: f32) -> Vec<Variant> {
+    let largest_step = 0.25
+        * scene
+            .balls
+            .iter()
+            .map(|b| b.min_semi_axis())
+            .fold(0.0f32, f32::max) as f64;
+    let base = PrepareOptions {
+        tolerance: TOLERANCE,
+        ..PrepareOptions::fitted(isovalue)
+    };
+    let mut out = Vec::new();
+    for (mode, accel) in [
+        ("brute force", AccelKind::BruteForce),
+        ("active list", AccelKind::ActiveList),
+    ] {
+        for finder in RootFinder::ALL {
+            let resolves = match finder {
+                RootFinder::BezierClipping => Resolves::Everything,
+                RootFinder::March => Resolves::Longer(largest_step),
+                RootFinder::SphereTracing => Resolves::Longer(TOLERANCE as f64),
+                RootFinder::Secant => Resolves::Projection,
+            };
+            out.push(Variant {
+                name: format!("{mode} / {}", finder.name()),
+                options: base.with_accel(accel).with_finder(finder),
+                resolves,
+            });
+        }
+    }
+    for (mode, opts) in [
+        ("BVH", BuildOptions::bvh()),
+        ("FBVH", BuildOptions::fitted(isovalue)),
+        // Built for a higher isovalue than the query: the engine must fall back to a tree
+        // without the isovalue-dependent §5.3 optimisations.
+        ("FBVH for 2T", BuildOptions::fitted(2.0 * isovalue)),
+    ] {
+        out.push(Variant {
+            name: format!("{mode} / {}", RootFinder::BezierClipping.name()),
+            options: base
+                .with_accel(AccelKind::Tree(opts))
+                .with_finder(RootFinder::BezierClipping),
+            resolves: Resolves::Everything,
+        });
+    }
+    out
+}
+
+#[derive(Default)]
+struct Tally {
+    rays: usize,
+    hits: usize,
+    grazing: usize,
+    /// Largest `|t - t_ref|` over rays that are not grazing.
+    worst_error: f64,
+    /// The same over well-conditioned rays (`t(T+ε) - t(T-ε) ≤ tol / 10`).
+    worst_error_well_conditioned: f64,
+    failures: Vec<String>,
+}
+
+#[test]
+fn root_finders_agree_with_the_f64_reference() {
+    let mut table: BTreeMap<(String, String), Tally> = BTreeMap::new();
+    let tol = TOLERANCE as f64;
+    for (k, kernel) in Kernel::ALL.into_iter().enumerate() {
+        let (scene, isovalue) = random_scene(kernel, 0xB1_0B5 + k as u64);
+        let t = isovalue as f64;
+        let slope = max_ds_slope(kernel);
+        let prepared: Vec<(Variant, PreparedMetaballs)> = variants(&scene, isovalue)
+            .into_iter()
+            .map(|v| {
+                let p = PreparedMetaballs::new(scene.clone(), v.options);
+                (v, p)
+            })
+            .collect();
+        for ray in random_rays(0x5EED + k as u64, 400) {
+            let origin = ray.origin.as_dvec3();
+            let reference =
+                ReferenceRay::new(&scene, origin, ray.dir.as_dvec3(), 0.0, T_MAX as f64);
+            let eps = 1e-6
+                * slope
+                * reference
+                    .crossed()
+                    .map(|i| {
+                        let b = &scene.balls[i as usize];
+                        let d = (b.center.as_dvec3() - origin).length();
+                        b.strength.abs() as f64 * (d / b.min_semi_axis() as f64 + 1.0)
+                    })
+                    .sum::<f64>();
+            // The f32 ray's direction is renormalised in f64: a relative change of 1e-7.
+            let slack = 1e-6;
+            let t_ref = reference.first_at_least(t, 0.0);
+            let lo = reference.first_at_least(t - eps, 0.0);
+            let robust = reference.first_at_least(t + eps, 0.0).map(|u1| {
+                let u2 = reference.first_below(t + eps, u1 + 1e-7);
+                (u1, u2)
+            });
+            for (variant, engine) in &prepared {
+                let tally = table
+                    .entry((kernel_name(kernel), variant.name.clone()))
+                    .or_default();
+                tally.rays += 1;
+                let got = engine
+                    .first_hit(&ray, 0.0, T_MAX, isovalue)
+                    .map(|h| h.t as f64);
+                tally.hits += got.is_some() as usize;
+                let resolvable = robust.is_some_and(|(u1, u2)| match variant.resolves {
+                    Resolves::Everything => true,
+                    Resolves::Longer(len) => u2 - u1 >= len + 1e-6,
+                    Resolves::Projection => reference
+                        .projections()
+                        .any(|p| u1 <= p && p <= u2 && reference.field(p) >= t + 2.0 * eps),
+                });
+                let describe = || {
+                    format!(
+                        "{} {}: ray {:?} → {:?}; reference t(T)={t_ref:?} t(T-ε)={lo:?} \
+                         stretch at T+ε {robust:?}, ε={eps:.2e}",
+                        kernel_name(kernel),
+                        variant.name,
+                        ray,
+                        got
+                    )
+                };
+                match (lo, got) {
+                    (None, None) => {}
+                    (None, Some(_)) => tally.failures.push(format!("false hit: {}", describe())),
+                    (Some(lo), got) => {
+                        if let Some(g) = got {
+                            if g < lo - tol - slack {
+                                tally
+                                    .failures
+                                    .push(format!("hit before the surface: {}", describe()));
+                            }
+                        }
+                        match (resolvable, robust, got) {
+                            (true, Some((u1, _)), Some(g)) => {
+                                if g > u1 + tol + slack {
+                                    tally.failures.push(format!("hit too far: {}", describe()));
+                                }
+                                let err = (g - t_ref.unwrap_or(lo)).abs();
+                                tally.worst_error = tally.worst_error.max(err);
+                                if u1 - lo <= tol / 10.0 {
+                                    tally.worst_error_well_conditioned =
+                                        tally.worst_error_well_conditioned.max(err);
+                                }
+                            }
+                            (true, _, None) => {
+                                tally.failures.push(format!("missed: {}", describe()))
+                            }
+                            _ => tally.grazing += 1,
+                        }
+                    }
+                }
+            }
+        }
+    }
+    eprintln!("Root finders against the f64 reference (tolerance {TOLERANCE:e}):");
+    eprintln!(
+        "{:<10} {:<36} {:>5} {:>5} {:>7} {:>12} {:>12} {:>8}",
+        "kernel", "variant", "rays", "hits", "grazing", "worst |Δt|", "well-cond.", "failures"
+    );
+    let mut failures = Vec::new();
+    for ((kernel, variant), t) in &table {
+        eprintln!(
+            "{kernel:<10} {variant:<36} {:>5} {:>5} {:>7} {:>12.3e} {:>12.3e} {:>8}",
+            t.rays,
+            t.hits,
+            t.grazing,
+            t.worst_error,
+            t.worst_error_well_conditioned,
+            t.failures.len()
+        );
+        failures.extend(t.failures.iter().take(3).cloned());
+        assert!(t.hits > 0, "{kernel} {variant}: no ray hit anything");
+        assert!(
+            t.grazing * 10 < t.rays,
+            "{kernel} {variant}: {} of {} rays grazing",
+            t.grazing,
+            t.rays
+        );
+    }
+    assert!(
+        failures.is_empty(),
+        "disagreements:\n{}",
+        failures.join("\n")
+    );
+}
+
+fn kernel_name(kernel: Kernel) -> String {
+    match kernel {
+        Kernel::Wyvill => "wyvill".into(),
+        Kernel::Quartic => "quartic".into(),
+        Kernel::Power { alpha } => format!("power-{alpha}"),
+        Kernel::Tutorial => "tutorial".into(),
+    }
+}
+
+/// Whether a disagreement between two answers on one ray is explained by the ray grazing the
+/// surface: both answers lie where the `f32` field may round either way (see the module doc).
+fn explained_by_grazing(
+    scene: &MetaballScene,
+    ray: &Ray,
+    isovalue: f32,
+    answers: [Option<f32>; 2],
+) -> bool {
+    let origin = ray.origin.as_dvec3();
+    let reference = ReferenceRay::new(scene, origin, ray.dir.as_dvec3(), 0.0, T_MAX as f64);
+    let eps = 1e-6
+        * max_ds_slope(scene.kernel)
+        * reference
+            .crossed()
+            .map(|i| {
+                let b = &scene.balls[i as usize];
+                let d = (b.center.as_dvec3() - origin).length();
+                b.strength.abs() as f64 * (d / b.min_semi_axis() as f64 + 1.0)
+            })
+            .sum::<f64>();
+    let t = isovalue as f64;
+    let tol = TOLERANCE as f64 + 1e-6;
+    let lo = reference.first_at_least(t - eps, 0.0);
+    let hi = reference.first_at_least(t + eps, 0.0);
+    answers.iter().all(|a| match (a, lo, hi) {
+        (None, _, None) => true,
+        (Some(a), Some(lo), hi) => {
+            let a = *a as f64;
+            a >= lo - tol && hi.is_none_or(|hi| a <= hi + tol)
+        }
+        _ => false,
+    })
+}
+
+#[test]
+fn accelerations_render_the_same_image_on_every_paper_scene() {
+    use isoray_render::scene::Geometry;
+    use isoray_render::scenes::DemoScene;
+    let (width, height) = (48u32, 36u32);
+    eprintln!("Acceleration modes against the FBVH, {width}×{height}, Bézier clipping:");
+    let mut problems = Vec::new();
+    for demo in DemoScene::PAPER {
+        let Geometry::Metaballs(scene) = demo.state_at(1.0).geometry;
+        let isovalue = demo.default_isovalue();
+        let floor = demo.isovalue_slider().0;
+        let rays = demo.default_camera().rays(width, height);
+        let pixels: Vec<(u32, u32)> = (0..height)
+            .flat_map(|y| (0..width).map(move |x| (x, y)))
+            .collect();
+        // O(N)-per-ray modes see every pixel on the small scenes, a quarter on the big ones.
+        let stride = if scene.balls.len() > 20_000 { 4 } else { 1 };
+        let base = PrepareOptions {
+            tolerance: TOLERANCE,
+            ..PrepareOptions::fitted(floor)
+        };
+        let fbvh = PreparedMetaballs::new(scene.clone(), base);
+        let depth = |engine: &PreparedMetaballs, step: usize| -> Vec<Option<f32>> {
+            pixels
+                .iter()
+                .step_by(step)
+                .map(|&(x, y)| {
+                    let ray = rays.through_pixel(x, y);
+                    engine.first_hit(&ray, 0.0, T_MAX, isovalue).map(|h| h.t)
+                })
+                .collect()
+        };
+        let reference = depth(&fbvh, 1);
+        let hits = reference.iter().filter(|d| d.is_some()).count();
+        assert!(
+            hits > pixels.len() / 20 && hits < pixels.len(),
+            "{}: the default camera sees the surface and some background ({hits} hits)",
+            demo.id()
+        );
+        for (name, accel, step) in [
+            ("BVH", AccelKind::Tree(BuildOptions::bvh()), 1),
+            ("active list", AccelKind::ActiveList, stride),
+            ("brute force", AccelKind::BruteForce, stride),
+        ] {
+            let engine = PreparedMetaballs::new(scene.clone(), base.with_accel(accel));
+            let got = depth(&engine, step);
+            let (mut same, mut grazing, mut worst) = (0usize, 0usize, 0.0f32);
+            for (k, (&a, &b)) in got.iter().zip(reference.iter().step_by(step)).enumerate() {
+                let agree = match (a, b) {
+                    (None, None) => true,
+                    (Some(a), Some(b)) => {
+                        worst = worst.max((a - b).abs());
+                        (a - b).abs() <= 2.0 * TOLERANCE
+                    }
+                    _ => false,
+                };
+                if agree {
+                    same += 1;
+                    continue;
+                }
+                let (x, y) = pixels[k * step];
+                let ray = rays.through_pixel(x, y);
+                if explained_by_grazing(&scene, &ray, isovalue, [a, b]) {
+                    grazing += 1;
+                } else {
+                    problems.push(format!(
+                        "{} {name}: pixel ({x}, {y}) gives {a:?}, the FBVH {b:?}",
+                        demo.id()
+                    ));
+                }
+            }
+            eprintln!(
+                "{:>15} {name:<12} {:>5} pixels: {same} agree, {grazing} grazing, worst |Δt| {worst:.2e}",
+                demo.id(),
+                got.len()
+            );
+        }
+    }
+    assert!(problems.is_empty(), "{}", problems.join("\n"));
+}
