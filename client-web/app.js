@@ -1,304 +1,254 @@
-// isoray browser client: shows streamed frames, sends camera, isovalue and size changes.
-import { parseFrameHeader, FRAME_HEADER_LEN, CODECS } from './protocol.js';
+// isoray browser client: wires the modules together. The scene picker is fed by the REST API;
+// the connection streams frames of the chosen scene; camera, isosurfaces, time and quality
+// controls turn user input into protocol inputs; every setting lives in the URL.
+import { $, setStatus, showError, fillSelect } from './ui.js';
+import { parseSettings, serializeSettings } from './settings.js';
+import { attachControls, orbitFromPose, poseFromOrbit } from './camera.js';
+import { Connection } from './connection.js';
+import { FrameView, download } from './frames.js';
+import { Stats } from './stats.js';
+import { Timeline } from './timeline.js';
+import { Surfaces } from './surfaces.js';
+import { Quality } from './quality.js';
 
-const $ = (id) => document.getElementById(id);
+const settings = parseSettings(location.search);
 const canvas = $('view');
-const ctx = canvas.getContext('2d');
-const statusEl = $('status');
-const statsEl = $('stats');
-const sceneSelect = $('scene');
-const isoSlider = $('isovalue');
-const isoOut = $('isovalue-out');
+const view = new FrameView(canvas);
+const stats = new Stats($('stats'), $('stats-text'), $('stats-plot'));
+let info = null; // the server's `info` for the current session
+let scenes = []; // GET /api/v1/scenes
+let gotFrame = false;
+let screenshotWanted = false;
 
-const params = new URLSearchParams(location.search);
-const state = {
-  scene: params.get('scene'),
-  orbit: null,          // { target: [x,y,z], yaw, pitch, distance, fov }
-  isovalue: params.has('iso') ? Number(params.get('iso')) : null,
-  // Pinned scene time in seconds, or null to follow the live animation.
-  time: params.has('t') && Number.isFinite(Number(params.get('t'))) ? Number(params.get('t')) : null,
-  info: null,
-  socket: null,
-  nextInputId: 1,
-  pendingInputs: new Map(), // input_id -> performance.now() when sent
-  reconnectDelayMs: 250,
-  cameraDirty: false,
-};
-
-// Statistics over a sliding one-second window; exposed for tests as window.isorayStats.
-const stats = { frames: [], bytes: [], latencies: [], last: null, framesTotal: 0 };
-window.isorayStats = stats;
-
-function setStatus(text) {
-  statusEl.textContent = text || '';
-  statusEl.hidden = !text;
+// --- settings in the URL ---------------------------------------------------------------------
+let saveTimer = null;
+function saved() {
+  if (saveTimer !== null) return;
+  saveTimer = setTimeout(() => {
+    saveTimer = null;
+    history.replaceState(null, '', serializeSettings(settings));
+  }, 100);
 }
 
-function showError(message) {
-  const el = document.createElement('div');
-  el.className = 'error';
-  el.textContent = message;
-  el.title = 'Click to dismiss';
-  el.addEventListener('click', () => el.remove());
-  $('errors').append(el);
-  setTimeout(() => el.remove(), 8000);
-}
+// --- connection ------------------------------------------------------------------------------
+const connection = new Connection({
+  state(name, detail) {
+    document.body.dataset.connection = name;
+    if (name === 'connecting') setStatus(detail.attempt > 1 ? `Reconnecting (attempt ${detail.attempt})…` : 'Connecting…');
+    else if (name === 'open') setStatus('Waiting for the first frame…');
+    else if (name === 'waiting') {
+      gotFrame = false;
+      const why = detail.reason ? ` (${detail.reason})` : '';
+      setStatus(`Disconnected${why}. Reconnecting in ${(detail.delayMs / 1000).toFixed(1)} s…`);
+      if (detail.code === 1013) showError(`The server refused the session${why}; retrying.`);
+    }
+  },
+  info(message) {
+    onInfo(message);
+  },
+  async frame(buffer) {
+    const header = await view.show(buffer);
+    onFrame(header, buffer.byteLength);
+    return header.sequence;
+  },
+  serverError(message) {
+    showError(`${message.message} (${message.code})`);
+  },
+});
 
 function send(message) {
-  if (!state.socket || state.socket.readyState !== WebSocket.OPEN) return;
-  const inputId = state.nextInputId++;
-  state.pendingInputs.set(inputId, performance.now());
-  state.socket.send(JSON.stringify({ ...message, input_id: inputId }));
+  return connection.send(message);
 }
 
-// --- camera -----------------------------------------------------------------------------
-function orbitFromPose(pose) {
-  const [ex, ey, ez] = pose.eye, [tx, ty, tz] = pose.target;
-  const dx = ex - tx, dy = ey - ty, dz = ez - tz;
-  const distance = Math.hypot(dx, dy, dz);
-  return { target: [...pose.target], yaw: Math.atan2(dx, dz), pitch: Math.asin(dy / distance), distance, fov: pose.fov_y_deg };
-}
-
-function poseFromOrbit(o) {
-  const cp = Math.cos(o.pitch);
-  const eye = [
-    o.target[0] + o.distance * cp * Math.sin(o.yaw),
-    o.target[1] + o.distance * Math.sin(o.pitch),
-    o.target[2] + o.distance * cp * Math.cos(o.yaw),
-  ];
-  return { eye, target: o.target, up: [0, 1, 0], fov_y_deg: o.fov };
-}
-
-function scheduleCamera() {
-  if (state.cameraDirty) return;
-  state.cameraDirty = true;
+// --- camera ----------------------------------------------------------------------------------
+let cameraQueued = false;
+function cameraChanged() {
+  saved();
+  if (cameraQueued) return;
+  cameraQueued = true;
+  // At most one camera input per display frame, however fast the pointer moves.
   requestAnimationFrame(() => {
-    state.cameraDirty = false;
-    if (!state.orbit) return;
-    send({ type: 'camera', ...poseFromOrbit(state.orbit) });
-    saveUrl();
+    cameraQueued = false;
+    if (settings.cam) send({ type: 'camera', ...poseFromOrbit(settings.cam, settings.up) });
   });
 }
 
-function saveUrl() {
-  const p = new URLSearchParams();
-  if (state.scene) p.set('scene', state.scene);
-  if (state.orbit) {
-    const o = state.orbit;
-    p.set('cam', [o.yaw, o.pitch, o.distance, ...o.target].map((v) => +v.toFixed(5)).join(','));
-  }
-  if (state.isovalue !== null) p.set('iso', String(state.isovalue));
-  if (state.time !== null) p.set('t', String(state.time));
-  history.replaceState(null, '', `?${p}`);
+function resetView() {
+  if (!info) return;
+  settings.cam = orbitFromPose(info.camera, settings.up);
+  cameraChanged();
 }
 
-function orbitFromUrl() {
-  const cam = params.get('cam');
-  if (!cam || !state.info) return null;
-  const v = cam.split(',').map(Number);
-  if (v.length !== 6 || v.some((x) => !Number.isFinite(x)) || v[2] <= 0) return null;
-  return { yaw: v[0], pitch: v[1], distance: v[2], target: v.slice(3), fov: state.info.camera.fov_y_deg };
-}
-
-let drag = null;
-canvas.addEventListener('pointerdown', (e) => {
-  canvas.setPointerCapture(e.pointerId);
-  drag = { x: e.clientX, y: e.clientY, pan: e.shiftKey || e.button === 2 };
-  canvas.style.cursor = 'grabbing';
+attachControls(canvas, {
+  getOrbit: () => settings.cam,
+  getUp: () => settings.up,
+  changed: cameraChanged,
+  reset: resetView,
 });
-canvas.addEventListener('pointermove', (e) => {
-  if (!drag || !state.orbit) return;
-  const dx = e.clientX - drag.x, dy = e.clientY - drag.y;
-  drag.x = e.clientX; drag.y = e.clientY;
-  const o = state.orbit;
-  if (drag.pan) {
-    const scale = o.distance * 0.0015;
-    const right = [Math.cos(o.yaw), 0, -Math.sin(o.yaw)];
-    o.target = o.target.map((t, i) => t - right[i] * dx * scale);
-    o.target[1] += dy * scale;
-  } else {
-    o.yaw -= dx * 0.008;
-    o.pitch = Math.max(-1.55, Math.min(1.55, o.pitch + dy * 0.008));
-  }
-  scheduleCamera();
-});
-const endDrag = () => { drag = null; canvas.style.cursor = 'grab'; };
-canvas.addEventListener('pointerup', endDrag);
-canvas.addEventListener('pointercancel', endDrag);
-canvas.addEventListener('contextmenu', (e) => e.preventDefault());
-canvas.addEventListener('wheel', (e) => {
-  e.preventDefault();
-  if (!state.orbit) return;
-  state.orbit.distance = Math.max(0.1, Math.min(1e4, state.orbit.distance * Math.exp(e.deltaY * 0.001)));
-  scheduleCamera();
-}, { passive: false });
-canvas.addEventListener('keydown', (e) => {
-  if (!state.orbit) return;
-  const step = { ArrowLeft: [0.05, 0], ArrowRight: [-0.05, 0], ArrowUp: [0, 0.05], ArrowDown: [0, -0.05] }[e.key];
-  if (step) { state.orbit.yaw += step[0]; state.orbit.pitch = Math.max(-1.55, Math.min(1.55, state.orbit.pitch + step[1])); }
-  else if (e.key === '+' || e.key === '=') state.orbit.distance *= 0.9;
-  else if (e.key === '-') state.orbit.distance *= 1.1;
-  else return;
-  e.preventDefault();
-  scheduleCamera();
-});
-$('reset').addEventListener('click', () => {
-  if (!state.info) return;
-  state.orbit = orbitFromPose(state.info.camera);
-  scheduleCamera();
-});
-document.addEventListener('keydown', (e) => {
-  if (e.key === 's' && e.target === document.body) statsEl.hidden = !statsEl.hidden;
+$('reset').addEventListener('click', resetView);
+const upSelect = $('up');
+upSelect.value = settings.up;
+upSelect.addEventListener('change', () => {
+  // Keep the eye where it is; only the axis the orbit turns around changes.
+  const pose = settings.cam ? poseFromOrbit(settings.cam, settings.up) : null;
+  settings.up = upSelect.value;
+  if (pose) settings.cam = orbitFromPose(pose, settings.up);
+  cameraChanged();
 });
 
-isoSlider.addEventListener('input', () => {
-  state.isovalue = Number(isoSlider.value);
-  isoOut.textContent = state.isovalue.toFixed(3);
-  send({ type: 'isovalue', value: state.isovalue });
-  saveUrl();
+// --- isosurfaces, time, quality --------------------------------------------------------------
+const surfaces = new Surfaces(settings, {
+  changed(index, value) {
+    if (index === 0) send({ type: 'isovalue', value });
+    saved();
+  },
 });
 
-// --- size -------------------------------------------------------------------------------
-function renderSize() {
-  const dpr = window.devicePixelRatio || 1;
-  const rect = canvas.getBoundingClientRect();
-  const max = state.info ? state.info.max_width : 4096;
-  const maxH = state.info ? state.info.max_height : 4096;
-  return [Math.max(1, Math.min(max, Math.round(rect.width * dpr))), Math.max(1, Math.min(maxH, Math.round(rect.height * dpr)))];
-}
+const timeline = new Timeline(settings, {
+  sendTime: (time) => send({ type: 'time', time }),
+  saved,
+});
+
 let lastSize = '';
-function sendSize() {
-  const [width, height] = renderSize();
+function sendSize(force = false) {
+  if (!info || !connection.isOpen) return;
+  const [width, height] = quality.size();
   const key = `${width}x${height}`;
-  if (key === lastSize || !state.socket || state.socket.readyState !== WebSocket.OPEN) return;
+  if (key === lastSize && !force) return;
   lastSize = key;
   send({ type: 'resize', width, height });
 }
-new ResizeObserver(() => sendSize()).observe(canvas);
+const quality = new Quality(settings, canvas, { resized: () => sendSize(), saved });
 
-// --- frames -----------------------------------------------------------------------------
-async function onFrame(socket, buffer) {
-  const header = parseFrameHeader(buffer);
-  try {
-    await drawFrame(header, buffer);
-  } finally {
-    // Acknowledge once shown: the server sends only a small window of frames ahead of acks.
-    if (socket.readyState === WebSocket.OPEN) socket.send(JSON.stringify({ type: 'ack', sequence: header.sequence }));
-  }
-}
-
-async function drawFrame(header, buffer) {
-  const now = performance.now();
-  const sentAt = state.pendingInputs.get(header.inputId);
-  if (sentAt !== undefined) {
-    stats.latencies.push([now, now - sentAt]);
-    for (const id of state.pendingInputs.keys()) if (id <= header.inputId) state.pendingInputs.delete(id);
-  }
-  stats.frames.push(now);
-  stats.bytes.push([now, buffer.byteLength]);
-  stats.framesTotal += 1;
-  stats.last = header;
-  const blob = new Blob([new Uint8Array(buffer, FRAME_HEADER_LEN)], { type: CODECS[header.codec] || 'image/jpeg' });
-  const bitmap = await createImageBitmap(blob);
-  if (canvas.width !== header.width || canvas.height !== header.height) {
-    canvas.width = header.width;
-    canvas.height = header.height;
-  }
-  ctx.drawImage(bitmap, 0, 0);
-  bitmap.close();
-  setStatus('');
-  canvas.dataset.frames = String(stats.framesTotal);
-}
-
-function updateStats() {
-  const now = performance.now();
-  const cut = now - 1000;
-  while (stats.frames.length && stats.frames[0] < cut) stats.frames.shift();
-  while (stats.bytes.length && stats.bytes[0][0] < cut) stats.bytes.shift();
-  while (stats.latencies.length && stats.latencies[0][0] < now - 5000) stats.latencies.shift();
-  const fps = stats.frames.length;
-  const kbps = stats.bytes.reduce((a, [, b]) => a + b, 0) * 8 / 1000;
-  const lat = stats.latencies.length ? stats.latencies[stats.latencies.length - 1][1] : NaN;
-  const h = stats.last;
-  stats.fps = fps;
-  statsEl.textContent = [
-    `fps      ${fps}`,
-    `latency  ${Number.isNaN(lat) ? '–' : lat.toFixed(0) + ' ms'}`,
-    `bitrate  ${(kbps / 1000).toFixed(2)} Mbit/s`,
-    h ? `size     ${h.width}×${h.height}` : '',
-    h ? `update   ${(h.updateUs / 1000).toFixed(2)} ms` : '',
-    h ? `build    ${(h.buildUs / 1000).toFixed(2)} ms` : '',
-    h ? `trace    ${(h.traceUs / 1000).toFixed(2)} ms` : '',
-    h ? `encode   ${(h.encodeUs / 1000).toFixed(2)} ms` : '',
-  ].filter(Boolean).join('\n');
-}
-setInterval(updateStats, 250);
-
-// --- connection -------------------------------------------------------------------------
-function connect() {
-  const proto = location.protocol === 'https:' ? 'wss' : 'ws';
-  const socket = new WebSocket(`${proto}://${location.host}/api/v1/scenes/${encodeURIComponent(state.scene)}/stream`);
-  socket.binaryType = 'arraybuffer';
-  state.socket = socket;
+// --- session start and frames ----------------------------------------------------------------
+function onInfo(message) {
+  const sceneChanged = !info || info.scene.id !== message.scene.id;
+  info = message;
+  if (sceneChanged && !settings.cam) settings.cam = orbitFromPose(message.camera, settings.up);
+  if (!settings.cam) settings.cam = orbitFromPose(message.camera, settings.up);
+  surfaces.setInfo(message);
+  quality.setInfo(message);
   setStatus('Waiting for the first frame…');
-  socket.addEventListener('open', () => { state.reconnectDelayMs = 250; });
-  socket.addEventListener('message', (event) => {
-    if (typeof event.data === 'string') return onText(JSON.parse(event.data));
-    onFrame(socket, event.data).catch((err) => showError(`bad frame: ${err.message}`));
-  });
-  socket.addEventListener('close', (event) => {
-    if (state.socket !== socket) return;
-    state.socket = null;
-    lastSize = '';
-    const delay = state.reconnectDelayMs;
-    state.reconnectDelayMs = Math.min(5000, delay * 2);
-    setStatus(`Disconnected${event.reason ? ` (${event.reason})` : ''}; reconnecting…`);
-    setTimeout(connect, delay);
-  });
+  // Restore the whole view: the server starts every session from the scene's defaults.
+  sendSize(true);
+  send({ type: 'camera', ...poseFromOrbit(settings.cam, settings.up) });
+  for (const m of surfaces.messages()) send(m);
+  timeline.restore();
+  saved();
 }
 
-function onText(message) {
-  if (message.type === 'info') {
-    state.info = message;
-    const [lo, hi] = message.isovalue_slider;
-    isoSlider.min = String(lo);
-    isoSlider.max = String(hi);
-    isoSlider.step = String((hi - lo) / 1000);
-    if (state.isovalue === null) state.isovalue = message.isovalue;
-    isoSlider.value = String(state.isovalue);
-    isoOut.textContent = state.isovalue.toFixed(3);
-    state.orbit = state.orbit || orbitFromUrl() || orbitFromPose(message.camera);
-    if (state.time !== null) send({ type: 'time', time: state.time });
-    sendSize();
-    send({ type: 'camera', ...poseFromOrbit(state.orbit) });
-    if (state.isovalue !== message.isovalue) send({ type: 'isovalue', value: state.isovalue });
-  } else if (message.type === 'error') {
-    showError(`${message.code}: ${message.message}`);
+function onFrame(header, bytes) {
+  stats.frame(header, bytes, connection.latencyOf(header.inputId));
+  timeline.frameShown(header);
+  if (!gotFrame) {
+    gotFrame = true;
+    setStatus('');
+    document.body.dataset.connection = 'streaming';
   }
+  if (screenshotWanted && view.still) saveScreenshot();
 }
 
+// --- screenshot -----------------------------------------------------------------------------
+const shotButton = $('screenshot');
+function saveScreenshot() {
+  screenshotWanted = false;
+  shotButton.removeAttribute('aria-busy');
+  const { header, png } = view.still;
+  const time = header.sceneTime.toFixed(3).replace(/\.?0+$/, '');
+  download(png, `isoray-${settings.scene}-t${time}-${header.width}x${header.height}.png`, 'image/png');
+}
+shotButton.addEventListener('click', () => {
+  // The still frame is lossless; while the view moves, the next one comes once it rests.
+  screenshotWanted = true;
+  shotButton.setAttribute('aria-busy', 'true');
+  if (view.still) saveScreenshot();
+});
+
+// --- overlay and panel -----------------------------------------------------------------------
+const statsButton = $('stats-toggle');
+function showStats(on) {
+  settings.stats = on;
+  stats.shown = on;
+  statsButton.setAttribute('aria-pressed', String(on));
+  saved();
+}
+showStats(settings.stats);
+statsButton.addEventListener('click', () => showStats(!settings.stats));
+document.addEventListener('keydown', (e) => {
+  const typing = e.target instanceof HTMLElement && e.target.matches('input:not([type=range]):not([type=checkbox]), select, textarea');
+  if (typing || e.ctrlKey || e.metaKey || e.altKey) return;
+  if (e.key === 's' || e.key === 'S') showStats(!settings.stats);
+});
+const panelButton = $('panel-toggle');
+panelButton.addEventListener('click', () => {
+  const open = panelButton.getAttribute('aria-expanded') !== 'true';
+  panelButton.setAttribute('aria-expanded', String(open));
+  $('panel').hidden = !open;
+});
+
+// --- scenes ----------------------------------------------------------------------------------
+const sceneSelect = $('scene');
+function describe(s) {
+  const size = `${s.primitives.toLocaleString('en')} ${s.kind === 'metaballs' ? 'balls' : 'primitives'}`;
+  const time = s.source === 'stored' ? `${s.steps} time step${s.steps === 1 ? '' : 's'}` : 'animated demo';
+  return `${s.kind} · ${size} · ${time}`;
+}
+
+async function loadSteps(scene) {
+  if (scene.source !== 'stored') return null;
+  const response = await fetch(`/api/v1/scenes/${encodeURIComponent(scene.id)}/steps`);
+  if (!response.ok) throw new Error(`listing the steps of ${scene.id}: HTTP ${response.status}`);
+  return (await response.json()).steps.map((s) => ({ index: s.index, time: s.time }));
+}
+
+async function selectScene(id) {
+  const scene = scenes.find((s) => s.id === id);
+  settings.scene = id;
+  sceneSelect.value = id;
+  $('scene-details').textContent = scene ? `${describe(scene)}. ${scene.description}` : '';
+  let steps = null;
+  try {
+    steps = scene ? await loadSteps(scene) : null;
+  } catch (err) {
+    showError(err.message);
+  }
+  timeline.setScene(scene, steps);
+  gotFrame = false;
+  saved();
+  connection.open(id);
+}
+
+sceneSelect.addEventListener('change', () => {
+  // A new scene starts from its own default view.
+  settings.cam = null;
+  settings.iso = null;
+  settings.time = null;
+  info = null;
+  selectScene(sceneSelect.value);
+});
+
+let startDelayMs = 500;
 async function start() {
   try {
     const response = await fetch('/api/v1/scenes');
-    const { scenes } = await response.json();
-    for (const s of scenes) {
-      const option = new Option(`${s.name} (${s.kind}, ${s.primitives})`, s.id);
-      sceneSelect.append(option);
-    }
-    if (!scenes.some((s) => s.id === state.scene)) state.scene = scenes[0]?.id ?? null;
-    sceneSelect.value = state.scene;
-    sceneSelect.addEventListener('change', () => {
-      state.scene = sceneSelect.value;
-      state.orbit = null;
-      state.isovalue = null;
-      saveUrl();
-      if (state.socket) state.socket.close();
-    });
-    if (state.scene) connect();
-    else setStatus('The server has no scenes.');
+    if (!response.ok) throw new Error(`HTTP ${response.status}`);
+    scenes = (await response.json()).scenes;
   } catch (err) {
-    setStatus('Cannot reach the server; retrying…');
-    setTimeout(start, 1000);
+    setStatus(`Cannot list the scenes (${err.message}); retrying…`);
+    setTimeout(start, startDelayMs);
+    startDelayMs = Math.min(5000, startDelayMs * 2);
+    return;
   }
+  fillSelect(sceneSelect, scenes.map((s) => [s.id, `${s.name} (${describe(s)})`]), settings.scene);
+  if (!scenes.length) {
+    setStatus('The server has no scenes yet.', { busy: false });
+    return;
+  }
+  const id = scenes.some((s) => s.id === settings.scene) ? settings.scene : scenes[0].id;
+  if (id !== settings.scene) { settings.cam = null; settings.iso = null; settings.time = null; }
+  selectScene(id);
 }
+
+// For tests and debugging: the live objects behind the page.
+window.isoray = { settings, stats, view, connection, timeline };
 start();

@@ -1,7 +1,10 @@
 // Shared helpers of the browser tests: the real server binary, Debian's chromium through
-// playwright-core, image comparison of the canvas, and failure screenshots.
+// playwright-core, frames counted on the wire, image comparison of the canvas, and failure
+// screenshots. Every page records console errors, page errors and unhandled promise
+// rejections; a test fails on any of them.
 import { spawn } from 'node:child_process';
-import { mkdirSync } from 'node:fs';
+import { mkdirSync, mkdtempSync, rmSync } from 'node:fs';
+import { tmpdir } from 'node:os';
 import { dirname, join, resolve } from 'node:path';
 import { fileURLToPath } from 'node:url';
 import { chromium } from 'playwright-core';
@@ -10,10 +13,16 @@ const here = dirname(fileURLToPath(import.meta.url));
 export const repoRoot = resolve(here, '..', '..');
 export const screenshotDir = join(repoRoot, 'tests', 'browser', 'screenshots');
 
-/** Starts `isoray` on an ephemeral loopback port; resolves once it prints its address. */
-export async function startServer(args = []) {
+/**
+ * Starts `isoray` on 127.0.0.1 (an ephemeral port unless `port` is given) with its own empty
+ * data directory; resolves once it prints its address.
+ */
+export async function startServer({ args = [], port = 0, dataDir = null } = {}) {
   const bin = process.env.ISORAY_BIN || join(repoRoot, 'target', 'debug', 'isoray');
-  const child = spawn(bin, ['--listen', '127.0.0.1:0', '--log', 'warn', ...args], { stdio: ['ignore', 'pipe', 'pipe'] });
+  const ownDir = dataDir === null;
+  const dir = dataDir ?? mkdtempSync(join(tmpdir(), 'isoray-browser-'));
+  const child = spawn(bin, ['--listen', `127.0.0.1:${port}`, '--log', 'warn', '--data-dir', dir, ...args],
+    { stdio: ['ignore', 'pipe', 'pipe'] });
   let stderr = '';
   child.stderr.on('data', (d) => { stderr += d; });
   const url = await new Promise((resolveUrl, reject) => {
@@ -28,29 +37,57 @@ export async function startServer(args = []) {
   });
   return {
     url,
-    child,
-    async stop() {
-      if (child.exitCode !== null) return;
-      const exited = new Promise((r) => child.once('exit', r));
-      child.kill('SIGTERM');
-      await exited;
+    port: Number(new URL(url).port),
+    dataDir: dir,
+    async stop({ keepData = false } = {}) {
+      if (child.exitCode === null && child.signalCode === null) {
+        const exited = new Promise((r) => child.once('exit', r));
+        child.kill('SIGTERM');
+        await exited;
+      }
+      if (ownDir && !keepData) rmSync(dir, { recursive: true, force: true });
     },
   };
 }
 
-/** Launches headless chromium and a page that records console errors and page errors. */
+/** Launches headless chromium and a page that records every console error and page error. */
 export async function openBrowser() {
   const browser = await chromium.launch({
     executablePath: process.env.CHROMIUM || '/usr/bin/chromium',
     args: ['--no-sandbox', '--headless', '--disable-gpu', '--disable-quic', '--no-first-run',
       '--disable-background-networking', '--disable-component-update', '--disable-sync'],
   });
-  const context = await browser.newContext({ viewport: { width: 800, height: 600 } });
+  const context = await browser.newContext({ viewport: { width: 720, height: 480 }, acceptDownloads: true, hasTouch: true });
   const page = await context.newPage();
   const problems = [];
-  page.on('console', (msg) => { if (msg.type() === 'error') problems.push(`console error: ${msg.text()}`); });
+  // Network errors the test provokes on purpose (a stopped server) are allowed only while
+  // `expectNetworkErrors` is set, and only the browser's own connection-refused messages.
+  const state = { expectNetworkErrors: false, expected: [] };
+  page.on('console', (msg) => {
+    if (msg.type() !== 'error') return;
+    const text = msg.text();
+    if (state.expectNetworkErrors && /ERR_CONNECTION_REFUSED|WebSocket connection to .* failed/.test(text)) {
+      state.expected.push(text);
+      return;
+    }
+    problems.push(`console error: ${text}`);
+  });
   page.on('pageerror', (err) => problems.push(`page error: ${err.message}`));
-  return { browser, page, problems };
+  await page.addInitScript(() => {
+    window.addEventListener('unhandledrejection', (e) => console.error(`unhandled rejection: ${e.reason && e.reason.stack || e.reason}`));
+  });
+  return { browser, context, page, problems, network: state };
+}
+
+/** Counts binary websocket messages (frames) the page receives, independently of the app. */
+export function countWireFrames(page) {
+  const counter = { frames: 0, times: [], bytes: [] };
+  page.on('websocket', (ws) => {
+    ws.on('framereceived', ({ payload }) => {
+      if (typeof payload !== 'string') { counter.frames += 1; counter.times.push(Date.now()); counter.bytes.push(payload.length); }
+    });
+  });
+  return counter;
 }
 
 /** Frames the page has drawn so far. */
@@ -58,33 +95,43 @@ export async function frameCount(page) {
   return Number(await page.locator('#view').getAttribute('data-frames') || 0);
 }
 
-/** Waits until the page has drawn `n` more frames than it had. */
-export async function waitForFrames(page, n = 1, timeout = 20000) {
-  const start = await frameCount(page);
+/** Waits until the page has drawn `n` more frames than `from` (default: now). */
+export async function waitForFrames(page, n = 1, { from = null, timeout = 20000 } = {}) {
+  const start = from ?? await frameCount(page);
   await page.waitForFunction((target) => Number(document.getElementById('view').dataset.frames || 0) >= target,
     start + n, { timeout });
 }
 
-/** Waits until no frame has arrived for `quietMs` (a still view), then returns the pixels. */
-export async function settledPixels(page, quietMs = 600, timeout = 20000) {
+/**
+ * Waits for the view to settle after an action — a new frame since `from` frames, the last
+ * one the server's lossless still frame, then `quietMs` with no frame — and returns the pixels.
+ */
+export async function settledPixels(page, { from = 0, quietMs = 400, timeout = 30000 } = {}) {
   const deadline = Date.now() + timeout;
+  await page.waitForFunction((n) => {
+    const v = window.isoray && window.isoray.view;
+    return v && v.framesShown > n && v.lastHeader && (v.lastHeader.flags & 1) === 1;
+  }, from, { timeout });
   let last = await frameCount(page);
   let since = Date.now();
   while (Date.now() < deadline) {
     await page.waitForTimeout(100);
     const now = await frameCount(page);
-    if (now !== last) { last = now; since = Date.now(); } else if (Date.now() - since >= quietMs && now > 0) break;
+    if (now !== last) { last = now; since = Date.now(); } else if (Date.now() - since >= quietMs) break;
   }
   return canvasPixels(page);
 }
 
-/** The canvas as { width, height, data: number[] } (RGBA). */
+/** The canvas as { width, height, data: Buffer } (RGBA), moved out of the page as base64. */
 export async function canvasPixels(page) {
-  return page.evaluate(() => {
+  const { width, height, base64 } = await page.evaluate(() => {
     const c = document.getElementById('view');
-    const d = c.getContext('2d').getImageData(0, 0, c.width, c.height);
-    return { width: c.width, height: c.height, data: Array.from(d.data) };
+    const bytes = c.getContext('2d').getImageData(0, 0, c.width, c.height).data;
+    let binary = '';
+    for (let i = 0; i < bytes.length; i += 0x8000) binary += String.fromCharCode.apply(null, bytes.subarray(i, i + 0x8000));
+    return { width: c.width, height: c.height, base64: btoa(binary) };
   });
+  return { width, height, data: Buffer.from(base64, 'base64') };
 }
 
 /** Mean absolute difference per colour channel, 0–255; Infinity if sizes differ. */
@@ -106,21 +153,59 @@ export function stddev(img) {
   return Math.sqrt(g.reduce((s, v) => s + (v - mean) ** 2, 0) / g.length);
 }
 
-/** Runs `body` with a server, a browser and a page; screenshots on failure; fails on console errors. */
+/** Drags the mouse across the canvas from its centre by (dx, dy) pixels. */
+export async function drag(page, dx, dy, { button = 'left', shift = false } = {}) {
+  const box = await page.locator('#view').boundingBox();
+  const x = box.x + box.width / 2, y = box.y + box.height / 2;
+  if (shift) await page.keyboard.down('Shift');
+  await page.mouse.move(x, y);
+  await page.mouse.down({ button });
+  await page.mouse.move(x + dx, y + dy, { steps: 6 });
+  await page.mouse.up({ button });
+  if (shift) await page.keyboard.up('Shift');
+}
+
+/**
+ * Runs `body` with a server, a browser and a page; saves a screenshot on failure; fails on
+ * any console error, page error or unhandled rejection.
+ */
 export async function withPage(name, body, { serverArgs = [] } = {}) {
-  const server = await startServer(serverArgs);
-  const { browser, page, problems } = await openBrowser();
+  const servers = [await startServer({ args: serverArgs })];
+  const { browser, page, problems, network } = await openBrowser();
+  const ctx = {
+    server: servers[0],
+    page,
+    network,
+    /** Starts another server (e.g. on the same port and data directory after a stop). */
+    async startServer(options) {
+      const s = await startServer(options);
+      servers.push(s);
+      return s;
+    },
+  };
   try {
-    await body({ server, page });
+    await body(ctx);
     if (problems.length) throw new Error(problems.join('\n'));
   } catch (err) {
     mkdirSync(screenshotDir, { recursive: true });
     const file = join(screenshotDir, `${name}.png`);
     await page.screenshot({ path: file }).catch(() => {});
     err.message += `\n(screenshot: ${file})`;
+    if (problems.length && !err.message.includes(problems[0])) err.message += `\n${problems.join('\n')}`;
     throw err;
   } finally {
     await browser.close();
-    await server.stop();
+    for (const s of servers.reverse()) await s.stop();
   }
+}
+
+/** JSON request to the server's REST API. */
+export async function api(server, method, path, body, token) {
+  const headers = {};
+  if (body !== undefined) headers['content-type'] = 'application/json';
+  if (token) headers.authorization = `Bearer ${token}`;
+  const response = await fetch(new URL(path, server.url), { method, headers, body: body === undefined ? undefined : JSON.stringify(body) });
+  const text = await response.text();
+  if (!response.ok) throw new Error(`${method} ${path}: ${response.status} ${text}`);
+  return text ? JSON.parse(text) : null;
 }

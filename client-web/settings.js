@@ -1,0 +1,86 @@
+// The viewer's settings and their place in the URL: everything a user chooses (scene, camera,
+// view-up axis, isovalues, time, playback, effects, quality, overlay) is kept in the query
+// string, so a view can be shared and reloaded. Only values that differ from the defaults are
+// written; values that do not parse are ignored (the default stays), never thrown.
+
+export const UP_AXES = ['+y', '+z', '+x', '-y', '-z', '-x'];
+
+/** Defaults of every setting. `cam` and `iso` come from the server's `info` when null. */
+export function defaults() {
+  return {
+    scene: null,
+    cam: null, // { yaw, pitch, distance, target: [x, y, z], fov }
+    up: '+y',
+    iso: null, // [value, ...] one per isosurface
+    time: null, // pinned scene time in seconds; null follows the live state
+    speed: 1, // playback speed: scene seconds per second (demos) or steps per second (stored)
+    loop: true,
+    fx: {}, // effect name -> boolean, only those the user changed from the scene's default
+    codec: 'auto',
+    quality: null, // 1..100 or null for the server's default
+    scale: 1, // resolution scale on top of canvas size × devicePixelRatio
+    fps: null, // target frame rate, null for the server's default
+    stats: false,
+  };
+}
+
+const finite = (s) => (s !== null && s.trim() !== '' && Number.isFinite(Number(s)) ? Number(s) : null);
+
+/** Settings read from a query string; unknown or malformed values fall back to defaults. */
+export function parseSettings(search) {
+  const p = new URLSearchParams(search);
+  const s = defaults();
+  if (p.get('scene')) s.scene = p.get('scene');
+  const cam = (p.get('cam') || '').split(',').map(finite);
+  if (cam.length === 7 && cam.every((v) => v !== null) && cam[2] > 0 && cam[6] >= 1 && cam[6] <= 170) {
+    s.cam = { yaw: cam[0], pitch: cam[1], distance: cam[2], target: cam.slice(3, 6), fov: cam[6] };
+  }
+  if (UP_AXES.includes(p.get('up'))) s.up = p.get('up');
+  const iso = (p.get('iso') || '').split(',').map(finite);
+  if (p.get('iso') && iso.every((v) => v !== null)) s.iso = iso;
+  const t = finite(p.get('t'));
+  if (t !== null && t >= 0) s.time = t;
+  const speed = finite(p.get('speed'));
+  if (speed !== null && speed > 0 && speed <= 100) s.speed = speed;
+  if (p.get('loop') === '0') s.loop = false;
+  for (const item of (p.get('fx') || '').split(',').filter(Boolean)) {
+    const m = /^(-?)([a-z_]+)$/.exec(item);
+    if (m) s.fx[m[2]] = m[1] !== '-';
+  }
+  if (p.get('codec')) s.codec = p.get('codec');
+  const quality = finite(p.get('q'));
+  if (quality !== null && quality >= 1 && quality <= 100) s.quality = Math.round(quality);
+  const scale = finite(p.get('scale'));
+  if (scale !== null && scale >= 0.1 && scale <= 2) s.scale = scale;
+  const fps = finite(p.get('fps'));
+  if (fps !== null && fps >= 1 && fps <= 240) s.fps = fps;
+  if (p.get('stats') === '1') s.stats = true;
+  return s;
+}
+
+const round = (v) => String(+v.toFixed(6));
+
+/** The query string (with `?`) that `parseSettings` reads back as `s`. */
+export function serializeSettings(s) {
+  const d = defaults();
+  const p = new URLSearchParams();
+  if (s.scene) p.set('scene', s.scene);
+  if (s.cam) {
+    const c = s.cam;
+    p.set('cam', [c.yaw, c.pitch, c.distance, ...c.target, c.fov].map(round).join(','));
+  }
+  if (s.up !== d.up) p.set('up', s.up);
+  if (s.iso) p.set('iso', s.iso.map(round).join(','));
+  if (s.time !== null) p.set('t', round(s.time));
+  if (s.speed !== d.speed) p.set('speed', round(s.speed));
+  if (!s.loop) p.set('loop', '0');
+  const fx = Object.entries(s.fx).map(([k, on]) => (on ? k : `-${k}`));
+  if (fx.length) p.set('fx', fx.join(','));
+  if (s.codec !== d.codec) p.set('codec', s.codec);
+  if (s.quality !== null) p.set('q', String(s.quality));
+  if (s.scale !== d.scale) p.set('scale', round(s.scale));
+  if (s.fps !== null) p.set('fps', round(s.fps));
+  if (s.stats) p.set('stats', '1');
+  const text = p.toString();
+  return text ? `?${text}` : location.pathname;
+}
