@@ -8,6 +8,10 @@
 //! Binary step payloads are described in `PROTOCOL.md`'s REST section and on
 //! [`RAW_STEP_MAGIC`]: a NumPy `.npy` array or a raw little-endian array with a 16-byte header.
 
+pub use crate::effects::{
+    ClipBoxSpec, EffectChanges, FloorSpec, GroupSpec, IsosurfaceSpec, LightKind, MaterialSpec,
+    VolumeSpec,
+};
 use serde::{Deserialize, Serialize};
 
 /// Media type of a NumPy `.npy` step body.
@@ -133,21 +137,62 @@ pub struct LightingSpec {
     pub background_top: Option<[f64; 3]>,
     #[serde(default)]
     pub background_bottom: Option<[f64; 3]>,
+    /// Specular exponent and weight of `materials[0]` (when `materials` is absent).
     #[serde(default)]
     pub shininess: Option<f64>,
     #[serde(default)]
     pub specular: Option<f64>,
+    /// Materials; `materials[0]` shades every primitive outside `groups`.
+    #[serde(default)]
+    pub materials: Option<Vec<MaterialSpec>>,
+    /// Ranges of primitives and their material.
+    #[serde(default)]
+    pub groups: Option<Vec<GroupSpec>>,
+    #[serde(default)]
+    pub floor: Option<FloorSpec>,
+    #[serde(default)]
+    pub clip_box: Option<ClipBoxSpec>,
+    /// Further isosurfaces of the field.
+    #[serde(default)]
+    pub isosurfaces: Option<Vec<IsosurfaceSpec>>,
+    /// Render the field as an absorbing volume when transparency is on.
+    #[serde(default)]
+    pub volume: Option<VolumeSpec>,
+    /// Length of ambient-occlusion rays (default 1).
+    #[serde(default)]
+    pub occlusion_distance: Option<f64>,
+    /// The effects viewers start with (default: none).
+    #[serde(default)]
+    pub effects: Option<EffectChanges>,
 }
 
-/// A light infinitely far away.
+/// A light: directional (default), point, or sphere (an area light).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[serde(deny_unknown_fields)]
 pub struct LightSpec {
-    /// Direction from the surface towards the light (normalised by the server).
-    pub to_light: [f64; 3],
+    #[serde(default)]
+    pub kind: LightKind,
+    /// Directional: direction from the surface towards the light (normalised by the server).
+    #[serde(default)]
+    pub to_light: Option<[f64; 3]>,
+    /// Point and sphere: where the light is.
+    #[serde(default)]
+    pub position: Option<[f64; 3]>,
+    /// Sphere: its radius, `> 0`.
+    #[serde(default)]
+    pub radius: Option<f64>,
+    /// Linear-light colour, each channel `[0, 1]`.
     #[serde(default = "white")]
     pub color: [f64; 3],
+    /// Scale of `color`, `≥ 0`: the irradiance of a directional light, the intensity (the
+    /// irradiance at distance 1) of a point or sphere light.
+    #[serde(default = "unit")]
+    pub intensity: f64,
+}
+
+fn unit() -> f64 {
+    1.0
 }
 
 fn white() -> [f64; 3] {

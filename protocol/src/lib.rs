@@ -7,6 +7,7 @@
 //! the human-readable description; the tests below pin the JSON shapes it documents.
 
 pub mod api;
+pub mod effects;
 pub mod frame;
 
 pub use frame::{
@@ -34,10 +35,13 @@ pub enum ClientMessage {
     Resize(ResizeInput),
     Time(TimeInput),
     Ack(FrameAck),
+    /// Switch effects and set their quality (see [`effects`]).
+    Effects(effects::EffectsInput),
 }
 
 /// The `type` of every client message, in the order of [`ClientMessage`].
-pub const CLIENT_MESSAGE_TYPES: [&str; 5] = ["camera", "isovalue", "resize", "time", "ack"];
+pub const CLIENT_MESSAGE_TYPES: [&str; 6] =
+    ["camera", "isovalue", "resize", "time", "ack", "effects"];
 
 /// Place the camera. Positions are in world space.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -95,6 +99,7 @@ impl ClientMessage {
             ClientMessage::Resize(m) => Some(m.input_id),
             ClientMessage::Time(m) => Some(m.input_id),
             ClientMessage::Ack(_) => None,
+            ClientMessage::Effects(m) => Some(m.input_id),
         }
     }
 }
@@ -102,6 +107,8 @@ impl ClientMessage {
 /// A JSON text message from the server to the client.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "type", rename_all = "snake_case")]
+// `info` is sent once per session; boxing it would only burden every client of this type.
+#[allow(clippy::large_enum_variant)]
 pub enum ServerMessage {
     /// Sent once after the websocket opens.
     Info(SessionInfo),
@@ -129,6 +136,8 @@ pub struct SessionInfo {
     pub camera: CameraPose,
     /// Frames the server sends ahead of the client's `ack`s.
     pub frame_window: u32,
+    /// The effects the scene can use, the session's effects, and their limits.
+    pub effects: effects::EffectsInfo,
 }
 
 /// A camera as the server reports it.

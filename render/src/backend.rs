@@ -3,11 +3,15 @@
 //! This is the one place in the engine that knows about threads. A render called from inside
 //! the pool (as the server's render jobs are) runs its tiles on that same pool.
 
+use crate::effects::{Effects, EffectsPlan, RayCounts, RayKind};
 use crate::framebuffer::Framebuffer;
-use crate::integrator::trace_primary;
+use crate::integrator::{trace_primary, Tracer};
+use crate::metaball::RayCounters;
+use crate::sampling::PixelRng;
 use crate::scene::PreparedScene;
 use crate::shade::linear_to_srgb8;
 use crate::View;
+use glam::Vec3;
 use rayon::prelude::*;
 
 /// Tile edge in pixels: small enough to balance two to sixty-four workers on one frame.
@@ -89,6 +93,244 @@ fn render_tiles(scene: &PreparedScene, view: &View) -> Framebuffer {
         }
     }
     fb
+}
+
+// ---- Effects: frames traced by the effects plan, and progressive refinement. ----
+
+/// One frame's rays, per kind, and the traversal counters of their queries.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct FrameRays {
+    pub rays: RayCounts,
+    pub counters: RayCounters,
+}
+
+impl CpuBackend {
+    /// Renders one frame with `effects` (its first refinement pass), blocking. A plan with
+    /// primary rays only renders exactly as [`CpuBackend::render`] does.
+    pub fn render_effects(
+        &self,
+        scene: &PreparedScene,
+        view: &View,
+        effects: &Effects,
+    ) -> (Framebuffer, FrameRays) {
+        let plan = plan_for(scene, effects);
+        if plan.is_primary_only() {
+            let fb = self.render(scene, view);
+            let mut rays = FrameRays::default();
+            rays.rays
+                .add_n(RayKind::Primary, view.width as u64 * view.height as u64);
+            return (fb, rays);
+        }
+        let pass = self.pool.install(|| trace_pass(scene, view, &plan, 0));
+        let mut fb = Framebuffer::new(view.width, view.height);
+        for (i, c) in pass.color.iter().enumerate() {
+            fb.rgb[i * 3..i * 3 + 3].copy_from_slice(&[c.x, c.y, c.z].map(linear_to_srgb8));
+        }
+        fb.depth = pass.depth;
+        (fb, pass.rays)
+    }
+
+    /// Adds one refinement pass to `accumulator` (reset first if the frame it holds differs)
+    /// and returns the image of the mean so far. Once converged it renders nothing and
+    /// returns the same image again.
+    pub fn refine(
+        &self,
+        scene: &PreparedScene,
+        view: &View,
+        effects: &Effects,
+        accumulator: &mut Accumulator,
+    ) -> Framebuffer {
+        if accumulator.width != view.width || accumulator.height != view.height {
+            accumulator.reset(view.width, view.height);
+        }
+        if !accumulator.converged {
+            let plan = plan_for(scene, effects);
+            let pass_index = accumulator.passes;
+            let pass = self
+                .pool
+                .install(|| trace_pass(scene, view, &plan, pass_index));
+            accumulator.add(pass, plan.is_stochastic());
+        }
+        accumulator.image()
+    }
+}
+
+/// The plan of `effects` on `scene`.
+pub fn plan_for(scene: &PreparedScene, effects: &Effects) -> EffectsPlan {
+    let s = scene.scene();
+    EffectsPlan::new(&s.lighting, s.primitive_count(), effects)
+}
+
+/// One pass: linear colour and depth per pixel, and its rays.
+pub struct Pass {
+    pub color: Vec<Vec3>,
+    pub depth: Vec<f32>,
+    pub rays: FrameRays,
+}
+
+fn trace_pass(scene: &PreparedScene, view: &View, plan: &EffectsPlan, pass: u32) -> Pass {
+    let (width, height) = (view.width, view.height);
+    let rays = view.camera.rays(width, height);
+    let forward = rays.forward();
+    let tiles_x = width.div_ceil(TILE);
+    let tiles_y = height.div_ceil(TILE);
+    type Tile = (u32, u32, Vec<Vec3>, Vec<f32>, FrameRays);
+    let tiles: Vec<Tile> = (0..tiles_x * tiles_y)
+        .into_par_iter()
+        .map(|tile| {
+            let x0 = (tile % tiles_x) * TILE;
+            let y0 = (tile / tiles_x) * TILE;
+            let (x1, y1) = ((x0 + TILE).min(width), (y0 + TILE).min(height));
+            let n = ((x1 - x0) * (y1 - y0)) as usize;
+            let mut color = Vec::with_capacity(n);
+            let mut depth = Vec::with_capacity(n);
+            let mut tracer = Tracer::new(scene, plan, view.isovalue);
+            for y in y0..y1 {
+                for x in x0..x1 {
+                    let ray = rays.through_pixel(x, y);
+                    let mut rng = PixelRng::new(x, y, pass);
+                    let (c, t) = tracer.primary(&ray, &mut rng);
+                    color.push(c);
+                    depth.push(t * ray.dir.dot(forward));
+                }
+            }
+            let rays = FrameRays {
+                rays: tracer.counts,
+                counters: tracer.counters,
+            };
+            (x0, y0, color, depth, rays)
+        })
+        .collect();
+    let n = width as usize * height as usize;
+    let mut out = Pass {
+        color: vec![Vec3::ZERO; n],
+        depth: vec![f32::INFINITY; n],
+        rays: FrameRays::default(),
+    };
+    for (x0, y0, color, depth, rays) in tiles {
+        let tile_w = (TILE.min(width - x0)) as usize;
+        for (row, (c_row, d_row)) in color
+            .chunks_exact(tile_w)
+            .zip(depth.chunks_exact(tile_w))
+            .enumerate()
+        {
+            let start = (y0 as usize + row) * width as usize + x0 as usize;
+            out.color[start..start + tile_w].copy_from_slice(c_row);
+            out.depth[start..start + tile_w].copy_from_slice(d_row);
+        }
+        out.rays.rays.add(&rays.rays);
+        out.rays.counters.add(&rays.counters);
+    }
+    out
+}
+
+/// Progressive refinement of one still view: the sum of every pass so far, per pixel.
+///
+/// Each pass draws new samples for soft shadows and occlusion (the per-pixel streams are
+/// seeded by the pass number), and the image shown is the mean. The refinement converges when
+/// the mean changes by less than [`Accumulator::threshold`] per pixel and channel on average
+/// from one pass to the next, or after [`Accumulator::max_passes`]; a plan with nothing
+/// random converges after its first pass.
+#[derive(Clone, Debug)]
+pub struct Accumulator {
+    width: u32,
+    height: u32,
+    sum: Vec<Vec3>,
+    depth: Vec<f32>,
+    passes: u32,
+    converged: bool,
+    /// Mean absolute change of the linear mean from the previous pass (`INFINITY` before 2).
+    last_delta: f32,
+    /// Convergence: mean per-channel change of the linear mean below this.
+    pub threshold: f32,
+    pub max_passes: u32,
+}
+
+impl Default for Accumulator {
+    fn default() -> Accumulator {
+        Accumulator::new(DEFAULT_MAX_PASSES)
+    }
+}
+
+/// Passes after which refinement stops even if it has not met its threshold.
+pub const DEFAULT_MAX_PASSES: u32 = 64;
+/// A mean change of 1e-4 in linear light is a twentieth of one 8-bit sRGB step at mid-grey.
+pub const DEFAULT_THRESHOLD: f32 = 1.0e-4;
+
+impl Accumulator {
+    pub fn new(max_passes: u32) -> Accumulator {
+        Accumulator {
+            width: 0,
+            height: 0,
+            sum: Vec::new(),
+            depth: Vec::new(),
+            passes: 0,
+            converged: false,
+            last_delta: f32::INFINITY,
+            threshold: DEFAULT_THRESHOLD,
+            max_passes: max_passes.max(1),
+        }
+    }
+
+    /// Forgets every pass (the view, scene or effects changed).
+    pub fn reset(&mut self, width: u32, height: u32) {
+        self.width = width;
+        self.height = height;
+        self.sum.clear();
+        self.depth.clear();
+        self.passes = 0;
+        self.converged = false;
+        self.last_delta = f32::INFINITY;
+    }
+
+    pub fn passes(&self) -> u32 {
+        self.passes
+    }
+
+    pub fn converged(&self) -> bool {
+        self.converged
+    }
+
+    /// Mean absolute per-channel change of the mean image made by the last pass.
+    pub fn last_delta(&self) -> f32 {
+        self.last_delta
+    }
+
+    fn add(&mut self, pass: Pass, stochastic: bool) {
+        if self.passes == 0 {
+            self.sum = pass.color;
+            self.depth = pass.depth;
+        } else {
+            let k = self.passes as f32;
+            let mut change = 0.0f64;
+            for (s, c) in self.sum.iter_mut().zip(&pass.color) {
+                // |(S + c)/(k + 1) - S/k| = |c - S/k| / (k + 1)
+                let d = (*c - *s / k).abs() / (k + 1.0);
+                change += (d.x + d.y + d.z) as f64;
+                *s += *c;
+            }
+            self.last_delta = (change / (3.0 * self.sum.len().max(1) as f64)) as f32;
+        }
+        self.passes += 1;
+        self.converged = !stochastic
+            || self.passes >= self.max_passes
+            || (self.passes >= 2 && self.last_delta < self.threshold);
+    }
+
+    /// The mean of the passes so far, as an sRGB frame.
+    pub fn image(&self) -> Framebuffer {
+        let mut fb = Framebuffer::new(self.width, self.height);
+        if self.passes == 0 {
+            return fb;
+        }
+        let inv = 1.0 / self.passes as f32;
+        for (i, s) in self.sum.iter().enumerate() {
+            let c = *s * inv;
+            fb.rgb[i * 3..i * 3 + 3].copy_from_slice(&[c.x, c.y, c.z].map(linear_to_srgb8));
+        }
+        fb.depth.clone_from(&self.depth);
+        fb
+    }
 }
 
 #[cfg(test)]

@@ -1,17 +1,524 @@
-//! Follows one camera ray: first hit, then local shading; the background where it misses.
+//! Follows rays through a scene and shades what they hit, tracing only the rays the
+//! [`EffectsPlan`] calls for.
+//!
+//! How it works: [`trace_primary`] is ray casting (first hit, local shading of every light
+//! without shadows); it is the whole frame when the plan is primary-only, so switching on an
+//! effect no visible material can use costs nothing. [`Tracer`] is the Whitted-style
+//! integrator for everything else, per hit:
+//! - local shading: emission, ambient darkened by ambient occlusion (cosine-weighted any-hit
+//!   rays within the occlusion distance, fitted-bvh-metaballs.txt Fig. 8d), and for every light
+//!   facing the surface Lambert plus Blinn-Phong times its visibility: one shadow ray towards a
+//!   directional or point light or a sphere light's centre (hard), or `light_samples` rays
+//!   towards points of the sphere light's visible cap (soft, averaged over refinement passes);
+//! - mirror reflection to the plan's depth (ibid. Fig. 8a,b);
+//! - transparency: a surface of opacity `α` shows `α` of its own shading and `1 - α` of what
+//!   lies behind; behind is a refraction ray with Fresnel weighting of the reflected and bent
+//!   parts when the material's IOR is not 1 (ibid. Fig. 8e), else the same ray continued past
+//!   the hit (depth peeling, tetrahedral-isosurface-ray-tracing.txt §7), layer by layer;
+//! - a volume (bezier-clipping-metaballs.txt §5, eq. 16 with single scattering of a constant
+//!   in-scattered radiance `color`): a segment of optical depth `τ` shows
+//!   `I₀ e^{-τ} + color (1 - e^{-τ})`, the closed form of eq. 16's integral in that case;
+//! - the clip box cuts primitives away (ibid. §7): a ray sees them only outside it, and a ray
+//!   that leaves the box inside a solid sees the solid's inner side;
+//! - further isosurfaces of the same field are hit like the first (ibid. §7).
+//!
+//! Shadow and occlusion rays ask the scene for any hit, with early exit; with transparent
+//! materials in the plan they walk the crossings instead and multiply `1 - α` of each.
 
-use crate::ray::Ray;
+use crate::effects::{EffectsPlan, RayCounts, RayKind};
+use crate::metaball::RayCounters;
+use crate::ray::{Hit, Ray};
+use crate::sampling::{cosine_hemisphere, uniform_cone, PixelRng};
 use crate::scene::PreparedScene;
+use crate::shade::{direct, facing, fresnel, Light, Lighting, Material};
 use glam::Vec3;
 
 /// Far limit of every ray, in scene units.
 pub const T_MAX: f32 = 1.0e4;
 
-/// Shaded linear colour and hit distance (`INFINITY` on a miss) of one primary ray.
+/// Shaded linear colour and hit distance (`INFINITY` on a miss) of one primary ray, by ray
+/// casting alone.
+#[inline]
 pub fn trace_primary(scene: &PreparedScene, ray: &Ray, isovalue: f32) -> (Vec3, f32) {
     let lighting = &scene.scene().lighting;
     match scene.first_hit(ray, 0.0, T_MAX, isovalue) {
         Some(hit) => (lighting.shade(&hit, ray.dir), hit.t),
         None => (lighting.background(ray.dir.y), f32::INFINITY),
+    }
+}
+
+/// A surface a ray reached: of the geometry or of the floor.
+#[derive(Clone, Copy, Debug)]
+struct SurfaceHit {
+    t: f32,
+    position: Vec3,
+    /// Out of the solid (or up from the floor); not turned towards the viewer.
+    normal: Vec3,
+    albedo: Vec3,
+    material: u16,
+}
+
+/// Distance a secondary ray starts off its surface, against self-intersection: above the
+/// root finder's tolerance and the `f32` spacing at `p`.
+#[inline]
+fn offset(p: Vec3) -> f32 {
+    1.0e-3 + 2.0e-5 * p.abs().max_element()
+}
+
+/// How close to a segment's start a root must be to mean "the segment starts inside".
+const INSIDE_EPS: f32 = 2.0e-4;
+
+/// The integrator of one frame on one thread: the scene, the plan, and the rays it traced.
+pub struct Tracer<'a> {
+    scene: &'a PreparedScene,
+    lighting: &'a Lighting,
+    plan: &'a EffectsPlan,
+    isovalue: f32,
+    /// Rays traced so far, per kind.
+    pub counts: RayCounts,
+    /// Traversal and root-finder counters of every query.
+    pub counters: RayCounters,
+}
+
+impl<'a> Tracer<'a> {
+    pub fn new(scene: &'a PreparedScene, plan: &'a EffectsPlan, isovalue: f32) -> Tracer<'a> {
+        Tracer {
+            scene,
+            lighting: &scene.scene().lighting,
+            plan,
+            isovalue,
+            counts: RayCounts::default(),
+            counters: RayCounters::default(),
+        }
+    }
+
+    /// Linear colour and hit distance (`INFINITY` on a miss) of a camera ray.
+    pub fn primary(&mut self, ray: &Ray, rng: &mut PixelRng) -> (Vec3, f32) {
+        self.counts.bump(RayKind::Primary);
+        self.radiance(ray, 0.0, 0, self.plan.layers, rng)
+    }
+
+    fn radiance(
+        &mut self,
+        ray: &Ray,
+        t0: f32,
+        depth: u32,
+        layers: u32,
+        rng: &mut PixelRng,
+    ) -> (Vec3, f32) {
+        let hit = self.closest(ray, t0, T_MAX);
+        let (far, mut color) = match &hit {
+            Some(h) => (h.t, self.shade_hit(ray, h, depth, layers, rng)),
+            None => (T_MAX, self.lighting.background(ray.dir.y)),
+        };
+        if self.plan.volume {
+            if let Some(volume) = self.lighting.volume {
+                self.counts.bump(RayKind::Volume);
+                let tau = volume.density * self.optical_depth(ray, t0, far);
+                let transmitted = (-tau).exp();
+                color = color * transmitted + volume.color * (1.0 - transmitted);
+            }
+        }
+        (color, hit.map_or(f32::INFINITY, |h| h.t))
+    }
+
+    /// The stretches of `[a, b]` outside the clip box, in order.
+    #[inline]
+    fn segments(&self, ray: &Ray, a: f32, b: f32) -> ([(f32, f32); 2], usize) {
+        let mut out = [(a, b), (0.0, 0.0)];
+        let Some(clip) = &self.plan.clip_box else {
+            return (out, 1);
+        };
+        let Some((near, far)) = clip.range(ray.origin, ray.dir) else {
+            return (out, 1);
+        };
+        if far <= a || near >= b {
+            return (out, 1);
+        }
+        let mut n = 0;
+        if near > a {
+            out[n] = (a, near);
+            n += 1;
+        }
+        if far < b {
+            out[n] = (far, b);
+            n += 1;
+        }
+        (out, n)
+    }
+
+    /// The first crossing of the isosurface at `isovalue` on `[a, b]`, entering the solid or,
+    /// when the ray starts inside it, leaving it.
+    fn crossing(&mut self, ray: &Ray, a: f32, b: f32, isovalue: f32) -> Option<Hit> {
+        let (segments, n) = self.segments(ray, a, b);
+        for &(lo, hi) in &segments[..n] {
+            let Some(hit) = self
+                .scene
+                .first_hit_counted(ray, lo, hi, isovalue, &mut self.counters)
+            else {
+                continue;
+            };
+            if hit.t > lo + INSIDE_EPS {
+                return Some(hit);
+            }
+            if let Some(exit) =
+                self.scene
+                    .exit_hit_counted(ray, lo, hi, isovalue, &mut self.counters)
+            {
+                return Some(exit);
+            }
+        }
+        None
+    }
+
+    /// The nearest surface on `[t0, t1]`: every drawn isosurface, and the floor.
+    fn closest(&mut self, ray: &Ray, t0: f32, t1: f32) -> Option<SurfaceHit> {
+        let mut best: Option<SurfaceHit> = None;
+        let mut limit = t1;
+        if !self.plan.volume {
+            if let Some(h) = self.crossing(ray, t0, limit, self.isovalue) {
+                limit = h.t;
+                best = Some(SurfaceHit {
+                    t: h.t,
+                    position: h.position,
+                    normal: h.normal,
+                    albedo: h.albedo,
+                    material: self.lighting.material_of(h.primitive),
+                });
+            }
+            if self.plan.isosurfaces {
+                for k in 0..self.lighting.isosurfaces.len() {
+                    let surface = self.lighting.isosurfaces[k];
+                    if let Some(h) = self.crossing(ray, t0, limit, surface.isovalue) {
+                        limit = h.t;
+                        best = Some(SurfaceHit {
+                            t: h.t,
+                            position: h.position,
+                            normal: h.normal,
+                            albedo: h.albedo,
+                            material: surface.material,
+                        });
+                    }
+                }
+            }
+        }
+        if let Some(floor) = &self.lighting.floor {
+            let t = (floor.height - ray.origin.y) / ray.dir.y;
+            if t > t0 && t < limit {
+                let position = ray.at(t);
+                best = Some(SurfaceHit {
+                    t,
+                    position,
+                    normal: Vec3::Y,
+                    albedo: floor.color_at(position),
+                    material: floor.material,
+                });
+            }
+        }
+        best
+    }
+
+    fn shade_hit(
+        &mut self,
+        ray: &Ray,
+        hit: &SurfaceHit,
+        depth: u32,
+        layers: u32,
+        rng: &mut PixelRng,
+    ) -> Vec3 {
+        let material = *self.lighting.material(hit.material);
+        let view = ray.dir;
+        let normal = facing(hit.normal, view);
+        let entering = hit.normal.dot(view) < 0.0;
+        let eps = offset(hit.position);
+        let above = hit.position + normal * eps;
+        let mut color = material.emission;
+        if material.receives_light() {
+            color += self.local(&material, hit, normal, view, above, rng);
+        }
+
+        let transmits = material.is_transparent() && (self.plan.layers > 0);
+        if transmits {
+            let behind = if material.is_refractive() && depth < self.plan.refraction_depth {
+                Some(self.refract(&material, hit, normal, view, entering, depth, layers, rng))
+            } else if layers > 0 {
+                self.counts.bump(RayKind::Transparency);
+                let t_next = hit.t + eps;
+                Some(self.radiance(ray, t_next, depth, layers - 1, rng).0)
+            } else {
+                None
+            };
+            if let Some(behind) = behind {
+                color = color * material.opacity + behind * (1.0 - material.opacity);
+            }
+        }
+
+        if material.is_reflective() && depth < self.plan.reflection_depth {
+            self.counts.bump(RayKind::Reflection);
+            let reflected = Ray {
+                origin: above,
+                dir: reflect(view, normal),
+            };
+            let mirror = self.radiance(&reflected, 0.0, depth + 1, layers, rng).0;
+            color = color * (1.0 - material.reflectivity) + mirror * material.reflectivity;
+        }
+        color
+    }
+
+    /// Emission aside: ambient (with occlusion) and every light (with shadows).
+    fn local(
+        &mut self,
+        material: &Material,
+        hit: &SurfaceHit,
+        normal: Vec3,
+        view: Vec3,
+        above: Vec3,
+        rng: &mut PixelRng,
+    ) -> Vec3 {
+        let albedo = hit.albedo * material.diffuse;
+        let mut ambient = self.lighting.ambient * albedo;
+        let ao = self.plan.ao_samples;
+        if ao > 0 && ambient.max_element() > 0.0 {
+            let mut open = 0.0;
+            for _ in 0..ao {
+                let dir = cosine_hemisphere(normal, rng.next_f32(), rng.next_f32());
+                self.counts.bump(RayKind::Occlusion);
+                let ray = Ray { origin: above, dir };
+                open += self.transmittance(&ray, self.lighting.occlusion_distance);
+            }
+            ambient *= open / ao as f32;
+        }
+        let mut color = ambient;
+        for k in 0..self.lighting.lights.len() {
+            let light = self.lighting.lights[k];
+            let Some(sample) = light.toward(hit.position) else {
+                continue;
+            };
+            // A light behind the surface adds nothing: no shadow ray for it.
+            if normal.dot(sample.to_light) <= 0.0 {
+                continue;
+            }
+            let visibility = if self.plan.shadows {
+                self.visibility(&light, sample.to_light, sample.distance, above, rng)
+            } else {
+                1.0
+            };
+            color += direct(material, albedo, normal, view, &sample, visibility);
+        }
+        color
+    }
+
+    /// The share of `light` that reaches `origin`.
+    fn visibility(
+        &mut self,
+        light: &Light,
+        to_light: Vec3,
+        distance: f32,
+        origin: Vec3,
+        rng: &mut PixelRng,
+    ) -> f32 {
+        match *light {
+            Light::Sphere { center, radius, .. } if self.plan.soft_shadows => {
+                if distance <= radius {
+                    return 1.0;
+                }
+                let cos_max = (1.0 - (radius / distance).powi(2)).max(0.0).sqrt();
+                let n = self.plan.light_samples.max(1);
+                let mut seen = 0.0;
+                for _ in 0..n {
+                    let dir = uniform_cone(to_light, cos_max, rng.next_f32(), rng.next_f32());
+                    // Distance to the sphere along `dir`, nearer root.
+                    let oc = origin - center;
+                    let b = oc.dot(dir);
+                    let c = oc.length_squared() - radius * radius;
+                    let t = -b - (b * b - c).max(0.0).sqrt();
+                    self.counts.bump(RayKind::Shadow);
+                    seen += self.transmittance(&Ray { origin, dir }, t.max(0.0));
+                }
+                seen / n as f32
+            }
+            Light::Sphere { radius, .. } => {
+                self.counts.bump(RayKind::Shadow);
+                let ray = Ray {
+                    origin,
+                    dir: to_light,
+                };
+                self.transmittance(&ray, (distance - radius).max(0.0))
+            }
+            Light::Point { .. } | Light::Directional { .. } => {
+                self.counts.bump(RayKind::Shadow);
+                let ray = Ray {
+                    origin,
+                    dir: to_light,
+                };
+                self.transmittance(&ray, distance.min(T_MAX))
+            }
+        }
+    }
+
+    /// The share of light that passes along `ray` over `[0, t_max]`: 0 or 1 through opaque
+    /// scenes (any hit, early exit), `Π (1 - α)` through transparent surfaces, `e^{-τ}`
+    /// through a volume.
+    fn transmittance(&mut self, ray: &Ray, t_max: f32) -> f32 {
+        if let Some(floor) = &self.lighting.floor {
+            let t = (floor.height - ray.origin.y) / ray.dir.y;
+            if t > 0.0 && t < t_max && self.lighting.material(floor.material).opacity >= 1.0 {
+                return 0.0;
+            }
+        }
+        if self.plan.volume {
+            let Some(volume) = self.lighting.volume else {
+                return 1.0;
+            };
+            return (-volume.density * self.optical_depth(ray, 0.0, t_max)).exp();
+        }
+        let mut transmitted = 1.0;
+        let surfaces = 1 + if self.plan.isosurfaces {
+            self.lighting.isosurfaces.len()
+        } else {
+            0
+        };
+        for k in 0..surfaces {
+            let (isovalue, fixed_material) = if k == 0 {
+                (self.isovalue, None)
+            } else {
+                let s = self.lighting.isosurfaces[k - 1];
+                (s.isovalue, Some(s.material))
+            };
+            if self.plan.layers == 0 {
+                if self.blocked(ray, 0.0, t_max, isovalue) {
+                    return 0.0;
+                }
+                continue;
+            }
+            // Walk the crossings, each letting `1 - α` through.
+            let mut t = 0.0;
+            let mut crossings = 0;
+            while let Some(hit) = self.crossing(ray, t, t_max, isovalue) {
+                let material =
+                    fixed_material.unwrap_or_else(|| self.lighting.material_of(hit.primitive));
+                transmitted *= 1.0 - self.lighting.material(material).opacity.clamp(0.0, 1.0);
+                crossings += 1;
+                if transmitted <= 1e-3 || crossings > self.plan.layers {
+                    return 0.0;
+                }
+                t = hit.t + offset(hit.position);
+            }
+        }
+        transmitted
+    }
+
+    /// Whether the isosurface at `isovalue` crosses `[a, b]` outside the clip box (any hit).
+    fn blocked(&mut self, ray: &Ray, a: f32, b: f32, isovalue: f32) -> bool {
+        let (segments, n) = self.segments(ray, a, b);
+        for &(lo, hi) in &segments[..n] {
+            match self
+                .scene
+                .any_hit_counted(ray, lo, hi, isovalue, &mut self.counters)
+            {
+                None => {}
+                Some(t) if t > lo + INSIDE_EPS => return true,
+                // Starting inside the solid: its boundary blocks if the ray leaves it here.
+                Some(_)
+                    if self
+                        .scene
+                        .exit_hit_counted(ray, lo, hi, isovalue, &mut self.counters)
+                        .is_some() =>
+                {
+                    return true;
+                }
+                Some(_) => {}
+            }
+        }
+        false
+    }
+
+    /// `∫ F dt` over `[a, b]` outside the clip box.
+    fn optical_depth(&mut self, ray: &Ray, a: f32, b: f32) -> f32 {
+        let (segments, n) = self.segments(ray, a, b);
+        segments[..n]
+            .iter()
+            .map(|&(lo, hi)| self.scene.optical_depth(ray, lo, hi))
+            .sum()
+    }
+
+    /// What a refractive surface passes on: Fresnel-weighted reflected and bent rays.
+    #[allow(clippy::too_many_arguments)]
+    fn refract(
+        &mut self,
+        material: &Material,
+        hit: &SurfaceHit,
+        normal: Vec3,
+        view: Vec3,
+        entering: bool,
+        depth: u32,
+        layers: u32,
+        rng: &mut PixelRng,
+    ) -> Vec3 {
+        let (n1, n2) = if entering {
+            (1.0, material.ior)
+        } else {
+            (material.ior, 1.0)
+        };
+        let cos_i = (-view.dot(normal)).clamp(0.0, 1.0);
+        let reflectance = fresnel(cos_i, n1, n2);
+        let eps = offset(hit.position);
+        let mut color = Vec3::ZERO;
+        if reflectance > 0.0 {
+            self.counts.bump(RayKind::Reflection);
+            let ray = Ray {
+                origin: hit.position + normal * eps,
+                dir: reflect(view, normal),
+            };
+            color += reflectance * self.radiance(&ray, 0.0, depth + 1, layers, rng).0;
+        }
+        if reflectance < 1.0 {
+            if let Some(dir) = refract_dir(view, normal, n1 / n2) {
+                self.counts.bump(RayKind::Refraction);
+                let ray = Ray {
+                    origin: hit.position - normal * eps,
+                    dir,
+                };
+                color += (1.0 - reflectance) * self.radiance(&ray, 0.0, depth + 1, layers, rng).0;
+            }
+        }
+        color
+    }
+}
+
+/// `dir` mirrored about the unit `normal`.
+#[inline]
+pub fn reflect(dir: Vec3, normal: Vec3) -> Vec3 {
+    (dir - 2.0 * dir.dot(normal) * normal).normalize()
+}
+
+/// `dir` bent through a boundary with unit `normal` facing against it and index ratio
+/// `eta = n1 / n2`; `None` under total internal reflection.
+#[inline]
+pub fn refract_dir(dir: Vec3, normal: Vec3, eta: f32) -> Option<Vec3> {
+    let cos_i = -dir.dot(normal);
+    let k = 1.0 - eta * eta * (1.0 - cos_i * cos_i);
+    if k < 0.0 {
+        return None;
+    }
+    Some((eta * dir + (eta * cos_i - k.sqrt()) * normal).normalize())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn snell_and_mirror() {
+        let n = Vec3::Y;
+        let d = Vec3::new(1.0, -1.0, 0.0).normalize();
+        assert!((reflect(d, n) - Vec3::new(1.0, 1.0, 0.0).normalize()).length() < 1e-6);
+        let t = refract_dir(d, n, 1.0 / 1.5).expect("entering glass never reflects totally");
+        let sin_t = t.x;
+        assert!((sin_t - (45f32.to_radians().sin() / 1.5)).abs() < 1e-6);
+        assert!(
+            refract_dir(d, n, 1.5).is_none(),
+            "45° from glass is past critical"
+        );
     }
 }

@@ -19,16 +19,19 @@
 
 pub mod backend;
 pub mod camera;
+pub mod effects;
 pub mod framebuffer;
 pub mod integrator;
 pub mod metaball;
 pub mod ray;
+pub mod sampling;
 pub mod scene;
 pub mod scenes;
 pub mod shade;
 
-pub use backend::CpuBackend;
+pub use backend::{Accumulator, CpuBackend, FrameRays};
 pub use camera::Camera;
+pub use effects::{EffectKind, Effects, EffectsPlan, RayCounts, RayKind};
 pub use framebuffer::Framebuffer;
 pub use ray::{Hit, Ray};
 pub use scene::{PreparedScene, Scene, SceneError};

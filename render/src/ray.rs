@@ -32,4 +32,7 @@ pub struct Hit {
     pub normal: Vec3,
     /// Linear-light diffuse colour at the hit.
     pub albedo: Vec3,
+    /// The primitive whose material shades the hit (for metaballs, the ball with the largest
+    /// share of the field there).
+    pub primitive: u32,
 }

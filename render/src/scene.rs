@@ -129,3 +129,47 @@ impl PreparedScene {
         }
     }
 }
+
+/// The queries secondary rays make (shadows, occlusion, transmission, volumes). Every
+/// primitive kind answers them; a new kind adds its arm to each.
+impl PreparedScene {
+    /// Some root of the isosurface on `[t_min, t_max]`, stopping at the first one found (not
+    /// necessarily the nearest). A root at `t_min` means the segment starts inside the solid.
+    pub fn any_hit_counted(
+        &self,
+        ray: &Ray,
+        t_min: f32,
+        t_max: f32,
+        isovalue: f32,
+        counters: &mut RayCounters,
+    ) -> Option<f32> {
+        match &self.prepared {
+            PreparedGeometry::Metaballs(m) => {
+                m.any_hit_counted(ray, t_min, t_max, isovalue, counters)
+            }
+        }
+    }
+
+    /// From a start inside the solid, where the ray leaves it within `[t_min, t_max]`.
+    pub fn exit_hit_counted(
+        &self,
+        ray: &Ray,
+        t_min: f32,
+        t_max: f32,
+        isovalue: f32,
+        counters: &mut RayCounters,
+    ) -> Option<Hit> {
+        match &self.prepared {
+            PreparedGeometry::Metaballs(m) => {
+                m.exit_hit_counted(ray, t_min, t_max, isovalue, counters)
+            }
+        }
+    }
+
+    /// `∫ density dt` over `[t_min, t_max]`: the field for metaballs.
+    pub fn optical_depth(&self, ray: &Ray, t_min: f32, t_max: f32) -> f32 {
+        match &self.prepared {
+            PreparedGeometry::Metaballs(m) => m.optical_depth(ray, t_min, t_max),
+        }
+    }
+}

@@ -1,71 +1,390 @@
-//! Local shading: Lambert diffuse plus Blinn-Phong specular from directional lights, in
-//! linear light, and the conversion to 8-bit sRGB.
+//! What a scene is lit by and made of — lights, materials per primitive group, an optional
+//! floor, clip box, extra isosurfaces and absorbing volume — and the local shading model:
+//! Lambert diffuse plus Blinn-Phong specular in linear light, emission, and the conversion to
+//! 8-bit sRGB.
+//!
+//! Units: light colours are linear-light radiance scales. A directional light's colour is the
+//! irradiance it delivers to a surface facing it; a point or sphere light's colour is its
+//! intensity, the irradiance at distance 1 (inverse-square falloff). A uniformly emitting sphere
+//! light seen whole from above the horizon delivers exactly the irradiance of a point light at
+//! its centre, so unshadowed shading treats both alike; only shadows see the sphere's extent.
 
+use crate::effects::Effects;
 use crate::ray::Hit;
 use glam::Vec3;
 
-/// A light infinitely far away.
+/// A light source.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct DirectionalLight {
-    /// Unit vector from the surface towards the light.
+pub enum Light {
+    /// Infinitely far away; `to_light` is a unit vector from the surface towards it.
+    Directional { to_light: Vec3, color: Vec3 },
+    /// A point at `position` with intensity `color`.
+    Point { position: Vec3, color: Vec3 },
+    /// A uniformly emitting sphere (an area light): soft shadows sample its extent.
+    Sphere {
+        center: Vec3,
+        radius: f32,
+        color: Vec3,
+    },
+}
+
+/// A light as seen from one surface point.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LightSample {
+    /// Unit vector from the point towards the light's centre.
     pub to_light: Vec3,
-    /// Linear-light radiance scale per channel.
+    /// Distance to the light's centre (`INFINITY` for a directional light).
+    pub distance: f32,
+    /// Irradiance on a surface facing the light, before the cosine and shadowing.
+    pub irradiance: Vec3,
+}
+
+impl Light {
+    /// The light seen from `point`, or `None` when the point coincides with a point light.
+    #[inline]
+    pub fn toward(&self, point: Vec3) -> Option<LightSample> {
+        match *self {
+            Light::Directional { to_light, color } => Some(LightSample {
+                to_light,
+                distance: f32::INFINITY,
+                irradiance: color,
+            }),
+            Light::Point { position, color }
+            | Light::Sphere {
+                center: position,
+                color,
+                ..
+            } => {
+                let d = position - point;
+                let d2 = d.length_squared();
+                if !(d2 > 1e-12) {
+                    return None;
+                }
+                let distance = d2.sqrt();
+                Some(LightSample {
+                    to_light: d / distance,
+                    distance,
+                    irradiance: color / d2,
+                })
+            }
+        }
+    }
+
+    /// Whether the light delivers any light at all.
+    pub fn is_lit(&self) -> bool {
+        let color = match self {
+            Light::Directional { color, .. }
+            | Light::Point { color, .. }
+            | Light::Sphere { color, .. } => *color,
+        };
+        color.max_element() > 0.0
+    }
+}
+
+/// How a surface reflects, transmits and emits light.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Material {
+    /// Linear-light diffuse colour, multiplied with the primitive's own colour.
+    pub diffuse: Vec3,
+    /// Weight of the white Blinn-Phong lobe, and its exponent.
+    pub specular: f32,
+    pub shininess: f32,
+    /// Share of mirror reflection, `[0, 1]`.
+    pub reflectivity: f32,
+    /// Index of refraction, `≥ 1`; 1 lets transmitted rays pass straight through.
+    pub ior: f32,
+    /// `[0, 1]`; below 1 the surface transmits `1 - opacity` of what lies behind it.
+    pub opacity: f32,
+    /// Emitted radiance, linear light.
+    pub emission: Vec3,
+}
+
+impl Default for Material {
+    fn default() -> Material {
+        Material {
+            diffuse: Vec3::ONE,
+            specular: 0.35,
+            shininess: 48.0,
+            reflectivity: 0.0,
+            ior: 1.0,
+            opacity: 1.0,
+            emission: Vec3::ZERO,
+        }
+    }
+}
+
+impl Material {
+    pub fn is_reflective(&self) -> bool {
+        self.reflectivity > 0.0
+    }
+
+    pub fn is_transparent(&self) -> bool {
+        self.opacity < 1.0
+    }
+
+    /// Transparent and bending: refraction rays (with Fresnel weighting) apply.
+    pub fn is_refractive(&self) -> bool {
+        self.is_transparent() && self.ior != 1.0
+    }
+
+    /// Whether lights (and so shadows and occlusion) change how it looks.
+    pub fn receives_light(&self) -> bool {
+        self.diffuse.max_element() > 0.0 || self.specular > 0.0
+    }
+}
+
+/// Primitives `first .. first + count` use `materials[material]`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct MaterialGroup {
+    pub first: u32,
+    pub count: u32,
+    pub material: u16,
+}
+
+/// A horizontal plane `y = height`, with an optional checkerboard.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Floor {
+    pub height: f32,
+    pub material: u16,
+    /// Linear-light colours of the two kinds of squares (multiplied with the material's).
+    pub colors: [Vec3; 2],
+    /// Edge of a square in scene units; 0 for a plain floor of `colors[0]`.
+    pub checker: f32,
+}
+
+impl Floor {
+    /// The floor's colour at `p`.
+    #[inline]
+    pub fn color_at(&self, p: Vec3) -> Vec3 {
+        if self.checker > 0.0 {
+            let ix = (p.x / self.checker).floor() as i64;
+            let iz = (p.z / self.checker).floor() as i64;
+            self.colors[((ix + iz) & 1) as usize]
+        } else {
+            self.colors[0]
+        }
+    }
+}
+
+/// An axis-aligned box whose inside is cut away, exposing what lies within
+/// (tetrahedral-isosurface-ray-tracing.txt §7, "Clipping Planes and Boxes"). A very large
+/// extent on one side turns it into a clipping plane.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ClipBox {
+    pub min: Vec3,
+    pub max: Vec3,
+}
+
+impl ClipBox {
+    /// Where `origin + t·dir` is inside the box, if anywhere.
+    #[inline]
+    pub fn range(&self, origin: Vec3, dir: Vec3) -> Option<(f32, f32)> {
+        let inv = dir.recip();
+        let a = (self.min - origin) * inv;
+        let b = (self.max - origin) * inv;
+        let near = a.min(b).max_element();
+        let far = a.max(b).min_element();
+        (near <= far).then_some((near, far))
+    }
+}
+
+/// A further isosurface of the same field, drawn besides the session's own.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Isosurface {
+    pub isovalue: f32,
+    pub material: u16,
+}
+
+/// The field rendered as an absorbing, scattering volume instead of its isosurface
+/// (bezier-clipping-metaballs.txt §5): optical depth `τ = density · ∫ F dl`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Volume {
+    /// Extinction per unit of field and length.
+    pub density: f32,
+    /// Single-scattering albedo colour of the particles, linear light.
     pub color: Vec3,
 }
 
-/// How a scene is lit and what lies behind it.
+/// How a scene is lit and shaded, and the effects a viewer starts with.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Lighting {
-    pub lights: Vec<DirectionalLight>,
-    /// Constant ambient term, linear light.
+    pub lights: Vec<Light>,
+    /// Constant ambient irradiance, linear light (darkened by ambient occlusion).
     pub ambient: Vec3,
     /// Background at the top and bottom of the image, linear light.
     pub background_top: Vec3,
     pub background_bottom: Vec3,
-    /// Blinn-Phong exponent and weight of the white specular lobe.
-    pub shininess: f32,
-    pub specular: f32,
+    /// Never empty: `materials[0]` applies to every primitive outside `groups`.
+    pub materials: Vec<Material>,
+    pub groups: Vec<MaterialGroup>,
+    pub floor: Option<Floor>,
+    pub clip_box: Option<ClipBox>,
+    pub isosurfaces: Vec<Isosurface>,
+    pub volume: Option<Volume>,
+    /// Length of ambient-occlusion rays, scene units.
+    pub occlusion_distance: f32,
+    /// The effects a viewer starts with.
+    pub effects: Effects,
 }
 
 impl Default for Lighting {
     fn default() -> Lighting {
         Lighting {
-            lights: vec![DirectionalLight {
+            lights: vec![Light::Directional {
                 to_light: Vec3::new(0.4, 0.8, 0.45).normalize(),
                 color: Vec3::splat(1.0),
             }],
             ambient: Vec3::splat(0.08),
             background_top: Vec3::new(0.08, 0.09, 0.12),
             background_bottom: Vec3::new(0.015, 0.015, 0.02),
-            shininess: 48.0,
-            specular: 0.35,
+            materials: vec![Material::default()],
+            groups: Vec::new(),
+            floor: None,
+            clip_box: None,
+            isosurfaces: Vec::new(),
+            volume: None,
+            occlusion_distance: 1.0,
+            effects: Effects::OFF,
         }
     }
 }
 
+/// Fallback for an index past the end of `materials` (validation prevents it).
+const DEFAULT_MATERIAL: Material = Material {
+    diffuse: Vec3::ONE,
+    specular: 0.35,
+    shininess: 48.0,
+    reflectivity: 0.0,
+    ior: 1.0,
+    opacity: 1.0,
+    emission: Vec3::ZERO,
+};
+
 impl Lighting {
-    /// Colour of a surface point seen from direction `view_dir` (unit, towards the surface).
-    pub fn shade(&self, hit: &Hit, view_dir: Vec3) -> Vec3 {
-        let n = hit.normal;
-        let to_eye = -view_dir;
-        let mut color = self.ambient * hit.albedo;
-        for light in &self.lights {
-            let n_dot_l = n.dot(light.to_light);
-            if n_dot_l <= 0.0 {
-                continue;
+    /// The material of `materials[index]`.
+    #[inline]
+    pub fn material(&self, index: u16) -> &Material {
+        self.materials
+            .get(index as usize)
+            .unwrap_or(&DEFAULT_MATERIAL)
+    }
+
+    /// Index of the material of primitive `primitive`.
+    #[inline]
+    pub fn material_of(&self, primitive: u32) -> u16 {
+        for g in &self.groups {
+            if primitive.wrapping_sub(g.first) < g.count {
+                return g.material;
             }
-            let half = (light.to_light + to_eye).normalize_or_zero();
-            let spec = n.dot(half).max(0.0).powf(self.shininess) * self.specular;
-            color += light.color * (hit.albedo * n_dot_l + Vec3::splat(spec));
         }
-        color
+        0
+    }
+
+    /// Indices of the materials some primitive of `0..primitive_count` uses, plus the floor's.
+    pub fn visible_materials(&self, primitive_count: usize) -> Vec<u16> {
+        let n = primitive_count as u64;
+        let mut used = Vec::new();
+        let mut covered = 0u64;
+        let mut spans: Vec<(u64, u64)> = Vec::new();
+        for g in &self.groups {
+            let lo = (g.first as u64).min(n);
+            let hi = (g.first as u64 + g.count as u64).min(n);
+            if lo < hi {
+                used.push(g.material);
+                spans.push((lo, hi));
+            }
+        }
+        // Primitives outside every group use material 0.
+        spans.sort_unstable();
+        let mut end = 0u64;
+        for (lo, hi) in spans {
+            if lo > end {
+                break;
+            }
+            end = end.max(hi);
+            covered = end;
+        }
+        if covered < n {
+            used.push(0);
+        }
+        if let Some(floor) = &self.floor {
+            used.push(floor.material);
+        }
+        used.sort_unstable();
+        used.dedup();
+        used
     }
 
     /// Background seen along a ray whose direction has vertical component `dir_y`.
+    #[inline]
     pub fn background(&self, dir_y: f32) -> Vec3 {
         let a = 0.5 * (dir_y.clamp(-1.0, 1.0) + 1.0);
         self.background_bottom.lerp(self.background_top, a)
     }
+
+    /// Colour of a hit seen from direction `view_dir` (unit, towards the surface), lit by
+    /// every light without shadows, with the default material and no ambient occlusion.
+    /// The ray-cast-only image is made of this.
+    pub fn shade(&self, hit: &Hit, view_dir: Vec3) -> Vec3 {
+        let material = self.material(self.material_of(hit.primitive));
+        let albedo = hit.albedo * material.diffuse;
+        let normal = facing(hit.normal, view_dir);
+        let mut color = material.emission + self.ambient * albedo;
+        for light in &self.lights {
+            if let Some(l) = light.toward(hit.position) {
+                color += direct(material, albedo, normal, view_dir, &l, 1.0);
+            }
+        }
+        color
+    }
+}
+
+/// `normal` turned to face a viewer looking along `view_dir`.
+#[inline]
+pub fn facing(normal: Vec3, view_dir: Vec3) -> Vec3 {
+    if normal.dot(view_dir) > 0.0 {
+        -normal
+    } else {
+        normal
+    }
+}
+
+/// Light arriving from `light` and leaving towards the viewer, scaled by `visibility`.
+#[inline]
+pub fn direct(
+    material: &Material,
+    albedo: Vec3,
+    normal: Vec3,
+    view_dir: Vec3,
+    light: &LightSample,
+    visibility: f32,
+) -> Vec3 {
+    let n_dot_l = normal.dot(light.to_light);
+    if n_dot_l <= 0.0 || visibility <= 0.0 {
+        return Vec3::ZERO;
+    }
+    let half = (light.to_light - view_dir).normalize_or_zero();
+    let spec = if material.specular > 0.0 {
+        normal.dot(half).max(0.0).powf(material.shininess) * material.specular
+    } else {
+        0.0
+    };
+    light.irradiance * (albedo * n_dot_l + Vec3::splat(spec)) * visibility
+}
+
+/// Unpolarised Fresnel reflectance at a boundary where the ray goes from index `n1` to `n2`
+/// with `cos_i = cos θ_i > 0`; 1 under total internal reflection.
+#[inline]
+pub fn fresnel(cos_i: f32, n1: f32, n2: f32) -> f32 {
+    let eta = n1 / n2;
+    let sin_t2 = eta * eta * (1.0 - cos_i * cos_i).max(0.0);
+    if sin_t2 >= 1.0 {
+        return 1.0;
+    }
+    let cos_t = (1.0 - sin_t2).sqrt();
+    let rs = (n1 * cos_i - n2 * cos_t) / (n1 * cos_i + n2 * cos_t);
+    let rp = (n1 * cos_t - n2 * cos_i) / (n1 * cos_t + n2 * cos_i);
+    0.5 * (rs * rs + rp * rp)
 }
 
 /// Linear light in `[0, 1]` to an 8-bit sRGB value (IEC 61966-2-1).
@@ -78,6 +397,16 @@ pub fn linear_to_srgb8(v: f32) -> u8 {
         1.055 * v.powf(1.0 / 2.4) - 0.055
     };
     (s * 255.0 + 0.5) as u8
+}
+
+/// An 8-bit sRGB value to linear light (the inverse of [`linear_to_srgb8`] up to rounding).
+pub fn srgb8_to_linear(v: u8) -> f32 {
+    let s = v as f32 / 255.0;
+    if s <= 0.040_45 {
+        s / 12.92
+    } else {
+        ((s + 0.055) / 1.055).powf(2.4)
+    }
 }
 
 #[cfg(test)]
@@ -94,5 +423,60 @@ mod tests {
             0,
             "NaN never reaches the image as garbage"
         );
+        for v in 0..=255u8 {
+            assert_eq!(linear_to_srgb8(srgb8_to_linear(v)), v);
+        }
+    }
+
+    #[test]
+    fn fresnel_is_four_percent_for_glass_at_normal_incidence_and_total_beyond_critical() {
+        let r0 = fresnel(1.0, 1.0, 1.5);
+        assert!((r0 - 0.04).abs() < 1e-6, "{r0}");
+        // Inside glass, past the critical angle asin(1/1.5) = 41.8°.
+        assert_eq!(fresnel(50f32.to_radians().cos(), 1.5, 1.0), 1.0);
+        assert!(fresnel(0.01, 1.0, 1.5) > 0.9, "grazing incidence reflects");
+    }
+
+    #[test]
+    fn groups_pick_materials_and_visible_materials_follow_the_primitives() {
+        let mut l = Lighting::default();
+        l.materials.push(Material {
+            reflectivity: 0.5,
+            ..Material::default()
+        });
+        l.groups.push(MaterialGroup {
+            first: 10,
+            count: 5,
+            material: 1,
+        });
+        assert_eq!(l.material_of(9), 0);
+        assert_eq!(l.material_of(10), 1);
+        assert_eq!(l.material_of(14), 1);
+        assert_eq!(l.material_of(15), 0);
+        assert_eq!(l.visible_materials(20), vec![0, 1]);
+        assert_eq!(
+            l.visible_materials(8),
+            vec![0],
+            "group 1 has no primitive yet"
+        );
+        l.groups[0].first = 0;
+        assert_eq!(
+            l.visible_materials(5),
+            vec![1],
+            "every primitive is in group 1"
+        );
+    }
+
+    #[test]
+    fn clip_box_range() {
+        let b = ClipBox {
+            min: Vec3::splat(-1.0),
+            max: Vec3::splat(1.0),
+        };
+        let (near, far) = b
+            .range(Vec3::new(0.0, 0.0, 5.0), Vec3::NEG_Z)
+            .expect("hits");
+        assert!((near - 4.0).abs() < 1e-6 && (far - 6.0).abs() < 1e-6);
+        assert!(b.range(Vec3::new(0.0, 3.0, 5.0), Vec3::NEG_Z).is_none());
     }
 }

@@ -122,6 +122,18 @@ pub struct Config {
     /// Writes a client may make in a burst above that rate.
     #[arg(long, env = "ISORAY_WRITE_BURST", default_value_t = 200)]
     pub write_burst: u32,
+
+    /// Most reflection/refraction bounces and transparent layers a client or scene may ask for.
+    #[arg(long, env = "ISORAY_MAX_RAY_DEPTH", default_value_t = 8)]
+    pub max_ray_depth: u32,
+
+    /// Most soft-shadow or occlusion samples per pixel and pass a client or scene may ask for.
+    #[arg(long, env = "ISORAY_MAX_SAMPLES", default_value_t = 64)]
+    pub max_samples: u32,
+
+    /// Refinement passes a resting view accumulates at most before it stops rendering.
+    #[arg(long, env = "ISORAY_MAX_REFINE_PASSES", default_value_t = 64)]
+    pub max_refine_passes: u32,
 }
 
 /// `isoray` under the user's data directory: `$XDG_DATA_HOME/isoray`, else
@@ -186,6 +198,23 @@ impl Config {
                 "--max-push-bytes, --max-json-bytes and --push-timeout-secs must be positive"
                     .into(),
             );
+        }
+        if self.max_ray_depth > isoray_render::effects::MAX_DEPTH {
+            return Err(format!(
+                "--max-ray-depth {} exceeds the engine's {}",
+                self.max_ray_depth,
+                isoray_render::effects::MAX_DEPTH
+            ));
+        }
+        if !(1..=isoray_render::effects::MAX_SAMPLES).contains(&self.max_samples) {
+            return Err(format!(
+                "--max-samples {} must be in 1..={}",
+                self.max_samples,
+                isoray_render::effects::MAX_SAMPLES
+            ));
+        }
+        if !(1..=4096).contains(&self.max_refine_passes) {
+            return Err("--max-refine-passes must be in 1..=4096".into());
         }
         if self.max_steps_per_scene == 0 {
             return Err("--max-steps-per-scene must be at least 1".into());

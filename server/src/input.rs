@@ -3,11 +3,13 @@
 //! Every message is checked in full before anything changes, so a rejected input leaves the
 //! session exactly as it was. Errors name the field and the limit that was broken.
 
+use crate::effects::EffectLimits;
+use isoray_protocol::effects::EffectsInput;
 use isoray_protocol::{
     CameraInput, ClientMessage, ErrorMessage, InputId, IsovalueInput, ResizeInput, TimeInput,
     CLIENT_MESSAGE_TYPES, MAX_INPUT_ID,
 };
-use isoray_render::Camera;
+use isoray_render::{Camera, Effects};
 
 /// What a session renders, as the client last set it.
 #[derive(Clone, Debug, PartialEq)]
@@ -24,6 +26,8 @@ pub struct Settings {
     pub version: u64,
     /// When the last input was applied (for input-to-frame latency).
     pub last_input_at: Option<std::time::Instant>,
+    /// Effect switches and quality.
+    pub effects: Effects,
 }
 
 /// The limits inputs are checked against.
@@ -32,6 +36,8 @@ pub struct Limits {
     pub max_size: u32,
     /// Open interval of meaningful isovalues for the scene.
     pub isovalue_range: (f32, f32),
+    /// Largest effect quality settings.
+    pub effects: EffectLimits,
 }
 
 /// Largest coordinate accepted for a camera: keeps every value exact enough in f32.
@@ -101,6 +107,7 @@ pub fn parse(text: &str) -> Result<ClientMessage, ErrorMessage> {
         "resize" => ClientMessage::Resize(typed(&kind, body, input_id)?),
         "time" => ClientMessage::Time(typed(&kind, body, input_id)?),
         "ack" => ClientMessage::Ack(typed(&kind, body, input_id)?),
+        "effects" => ClientMessage::Effects(typed(&kind, body, input_id)?),
         _ => {
             return Err(error(
                 "unknown_type",
@@ -202,6 +209,12 @@ pub fn apply(
             }
         },
         ClientMessage::Ack(_) => return Ok(()),
+        ClientMessage::Effects(EffectsInput { effects, .. }) => {
+            match crate::effects::apply(&settings.effects, effects, &limits.effects) {
+                Ok(e) => settings.effects = e,
+                Err(e) => return fail(format!("effects.{}", e.message)),
+            }
+        }
     }
     settings.last_input_id = input_id;
     settings.version += 1;
@@ -228,12 +241,18 @@ mod tests {
             last_input_id: 0,
             version: 0,
             last_input_at: None,
+            effects: Effects::OFF,
         }
     }
 
     const LIMITS: Limits = Limits {
         max_size: 4096,
         isovalue_range: (0.0, 2.0),
+        effects: EffectLimits {
+            max_depth: 8,
+            max_samples: 64,
+            max_passes: 64,
+        },
     };
 
     #[test]
@@ -267,6 +286,8 @@ mod tests {
             r#"{"type":"camera","input_id":1,"eye":[0,0,0],"target":[0,0,0],"up":[0,1,0]}"#,
             r#"{"type":"camera","input_id":1,"eye":[0,5,0],"target":[0,0,0],"up":[0,1,0]}"#,
             r#"{"type":"time","input_id":1,"time":-1}"#,
+            r#"{"type":"effects","input_id":1,"effects":{"shadows":true,"depth":9}}"#,
+            r#"{"type":"effects","input_id":1,"effects":{"ao_samples":0}}"#,
         ] {
             let msg = parse(text).expect("well-formed");
             let e = apply(&msg, &mut s, &LIMITS).expect_err(text);
@@ -276,5 +297,13 @@ mod tests {
         let ok = parse(r#"{"type":"isovalue","input_id":9,"value":1.25}"#).expect("parses");
         apply(&ok, &mut s, &LIMITS).expect("valid");
         assert_eq!((s.isovalue, s.last_input_id, s.version), (1.25, 9, 1));
+        let ok =
+            parse(r#"{"type":"effects","input_id":10,"effects":{"reflections":true,"depth":8}}"#)
+                .expect("parses");
+        apply(&ok, &mut s, &LIMITS).expect("valid");
+        assert!(s.effects.reflections && s.effects.depth == 8 && s.version == 2);
+        let e = parse(r#"{"type":"effects","input_id":11,"effects":{"reflection":true}}"#)
+            .expect_err("unknown field");
+        assert!(e.message.contains("reflection"), "{}", e.message);
     }
 }

@@ -10,10 +10,12 @@
 
 pub mod api;
 pub mod config;
+pub mod effects;
 pub mod encode;
 pub mod error;
 pub mod input;
 pub mod metrics;
+pub mod refine;
 pub mod scenes;
 pub mod session;
 pub mod state;

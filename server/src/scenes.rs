@@ -197,6 +197,7 @@ enum Source {
         demo: DemoScene,
         primitives: usize,
         isovalue_range: (f32, f32),
+        lighting: Lighting,
         cache: Mutex<Vec<(u64, PreparedState)>>,
     },
     Stored {
@@ -217,6 +218,7 @@ impl SceneEntry {
                 demo,
                 primitives: first.primitive_count(),
                 isovalue_range: first.isovalue_range(),
+                lighting: first.lighting.clone(),
                 cache: Mutex::new(Vec::with_capacity(CACHED_STATES)),
             },
         }
@@ -277,6 +279,22 @@ impl SceneEntry {
         match &self.source {
             Source::Demo { .. } => None,
             Source::Stored { scene, .. } => Some(scene),
+        }
+    }
+
+    /// How the scene is lit and shaded (demo scenes keep one look for all their states).
+    pub fn lighting(&self) -> &Lighting {
+        match &self.source {
+            Source::Demo { lighting, .. } | Source::Stored { lighting, .. } => lighting,
+        }
+    }
+
+    /// Primitives a state may hold, for the effects a scene can use: a demo's count, or any
+    /// number for a pushed scene (a later step may fill every group).
+    pub fn effect_primitives(&self) -> usize {
+        match &self.source {
+            Source::Demo { primitives, .. } => *primitives,
+            Source::Stored { .. } => u32::MAX as usize,
         }
     }
 

@@ -147,10 +147,15 @@ async fn run_registered(
         last_input_id: 0,
         version: 0,
         last_input_at: None,
+        effects: crate::effects::clamp(
+            &entry.lighting().effects,
+            &crate::effects::EffectLimits::from_config(config),
+        ),
     };
     let limits = Limits {
         max_size: config.max_size,
         isovalue_range: entry.isovalue_range(),
+        effects: crate::effects::EffectLimits::from_config(config),
     };
     let slider = demo.isovalue_slider();
     let info = ServerMessage::Info(SessionInfo {
@@ -173,6 +178,12 @@ async fn run_registered(
             up: camera.up.as_dvec3().to_array(),
             fov_y_deg: camera.fov_y_deg as f64,
         },
+        effects: crate::effects::info(
+            entry.lighting(),
+            entry.effect_primitives(),
+            &settings.effects,
+            &limits.effects,
+        ),
     });
 
     let settings = Arc::new(Mutex::new(settings));
@@ -367,6 +378,10 @@ async fn render_loop(
     let mut last_change = tokio::time::Instant::now();
     let mut next_tick = tokio::time::Instant::now();
     let mut sequence = 0u64;
+    // Effects hook: a still view keeps refining (one pass per still frame) until converged.
+    let refinement = Arc::new(crate::refine::Refinement::new(
+        app.config().max_refine_passes,
+    ));
     loop {
         // Flow control: one frame in the slot at most, and a window of unacknowledged ones.
         let acked = stats.last_acked_sequence.load(Ordering::SeqCst);
@@ -381,7 +396,14 @@ async fn render_loop(
         let now = tokio::time::Instant::now();
         let view_changed = last.map(|(v, _, _)| v) != Some(current.version);
         let time_changed = last.map(|(_, t, _)| t) != Some(time);
-        let shown_still = last.is_some_and(|(_, _, q)| q == Quality::Still);
+        let refine_key = (
+            current.version,
+            time.to_bits(),
+            current.width,
+            current.height,
+        );
+        let shown_still =
+            last.is_some_and(|(_, _, q)| q == Quality::Still) && refinement.converged(refine_key);
         if view_changed {
             last_change = now;
         }
@@ -429,6 +451,7 @@ async fn render_loop(
         let (tx, rx) = oneshot::channel();
         let job_entry = Arc::clone(entry);
         let job_app = app.clone();
+        let job_refinement = Arc::clone(&refinement);
         metrics::gauge!(m::RENDER_QUEUE).increment(1.0);
         app.backend().spawn(move || {
             let frame = render_frame(
@@ -439,6 +462,7 @@ async fn render_loop(
                 sequence,
                 quality,
                 (width, height),
+                &job_refinement,
             );
             metrics::gauge!(m::RENDER_QUEUE).decrement(1.0);
             let _ = tx.send(frame);
@@ -497,6 +521,7 @@ enum Quality {
 }
 
 /// Prepares, traces and encodes one frame. Runs on the render pool.
+#[allow(clippy::too_many_arguments)]
 fn render_frame(
     app: &AppState,
     entry: &SceneEntry,
@@ -505,6 +530,7 @@ fn render_frame(
     sequence: u64,
     quality: Quality,
     (width, height): (u32, u32),
+    refinement: &crate::refine::Refinement,
 ) -> Result<(Bytes, StageTimings), crate::encode::EncodeError> {
     let state = entry.prepared_at(time, settings.pinned_time.is_none());
     let view = View {
@@ -514,7 +540,25 @@ fn render_frame(
         isovalue: settings.isovalue,
     };
     let t0 = Instant::now();
-    let fb = app.backend().render(&state.prepared, &view);
+    // Effects hook: interactive frames trace one pass of the session's effects; a still frame
+    // adds a refinement pass.
+    let fb = match quality {
+        Quality::Interactive => {
+            app.backend()
+                .render_effects(&state.prepared, &view, &settings.effects)
+                .0
+        }
+        Quality::Still => {
+            let key = (settings.version, time.to_bits(), width, height);
+            refinement.next_pass(
+                app.backend(),
+                &state.prepared,
+                &view,
+                &settings.effects,
+                key,
+            )
+        }
+    };
     let t1 = Instant::now();
     let (codec, flags, payload) = match quality {
         Quality::Interactive => (

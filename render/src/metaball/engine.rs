@@ -20,6 +20,9 @@ use glam::{Mat3, Vec3};
 use std::cell::RefCell;
 use std::sync::{Arc, OnceLock};
 
+// Secondary-ray queries (any hit, exit from the solid, optical depth): the effects layer's.
+mod queries;
+
 /// The closed set of acceleration modes.
 #[derive(Clone, Debug, PartialEq)]
 pub enum Accel {
@@ -235,14 +238,15 @@ impl PreparedMetaballs {
             )?;
             counters.hits += 1;
             let position = ray.at(t);
-            let (normal, albedo) = self
+            let (normal, albedo, primitive) = self
                 .scene
-                .surface_at(gathered.iter().map(|b| b.ball), position);
+                .surface_detail(gathered.iter().map(|b| b.ball), position);
             Some(Hit {
                 t,
                 position,
                 normal,
                 albedo,
+                primitive,
             })
         })
     }

@@ -194,6 +194,18 @@ impl MetaballScene {
 
     /// Outward unit normal (against the field gradient) and blended colour at `p`.
     pub fn surface_at(&self, balls: impl IntoIterator<Item = u32>, p: Vec3) -> (Vec3, Vec3) {
+        let (normal, albedo, _) = self.surface_detail(balls, p);
+        (normal, albedo)
+    }
+
+    /// [`MetaballScene::surface_at`], plus the ball with the largest share of the field at
+    /// `p` (its material group shades the hit; 0 when none contributes).
+    pub fn surface_detail(
+        &self,
+        balls: impl IntoIterator<Item = u32>,
+        p: Vec3,
+    ) -> (Vec3, Vec3, u32) {
+        let mut dominant = (0u32, 0.0f32);
         let mut gradient = Vec3::ZERO;
         let mut color = Vec3::ZERO;
         let mut weight = 0.0f32;
@@ -219,6 +231,9 @@ impl MetaballScene {
             let w = (b.strength * self.kernel.value(s)).max(0.0);
             color += w * b.color;
             weight += w;
+            if w > dominant.1 {
+                dominant = (i, w);
+            }
         }
         let normal = (-gradient).normalize_or(Vec3::Z);
         let albedo = if weight > 0.0 {
@@ -226,7 +241,7 @@ impl MetaballScene {
         } else {
             Vec3::splat(0.5)
         };
-        (normal, albedo)
+        (normal, albedo, dominant.0)
     }
 
     /// Axis-aligned bounds of every ball's support, or `None` for an empty scene.

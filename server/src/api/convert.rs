@@ -2,11 +2,14 @@
 //! out-of-range value is refused with the field that holds it.
 
 use super::error::ApiError;
+use crate::effects::EffectLimits;
 use crate::scenes::BallDefaults;
 use glam::Vec3;
-use isoray_protocol::api::{ApiCamera, CreateScene, LightingSpec};
+use isoray_protocol::api::{
+    ApiCamera, CreateScene, LightKind, LightSpec, LightingSpec, MaterialSpec,
+};
 use isoray_render::metaball::Kernel;
-use isoray_render::shade::DirectionalLight;
+use isoray_render::shade::{ClipBox, Floor, Isosurface, Light, Material, MaterialGroup, Volume};
 use isoray_render::{Camera, Lighting};
 
 /// Largest coordinate accepted: keeps values exact enough in f32.
@@ -61,47 +64,293 @@ pub fn camera(c: &ApiCamera, field: &str) -> Result<Camera, ApiError> {
     })
 }
 
-fn lighting(spec: &LightingSpec) -> Result<Lighting, ApiError> {
+fn range(v: f64, lo: f64, hi: f64, field: &str) -> Result<f32, ApiError> {
+    if v.is_finite() && (lo..=hi).contains(&v) {
+        Ok(v as f32)
+    } else {
+        Err(ApiError::bad_request(
+            "invalid_value",
+            format!("{field} is {v}; it must be a number in [{lo}, {hi}]"),
+        )
+        .field(field))
+    }
+}
+
+/// A linear-light colour, each channel in `[0, hi]`.
+fn color(v: [f64; 3], hi: f64, field: &str) -> Result<Vec3, ApiError> {
+    Ok(Vec3::new(
+        range(v[0], 0.0, hi, &format!("{field}[0]"))?,
+        range(v[1], 0.0, hi, &format!("{field}[1]"))?,
+        range(v[2], 0.0, hi, &format!("{field}[2]"))?,
+    ))
+}
+
+fn invalid(field: String, message: String) -> ApiError {
+    ApiError::bad_request("invalid_value", message).field(field)
+}
+
+/// Most lights, materials, groups and isosurfaces a scene may declare.
+const MAX_LIGHTS: usize = 8;
+const MAX_MATERIALS: usize = 64;
+const MAX_GROUPS: usize = 1024;
+const MAX_ISOSURFACES: usize = 4;
+
+fn light(spec: &LightSpec, field: &str) -> Result<Light, ApiError> {
+    let intensity = range(
+        spec.intensity,
+        0.0,
+        MAX_COORDINATE,
+        &format!("{field}.intensity"),
+    )?;
+    let color = color(spec.color, 1.0, &format!("{field}.color"))? * intensity;
+    let need = |v: Option<[f64; 3]>, name: &str| {
+        v.ok_or_else(|| {
+            invalid(
+                format!("{field}.{name}"),
+                format!("{field}: a {:?} light needs `{name}`", spec.kind).to_lowercase(),
+            )
+        })
+    };
+    let unused = |present: bool, name: &str| {
+        if present {
+            Err(invalid(
+                format!("{field}.{name}"),
+                format!("{field}.{name} does not apply to a {:?} light", spec.kind).to_lowercase(),
+            ))
+        } else {
+            Ok(())
+        }
+    };
+    Ok(match spec.kind {
+        LightKind::Directional => {
+            unused(spec.position.is_some(), "position")?;
+            unused(spec.radius.is_some(), "radius")?;
+            let dir = vec3(
+                need(spec.to_light, "to_light")?,
+                &format!("{field}.to_light"),
+            )?;
+            if dir.length() < 1e-6 {
+                return Err(invalid(
+                    format!("{field}.to_light"),
+                    format!("{field}.to_light must not be zero"),
+                ));
+            }
+            Light::Directional {
+                to_light: dir.normalize(),
+                color,
+            }
+        }
+        LightKind::Point => {
+            unused(spec.to_light.is_some(), "to_light")?;
+            unused(spec.radius.is_some(), "radius")?;
+            Light::Point {
+                position: vec3(
+                    need(spec.position, "position")?,
+                    &format!("{field}.position"),
+                )?,
+                color,
+            }
+        }
+        LightKind::Sphere => {
+            unused(spec.to_light.is_some(), "to_light")?;
+            let radius = spec.radius.ok_or_else(|| {
+                invalid(
+                    format!("{field}.radius"),
+                    format!("{field}: a sphere light needs `radius`"),
+                )
+            })?;
+            let radius = finite(radius, &format!("{field}.radius"))?;
+            if radius <= 0.0 {
+                return Err(invalid(
+                    format!("{field}.radius"),
+                    format!("{field}.radius {radius} must be positive"),
+                ));
+            }
+            Light::Sphere {
+                center: vec3(
+                    need(spec.position, "position")?,
+                    &format!("{field}.position"),
+                )?,
+                radius,
+                color,
+            }
+        }
+    })
+}
+
+fn material(spec: &MaterialSpec, field: &str) -> Result<Material, ApiError> {
+    let f = |name: &str| format!("{field}.{name}");
+    Ok(Material {
+        diffuse: color(spec.diffuse, 1.0, &f("diffuse"))?,
+        specular: range(spec.specular, 0.0, 1.0, &f("specular"))?,
+        shininess: range(spec.shininess, 1.0, 10_000.0, &f("shininess"))?,
+        reflectivity: range(spec.reflectivity, 0.0, 1.0, &f("reflectivity"))?,
+        ior: range(spec.ior, 1.0, 4.0, &f("ior"))?,
+        opacity: range(spec.opacity, 0.0, 1.0, &f("opacity"))?,
+        emission: color(spec.emission, 1000.0, &f("emission"))?,
+    })
+}
+
+fn material_index(index: u16, count: usize, field: String) -> Result<u16, ApiError> {
+    if (index as usize) < count {
+        Ok(index)
+    } else {
+        Err(invalid(
+            field.clone(),
+            format!("{field} {index} names no material (there are {count})"),
+        ))
+    }
+}
+
+fn lighting(spec: &LightingSpec, limits: &EffectLimits) -> Result<Lighting, ApiError> {
     let mut l = Lighting::default();
     if let Some(lights) = &spec.lights {
-        if lights.len() > 8 {
-            return Err(
-                ApiError::bad_request("invalid_value", "at most 8 lights").field("lighting.lights")
-            );
+        if lights.len() > MAX_LIGHTS {
+            return Err(invalid(
+                "lighting.lights".into(),
+                format!("at most {MAX_LIGHTS} lights"),
+            ));
         }
         l.lights = lights
             .iter()
             .enumerate()
-            .map(|(i, light)| {
-                let dir = vec3(light.to_light, &format!("lighting.lights[{i}].to_light"))?;
-                if dir.length() < 1e-6 {
-                    return Err(ApiError::bad_request(
-                        "invalid_value",
-                        "a light direction must not be zero",
-                    )
-                    .field(format!("lighting.lights[{i}].to_light")));
-                }
-                Ok(DirectionalLight {
-                    to_light: dir.normalize(),
-                    color: vec3(light.color, &format!("lighting.lights[{i}].color"))?,
-                })
-            })
+            .map(|(i, s)| light(s, &format!("lighting.lights[{i}]")))
             .collect::<Result<_, _>>()?;
     }
     if let Some(v) = spec.ambient {
-        l.ambient = vec3(v, "lighting.ambient")?;
+        l.ambient = color(v, 1.0, "lighting.ambient")?;
     }
     if let Some(v) = spec.background_top {
-        l.background_top = vec3(v, "lighting.background_top")?;
+        l.background_top = color(v, 1.0, "lighting.background_top")?;
     }
     if let Some(v) = spec.background_bottom {
-        l.background_bottom = vec3(v, "lighting.background_bottom")?;
+        l.background_bottom = color(v, 1.0, "lighting.background_bottom")?;
+    }
+    if let Some(materials) = &spec.materials {
+        if materials.is_empty() || materials.len() > MAX_MATERIALS {
+            return Err(invalid(
+                "lighting.materials".into(),
+                format!("lighting.materials must hold 1 to {MAX_MATERIALS} materials"),
+            ));
+        }
+        l.materials = materials
+            .iter()
+            .enumerate()
+            .map(|(i, m)| material(m, &format!("lighting.materials[{i}]")))
+            .collect::<Result<_, _>>()?;
     }
     if let Some(v) = spec.shininess {
-        l.shininess = finite(v, "lighting.shininess")?.max(1.0);
+        l.materials[0].shininess = range(v, 1.0, 10_000.0, "lighting.shininess")?;
     }
     if let Some(v) = spec.specular {
-        l.specular = finite(v, "lighting.specular")?;
+        l.materials[0].specular = range(v, 0.0, 1.0, "lighting.specular")?;
+    }
+    let count = l.materials.len();
+    if let Some(groups) = &spec.groups {
+        if groups.len() > MAX_GROUPS {
+            return Err(invalid(
+                "lighting.groups".into(),
+                format!("at most {MAX_GROUPS} groups"),
+            ));
+        }
+        l.groups = groups
+            .iter()
+            .enumerate()
+            .map(|(i, g)| {
+                Ok(MaterialGroup {
+                    first: g.first,
+                    count: g.count,
+                    material: material_index(
+                        g.material,
+                        count,
+                        format!("lighting.groups[{i}].material"),
+                    )?,
+                })
+            })
+            .collect::<Result<_, ApiError>>()?;
+    }
+    if let Some(floor) = &spec.floor {
+        l.floor = Some(Floor {
+            height: finite(floor.height, "lighting.floor.height")?,
+            material: material_index(floor.material, count, "lighting.floor.material".into())?,
+            colors: [
+                color(floor.colors[0], 1.0, "lighting.floor.colors[0]")?,
+                color(floor.colors[1], 1.0, "lighting.floor.colors[1]")?,
+            ],
+            checker: range(floor.checker, 0.0, MAX_COORDINATE, "lighting.floor.checker")?,
+        });
+    }
+    if let Some(clip) = &spec.clip_box {
+        let min = vec3(clip.min, "lighting.clip_box.min")?;
+        let max = vec3(clip.max, "lighting.clip_box.max")?;
+        if !min.cmplt(max).all() {
+            return Err(invalid(
+                "lighting.clip_box".into(),
+                "lighting.clip_box: min must be below max on every axis".into(),
+            ));
+        }
+        l.clip_box = Some(ClipBox { min, max });
+    }
+    if let Some(surfaces) = &spec.isosurfaces {
+        if surfaces.len() > MAX_ISOSURFACES {
+            return Err(invalid(
+                "lighting.isosurfaces".into(),
+                format!("at most {MAX_ISOSURFACES} further isosurfaces"),
+            ));
+        }
+        l.isosurfaces = surfaces
+            .iter()
+            .enumerate()
+            .map(|(i, s)| {
+                let field = format!("lighting.isosurfaces[{i}]");
+                let isovalue = finite(s.isovalue, &format!("{field}.isovalue"))?;
+                if isovalue <= 0.0 {
+                    return Err(invalid(
+                        format!("{field}.isovalue"),
+                        format!("{field}.isovalue must be positive"),
+                    ));
+                }
+                Ok(Isosurface {
+                    isovalue,
+                    material: material_index(s.material, count, format!("{field}.material"))?,
+                })
+            })
+            .collect::<Result<_, ApiError>>()?;
+    }
+    if let Some(volume) = &spec.volume {
+        let density = range(
+            volume.density,
+            0.0,
+            MAX_COORDINATE,
+            "lighting.volume.density",
+        )?;
+        if density <= 0.0 {
+            return Err(invalid(
+                "lighting.volume.density".into(),
+                "lighting.volume.density must be positive".into(),
+            ));
+        }
+        l.volume = Some(Volume {
+            density,
+            color: color(volume.color, 1.0, "lighting.volume.color")?,
+        });
+    }
+    if let Some(d) = spec.occlusion_distance {
+        l.occlusion_distance = finite(d, "lighting.occlusion_distance")?;
+        if l.occlusion_distance <= 0.0 {
+            return Err(invalid(
+                "lighting.occlusion_distance".into(),
+                "lighting.occlusion_distance must be positive".into(),
+            ));
+        }
+    }
+    if let Some(changes) = &spec.effects {
+        l.effects = crate::effects::apply(&l.effects, changes, limits).map_err(|e| {
+            invalid(
+                format!("lighting.effects.{}", e.field),
+                format!("lighting.effects.{}", e.message),
+            )
+        })?;
     }
     Ok(l)
 }
@@ -109,8 +358,16 @@ fn lighting(spec: &LightingSpec) -> Result<Lighting, ApiError> {
 /// What a new scene's viewers start with, how it is lit, and its ball defaults.
 pub type SceneSetup = ((Camera, f32, (f32, f32)), Lighting, BallDefaults);
 
-/// Validates a creation request's settings and converts them.
+/// Validates a creation request's settings against the engine's limits and converts them.
 pub fn scene_setup(spec: &CreateScene) -> Result<SceneSetup, ApiError> {
+    scene_setup_within(spec, &EffectLimits::ENGINE)
+}
+
+/// [`scene_setup`], with effect quality checked against the server's configured `limits`.
+pub fn scene_setup_within(
+    spec: &CreateScene,
+    limits: &EffectLimits,
+) -> Result<SceneSetup, ApiError> {
     let camera = match &spec.camera {
         Some(c) => camera(c, "camera")?,
         None => Camera {
@@ -143,7 +400,7 @@ pub fn scene_setup(spec: &CreateScene) -> Result<SceneSetup, ApiError> {
         }
         None => (0.05, 1.5),
     };
-    let lighting = lighting(&spec.lighting.clone().unwrap_or_default())?;
+    let lighting = lighting(&spec.lighting.clone().unwrap_or_default(), limits)?;
     let d = spec.metaballs.clone().unwrap_or_default();
     let kernel = match d.kernel.as_str() {
         "wyvill" => Kernel::Wyvill,

@@ -363,7 +363,10 @@ async fn create_scene(
             .field(field));
         }
     }
-    convert::scene_setup(&spec)?;
+    convert::scene_setup_within(
+        &spec,
+        &crate::effects::EffectLimits::from_config(app.config()),
+    )?;
     let store = app.scenes().store().cloned().ok_or_else(|| {
         ApiError::new(
             StatusCode::SERVICE_UNAVAILABLE,
