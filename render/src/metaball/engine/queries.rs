@@ -353,7 +353,7 @@ impl PreparedMetaballs {
 }
 
 /// `∫ f(s(t)) dt` over `[lo, hi]` for one ball (strength not applied), with
-/// `f = Σ c_k w^k`, `w = 1 - s` and `s(t) = a t² + b t + c`, in closed form in `f64`.
+/// `f = Σ c_k w^k`, `w = 1 - s` and `s(t) = a (t - tc)² + s_min`, in closed form in `f64`.
 fn ball_integral(
     ball: &RayBall<f32>,
     kernel: &[f64; crate::metaball::kernel::MAX_W_DEGREE + 1],
@@ -362,11 +362,13 @@ fn ball_integral(
     hi: f32,
 ) -> f64 {
     const N: usize = 2 * crate::metaball::kernel::MAX_W_DEGREE + 1;
-    let (a, b, c) = (ball.a as f64, ball.b as f64, ball.c as f64);
-    let (lo, h) = (lo as f64, hi as f64 - lo as f64);
-    // s(lo + u) = s0 + s1 u + s2 u², so w = (1 - s0) - s1 u - s2 u².
-    let s0 = (a * lo + b) * lo + c;
-    let s1 = 2.0 * a * lo + b;
+    let (a, tc, s_min) = (ball.a as f64, ball.tc as f64, ball.s_min as f64);
+    let h = hi as f64 - lo as f64;
+    // s(t) = a (t - tc)² + s_min; with d = lo - tc, s(lo + u) = s0 + s1 u + a u², so
+    // w = (1 - s0) - s1 u - a u².
+    let d = lo as f64 - tc;
+    let s0 = a * d * d + s_min;
+    let s1 = 2.0 * a * d;
     let w = [1.0 - s0, -s1, -a];
     let mut wk = [0.0f64; N];
     wk[0] = 1.0;
