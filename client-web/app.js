@@ -250,5 +250,5 @@ async function start() {
 }
 
 // For tests and debugging: the live objects behind the page.
-window.isoray = { settings, stats, view, connection, timeline };
+window.isoray = { settings, stats, view, connection, timeline, quality };
 start();

@@ -123,8 +123,9 @@ export class Timeline {
   }
 
   #scrub() {
-    this.pause();
-    this.#pin(this.#timeAt(Number(this.el.slider.value)));
+    const position = Number(this.el.slider.value);
+    this.playing = false;
+    this.#pin(this.#timeAt(position));
     this.#render();
   }
 

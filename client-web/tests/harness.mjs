@@ -122,15 +122,24 @@ export async function settledPixels(page, { from = 0, quietMs = 400, timeout = 3
   return canvasPixels(page);
 }
 
-/** The canvas as { width, height, data: Buffer } (RGBA), moved out of the page as base64. */
-export async function canvasPixels(page) {
-  const { width, height, base64 } = await page.evaluate(() => {
-    const c = document.getElementById('view');
+/**
+ * The canvas as { width, height, data: Buffer } (RGBA), moved out of the page as base64;
+ * resampled to `size` ([w, h]) when given, to compare frames of different resolutions.
+ */
+export async function canvasPixels(page, size = null) {
+  const { width, height, base64 } = await page.evaluate((size) => {
+    let c = document.getElementById('view');
+    if (size) {
+      const r = document.createElement('canvas');
+      [r.width, r.height] = size;
+      r.getContext('2d').drawImage(c, 0, 0, r.width, r.height);
+      c = r;
+    }
     const bytes = c.getContext('2d').getImageData(0, 0, c.width, c.height).data;
     let binary = '';
     for (let i = 0; i < bytes.length; i += 0x8000) binary += String.fromCharCode.apply(null, bytes.subarray(i, i + 0x8000));
     return { width: c.width, height: c.height, base64: btoa(binary) };
-  });
+  }, size);
   return { width, height, data: Buffer.from(base64, 'base64') };
 }
 

@@ -1,0 +1,135 @@
+// The rest of the viewer: the lossless screenshot, the waiting state before the first frame,
+// dismissible server errors, the scene picker, labels and keyboard focus order, and a render
+// size that follows the canvas and devicePixelRatio within the server's limit.
+import { test } from 'node:test';
+import assert from 'node:assert/strict';
+import { readFile } from 'node:fs/promises';
+import { withPage, waitForFrames, settledPixels, frameCount } from './harness.mjs';
+
+test('the screenshot button downloads the still frame as a lossless PNG', async () => {
+  await withPage('screenshot', async ({ server, page }) => {
+    await page.goto(`${server.url}?scene=blobs&t=3`);
+    const shown = await settledPixels(page);
+    const [download] = await Promise.all([page.waitForEvent('download'), page.click('#screenshot')]);
+    assert.match(download.suggestedFilename(), /^isoray-blobs-t3-\d+x\d+\.png$/);
+    const png = await readFile(await download.path());
+    assert.deepEqual([...png.subarray(0, 8)], [0x89, 0x50, 0x4e, 0x47, 0x0d, 0x0a, 0x1a, 0x0a], 'a PNG file');
+    assert.equal(png.readUInt32BE(16), shown.width, 'the width of the frame shown');
+    assert.equal(png.readUInt32BE(20), shown.height, 'the height of the frame shown');
+    // Decoded, the file has exactly the pixels on the canvas.
+    const same = await page.evaluate(async (b64) => {
+      const bytes = Uint8Array.from(atob(b64), (c) => c.charCodeAt(0));
+      const bitmap = await createImageBitmap(new Blob([bytes], { type: 'image/png' }));
+      const c = new OffscreenCanvas(bitmap.width, bitmap.height);
+      c.getContext('2d').drawImage(bitmap, 0, 0);
+      const a = c.getContext('2d').getImageData(0, 0, c.width, c.height).data;
+      const v = document.getElementById('view');
+      const b = v.getContext('2d').getImageData(0, 0, v.width, v.height).data;
+      return a.length === b.length && a.every((x, i) => x === b[i]);
+    }, png.toString('base64'));
+    assert.ok(same, 'the PNG holds the pixels shown');
+  });
+});
+
+test('before the first frame the page says it is waiting; server errors show until dismissed', async () => {
+  await withPage('waiting-and-errors', async ({ server, page }) => {
+    // Hold every frame back: the page must show that it waits.
+    let hold = true;
+    await page.routeWebSocket(/\/stream$/, (ws) => {
+      const upstream = ws.connectToServer();
+      upstream.onMessage((m) => { if (!hold || typeof m === 'string') ws.send(m); });
+      ws.onMessage((m) => upstream.send(m));
+    });
+    await page.goto(`${server.url}?scene=blobs&t=3`);
+    await page.waitForFunction(() => /Waiting for the first frame/.test(document.getElementById('status-text').textContent));
+    await page.waitForTimeout(1000);
+    assert.equal(await frameCount(page), 0);
+    assert.equal(await page.locator('#status').isVisible(), true, 'the waiting banner is visible');
+    hold = false;
+    // Frames come again once the client moves the view (the held ones were never acknowledged,
+    // so the server waits; a new connection starts afresh).
+    await page.reload();
+    await waitForFrames(page, 1);
+    assert.equal(await page.locator('#status').isHidden(), true);
+
+    // An input the server rejects: its message shows, and stays until dismissed.
+    await page.evaluate(() => window.isoray.connection.send({ type: 'isovalue', value: 1e9 }));
+    const error = page.locator('#errors .error');
+    await error.first().waitFor();
+    assert.match(await error.first().textContent(), /isovalue .* outside .*\(invalid_value\)/);
+    await page.waitForTimeout(500);
+    assert.equal(await error.count(), 1);
+    await page.getByRole('button', { name: /^Dismiss/ }).click();
+    assert.equal(await error.count(), 0, 'the dismiss button removes the message');
+  });
+});
+
+test('the scene picker lists every scene with kind and size, and switches scenes', async () => {
+  await withPage('scene-picker', async ({ server, page }) => {
+    await page.goto(`${server.url}?scene=blobs&t=3`);
+    await settledPixels(page);
+    const { scenes } = await (await fetch(`${server.url}api/v1/scenes`)).json();
+    const options = await page.locator('#scene option').allTextContents();
+    assert.equal(options.length, scenes.length, 'one option per scene');
+    for (const s of scenes) {
+      assert.ok(options.some((o) => o.includes(s.name) && o.includes(s.kind) && o.includes(s.primitives.toLocaleString('en'))),
+        `${s.id} is listed with kind and size: ${options}`);
+    }
+    const before = await frameCount(page);
+    await page.selectOption('#scene', 'molecule');
+    await page.waitForURL(/scene=molecule/);
+    await waitForFrames(page, 1, { from: before });
+    assert.match(await page.locator('#scene-details').textContent(), /molecule/i);
+    assert.doesNotMatch(page.url(), /[?&]t=/, 'a new scene starts live, from its own view');
+  });
+});
+
+test('controls are labelled and reachable by keyboard; render size follows canvas × devicePixelRatio', async () => {
+  await withPage('a11y-and-size', async ({ server, page }) => {
+    await page.goto(`${server.url}?scene=blobs&t=3`);
+    await waitForFrames(page, 1);
+    // Every form control has an accessible name.
+    const unnamed = await page.evaluate(() => [...document.querySelectorAll('input, select, button, canvas#view')]
+      .filter((el) => !el.closest('[hidden]'))
+      .filter((el) => !(el.labels && el.labels.length) && !el.getAttribute('aria-label') && !el.textContent.trim())
+      .map((el) => el.id || el.outerHTML.slice(0, 60)));
+    assert.deepEqual(unnamed, [], 'controls without a label');
+    // Tab walks the header, then the view, then the panel.
+    const order = [];
+    await page.locator('body').focus();
+    for (let i = 0; i < 12; i++) {
+      await page.keyboard.press('Tab');
+      order.push(await page.evaluate(() => document.activeElement.id));
+    }
+    const at = (id) => order.indexOf(id);
+    assert.ok(at('scene') >= 0 && at('scene') < at('view') && at('view') < at('isovalue'), `focus order ${order}`);
+
+    // Render size: canvas CSS size × devicePixelRatio × scale, capped by the server's limit.
+    const size = () => page.evaluate(() => {
+      const r = document.getElementById('view').getBoundingClientRect();
+      return { css: [r.width, r.height], dpr: devicePixelRatio, sent: window.isoray.quality.size() };
+    });
+    const s1 = await size();
+    assert.deepEqual(s1.sent, s1.css.map((v) => Math.round(v * s1.dpr)));
+    let before = await frameCount(page);
+    await page.locator('#scale').fill('0.5');
+    await settledPixels(page, { from: before });
+    const half = await page.evaluate(() => [document.getElementById('view').width, document.getElementById('view').height]);
+    assert.deepEqual(half, s1.css.map((v) => Math.round(v * s1.dpr * 0.5)), 'the still frame has the scaled size');
+    await page.setViewportSize({ width: 1000, height: 700 });
+    before = await frameCount(page);
+    await settledPixels(page, { from: before });
+    const s2 = await size();
+    const bigger = await page.evaluate(() => [document.getElementById('view').width, document.getElementById('view').height]);
+    assert.deepEqual(bigger, s2.css.map((v) => Math.round(v * s2.dpr * 0.5)), 'a resized window gets frames of its new size');
+  });
+});
+
+test('the render size is capped by the server limit', async () => {
+  await withPage('size-cap', async ({ server, page }) => {
+    await page.goto(`${server.url}?scene=blobs&t=3&scale=2`);
+    const still = await settledPixels(page);
+    assert.ok(still.width <= 200 && still.height <= 200, `frames within --max-size 200 (${still.width}×${still.height})`);
+    assert.ok(still.width === 200 || still.height === 200, 'as large as the limit allows');
+  }, { serverArgs: ['--max-size', '200', '--default-width', '160', '--default-height', '90'] });
+});
