@@ -10,6 +10,7 @@ import { Stats } from './stats.js';
 import { Timeline } from './timeline.js';
 import { Surfaces } from './surfaces.js';
 import { Quality } from './quality.js';
+import { EffectsPanel } from './effects.js';
 
 const settings = parseSettings(location.search);
 const canvas = $('view');
@@ -120,6 +121,11 @@ function sendSize(force = false) {
 }
 const quality = new Quality(settings, canvas, { resized: () => sendSize(), saved });
 
+const effects = new EffectsPanel(settings, {
+  changed: (changes) => send({ type: 'effects', effects: changes }),
+  saved,
+});
+
 // --- session start and frames ----------------------------------------------------------------
 function onInfo(message) {
   const sceneChanged = !info || info.scene.id !== message.scene.id;
@@ -128,11 +134,14 @@ function onInfo(message) {
   if (!settings.cam) settings.cam = orbitFromPose(message.camera, settings.up);
   surfaces.setInfo(message);
   quality.setInfo(message);
+  effects.setInfo(message);
   setStatus('Waiting for the first frame…');
   // Restore the whole view: the server starts every session from the scene's defaults.
   sendSize(true);
   send({ type: 'camera', ...poseFromOrbit(settings.cam, settings.up) });
   for (const m of surfaces.messages()) send(m);
+  const fx = effects.restoreChanges();
+  if (fx) send({ type: 'effects', effects: fx });
   timeline.restore();
   saved();
 }
@@ -223,6 +232,7 @@ sceneSelect.addEventListener('change', () => {
   settings.cam = null;
   settings.iso = null;
   settings.time = null;
+  settings.fx = {};
   info = null;
   selectScene(sceneSelect.value);
 });
@@ -245,10 +255,10 @@ async function start() {
     return;
   }
   const id = scenes.some((s) => s.id === settings.scene) ? settings.scene : scenes[0].id;
-  if (id !== settings.scene) { settings.cam = null; settings.iso = null; settings.time = null; }
+  if (id !== settings.scene) { settings.cam = null; settings.iso = null; settings.time = null; settings.fx = {}; }
   selectScene(id);
 }
 
 // For tests and debugging: the live objects behind the page.
-window.isoray = { settings, stats, view, connection, timeline, quality };
+window.isoray = { settings, stats, view, connection, timeline, quality, effects };
 start();

@@ -15,7 +15,7 @@ export function defaults() {
     time: null, // pinned scene time in seconds; null follows the live state
     speed: 1, // playback speed: scene seconds per second (demos) or steps per second (stored)
     loop: true,
-    fx: {}, // effect name -> boolean, only those the user changed from the scene's default
+    fx: {}, // effect -> on (boolean) or quality setting -> level (number), where the user differs from the scene
     codec: 'auto',
     quality: null, // 1..100 or null for the server's default
     scale: 1, // resolution scale on top of canvas size × devicePixelRatio
@@ -44,8 +44,10 @@ export function parseSettings(search) {
   if (speed !== null && speed > 0 && speed <= 100) s.speed = speed;
   if (p.get('loop') === '0') s.loop = false;
   for (const item of (p.get('fx') || '').split(',').filter(Boolean)) {
-    const m = /^(-?)([a-z_]+)$/.exec(item);
-    if (m) s.fx[m[2]] = m[1] !== '-';
+    const toggle = /^(-?)([a-z_]+)$/.exec(item);
+    const level = /^([a-z_]+):(\d{1,4})$/.exec(item);
+    if (toggle) s.fx[toggle[2]] = toggle[1] !== '-';
+    else if (level) s.fx[level[1]] = Number(level[2]);
   }
   if (p.get('codec')) s.codec = p.get('codec');
   const quality = finite(p.get('q'));
@@ -74,7 +76,7 @@ export function serializeSettings(s) {
   if (s.time !== null) p.set('t', round(s.time));
   if (s.speed !== d.speed) p.set('speed', round(s.speed));
   if (!s.loop) p.set('loop', '0');
-  const fx = Object.entries(s.fx).map(([k, on]) => (on ? k : `-${k}`));
+  const fx = Object.entries(s.fx).map(([k, v]) => (typeof v === 'number' ? `${k}:${v}` : v ? k : `-${k}`));
   if (fx.length) p.set('fx', fx.join(','));
   if (s.codec !== d.codec) p.set('codec', s.codec);
   if (s.quality !== null) p.set('q', String(s.quality));
