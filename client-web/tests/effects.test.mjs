@@ -7,8 +7,11 @@ import { withPage, settledPixels, meanAbsDiff, frameCount, api } from './harness
 
 const CHANGED = 2; // see viewer.test.mjs
 const SAME = 0.5; // see state.test.mjs
+// Shadows the blobs cast on each other cover a small share of the frame: measured 1.5 mean
+// abs diff at this view. The same view re-rendered differs by 0 (lossless, deterministic).
+const SHADOWS_CHANGED = 0.5;
 
-test('a demo offers only the effects it can use; toggling shadows changes the picture and survives a reload', async () => {
+test('a demo offers only the effects it can use; toggling shadows changes the picture and survives a reload', async (t) => {
   await withPage('effects-demo', async ({ server, page }) => {
     await page.goto(`${server.url}?scene=blobs&t=3`);
     const plain = await settledPixels(page);
@@ -24,7 +27,8 @@ test('a demo offers only the effects it can use; toggling shadows changes the pi
     await page.locator('#fx-shadows').check();
     const shadowed = await settledPixels(page, { from: before });
     const diff = meanAbsDiff(plain, shadowed);
-    assert.ok(diff > CHANGED / 4, `shadows change the picture (mean abs diff ${diff.toFixed(3)})`);
+    t.diagnostic(`shadows on vs off: mean abs diff ${diff.toFixed(3)}`);
+    assert.ok(diff > SHADOWS_CHANGED, `shadows change the picture (mean abs diff ${diff.toFixed(3)})`);
     await page.waitForURL(/fx=shadows/);
 
     await page.reload();
@@ -39,7 +43,7 @@ test('a demo offers only the effects it can use; toggling shadows changes the pi
   });
 });
 
-test('a scene with a mirror-like material offers reflections, and they change the picture', async () => {
+test('a scene with a mirror-like material offers reflections, and they change the picture', async (t) => {
   await withPage('effects-reflective', async ({ server, page }) => {
     const created = await api(server, 'POST', '/api/v1/scenes', {
       kind: 'metaballs',
@@ -63,6 +67,7 @@ test('a scene with a mirror-like material offers reflections, and they change th
     await page.locator('#fx-reflections').check();
     const mirrored = await settledPixels(page, { from: before });
     const diff = meanAbsDiff(plain, mirrored);
+    t.diagnostic(`reflections on vs off: mean abs diff ${diff.toFixed(3)}`);
     assert.ok(diff > CHANGED, `reflections change the picture (mean abs diff ${diff.toFixed(2)})`);
   });
 });
