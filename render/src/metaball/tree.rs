@@ -12,15 +12,21 @@
 //!   child's half box, and the half box is intersected with the bounds of the child's balls
 //!   (the fitting step, Fig. 4). Siblings never overlap, so the front-to-back traversal stops
 //!   at the first leaf with a hit.
-//! - §5.1: binned SAH with the leaf cost `n²` (or `n`, switchable), `n` counting split balls.
+//! - §5.1: binned SAH with the leaf cost `n²` (or `n`, switchable), `n` counting the split
+//!   balls a child will get: the parent's that reach its side of the plane and the other
+//!   side's owned balls whose spheres cross it (counted per bin with difference arrays).
 //! - §5.3.1: tighter boxes: a ball's box uses `min(R_i, r_max)` with
 //!   `r_max = R_K · sqrt(s*)`, `f(s*) = T / (n q_max)` (the paper's `(1-(T/n)^{1/α})^{1/2}`
 //!   for its kernel, generalised to any kernel and strength).
 //! - §5.3.2: a positive split ball is discarded when its `r_max` sphere misses the node's box
-//!   and it lies at least `max(R_i, R_j) + r_max` from every other ball `j` of the node.
+//!   and it lies at least `R_i + r_max` from every other ball of the node (run on nodes of
+//!   up to `DISCARD_MAX_BALLS` balls; what it drops stays dropped below).
 //!
-//! The recursion forks on rayon for large nodes; children are flattened in a fixed order, so
-//! the tree is the same whatever the thread count.
+//! The build: a node's owned balls are a contiguous slice of `Prim`s partitioned in place,
+//! so the passes over them read memory in order; nodes with more than `PARALLEL_BALLS`
+//! owned balls fork on rayon (both cores), smaller subtrees are built sequentially into one
+//! chunk with their split lists on a stack, and the chunks are stitched once at the end in a
+//! fixed order, so the tree is the same whatever the thread count.
 
 use super::Kernel;
 use glam::Vec3;
@@ -59,7 +65,13 @@ pub struct BuildOptions {
     pub isovalue: f32,
     /// SAH bins per axis.
     pub bins: usize,
+    /// Cost of one traversal step in the units of the leaf cost (one ball for `n`, one
+    /// field term at one sample for `n²`).
+    pub traversal_cost: f32,
 }
+
+/// The SAH's traversal cost, from timing the paper scenes with `isoray-bench build`.
+pub const DEFAULT_TRAVERSAL_COST: f32 = 4.0;
 
 impl BuildOptions {
     /// The Fitted BVH with every optimisation of the paper.
@@ -72,6 +84,7 @@ impl BuildOptions {
             discard_split: true,
             isovalue,
             bins: 16,
+            traversal_cost: DEFAULT_TRAVERSAL_COST,
         }
     }
 
@@ -85,6 +98,7 @@ impl BuildOptions {
             discard_split: false,
             isovalue: 0.0,
             bins: 16,
+            traversal_cost: DEFAULT_TRAVERSAL_COST,
         }
     }
 
@@ -218,25 +232,87 @@ pub struct TreeStats {
     pub nodes: usize,
     pub leaves: usize,
     pub max_depth: usize,
+    /// Mean depth of a leaf (the root is at depth 1).
+    pub mean_leaf_depth: f64,
     /// Mean owned and split balls per leaf.
     pub owned_per_leaf: f64,
     pub split_per_leaf: f64,
 }
 
-enum BuildNode {
-    Leaf {
-        bounds: Aabb,
-        owned: Vec<u32>,
-        split: Vec<u32>,
-    },
-    Interior {
-        bounds: Aabb,
-        children: Box<[BuildNode; 2]>,
-    },
+/// A subtree built on one thread: node 0 is its root; child and ball indices are local.
+struct Chunk {
+    nodes: Vec<Node>,
+    balls: Vec<u32>,
 }
 
-struct Ctx<'a> {
-    balls: &'a [TreeBall],
+/// The parallel top of the tree: joins of chunks, flattened once at the end.
+enum Built {
+    Chunk(Chunk),
+    Join(Aabb, Box<(Built, Built)>),
+}
+
+const BLANK: Node = Node {
+    bounds: Aabb::EMPTY,
+    first: u32::MAX,
+    count: 0,
+    owned: 0,
+};
+
+/// A ball as the build moves it around: the owned balls of a node are a contiguous slice of
+/// these, partitioned in place, so the passes over them read memory in order.
+#[derive(Clone, Copy, Debug)]
+struct Prim {
+    center: Vec3,
+    radius: f32,
+    strength: f32,
+    id: u32,
+}
+
+/// What one side of a split plane holds, gathered while binning.
+#[derive(Clone, Copy, Debug)]
+struct Side {
+    /// Box of the side's own balls (radii `min(R, r_max)` with the parent's `r_max`, which
+    /// is at least the child's: safe).
+    bounds: Aabb,
+    positive: u32,
+    max_radius: f32,
+}
+
+/// The best split of a node.
+#[derive(Clone, Copy, Debug)]
+struct Choice {
+    axis: usize,
+    plane: f32,
+    cost: f32,
+    sides: [Side; 2],
+}
+
+/// A node's box, its `r_max` and the bounds of its owned balls' centres.
+#[derive(Clone, Copy, Debug)]
+struct Geom {
+    bounds: Aabb,
+    r_max: f32,
+    centroids: (Vec3, Vec3),
+}
+
+/// A node's split balls and geometry.
+struct NodeInput {
+    split: Vec<u32>,
+    geom: Geom,
+}
+
+/// Bounds of the centres of `prims`.
+fn centroid_bounds(prims: &[Prim]) -> (Vec3, Vec3) {
+    prims.iter().fold(
+        (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)),
+        |(lo, hi), p| (lo.min(p.center), hi.max(p.center)),
+    )
+}
+
+struct Ctx {
+    centers: Vec<Vec3>,
+    radii: Vec<f32>,
+    strengths: Vec<f32>,
     kernel: Kernel,
     opts: BuildOptions,
     /// Algorithm 1: overlapping-sphere neighbours (CSR).
@@ -248,19 +324,74 @@ struct Ctx<'a> {
     root_s_star: Vec<f32>,
 }
 
+/// Per-thread buffers of the sequential build.
+#[derive(Default)]
+struct Scratch {
+    /// The split lists of the nodes on the recursion path, each on top of its parent's.
+    arena: Vec<u32>,
+    /// A copy of the parent's split list while a child's is pushed.
+    parent: Vec<u32>,
+    /// Sorted ids of a BVH child's own balls (membership tests).
+    sorted: Vec<u32>,
+    keep: Vec<bool>,
+    bins: Bins,
+}
+
+/// One SAH bin, and the difference-array entries of the plane at its left edge.
+#[derive(Clone, Copy, Debug)]
+struct Bin {
+    count: u32,
+    side: Side,
+    cross_left: i32,
+    cross_right: i32,
+    split_left: i32,
+    split_right: i32,
+}
+
+const EMPTY_SIDE: Side = Side {
+    bounds: Aabb::EMPTY,
+    positive: 0,
+    max_radius: 0.0,
+};
+
+const EMPTY_BIN: Bin = Bin {
+    count: 0,
+    side: EMPTY_SIDE,
+    cross_left: 0,
+    cross_right: 0,
+    split_left: 0,
+    split_right: 0,
+};
+
+/// The binned SAH's arrays; a node clears only the bins it uses (small nodes use few, and
+/// clearing sixteen of everything for every two-ball node was much of the build).
+struct Bins {
+    bins: [Bin; MAX_BINS + 1],
+    right: [(u32, Side); MAX_BINS],
+}
+
+impl Default for Bins {
+    fn default() -> Bins {
+        Bins {
+            bins: [EMPTY_BIN; MAX_BINS + 1],
+            right: [(0, EMPTY_SIDE); MAX_BINS],
+        }
+    }
+}
+
 /// Node sizes whose `r_max` comes from a table rather than a bisection.
 const S_TABLE: usize = 4096;
-/// Split-metaball discarding (§5.3.2) costs `n × split` per node; it runs on nodes up to this
-/// size, where leaves form and it pays.
-const DISCARD_MAX_BALLS: usize = 512;
+/// Split-metaball discarding (§5.3.2) costs `split × (owned + split)` per node; it runs on
+/// nodes up to this size, near the leaves, where it pays. A ball it drops is dropped from the
+/// whole subtree, whose boxes lie inside the node's.
+const DISCARD_MAX_BALLS: usize = 96;
 
 const MAX_DEPTH: usize = 64;
 /// Most SAH bins per axis.
 const MAX_BINS: usize = 16;
-/// Nodes with more balls than this build their children in parallel.
-const PARALLEL_BALLS: usize = 2048;
-/// Cost of one traversal step relative to one field term, for the SAH.
-const TRAVERSAL_COST: f32 = 2.0;
+/// Nodes with more owned balls than this build their children in parallel; smaller ones are
+/// built sequentially into one chunk.
+const PARALLEL_BALLS: usize = 3072;
 
 impl Tree {
     /// Builds the structure over `balls`.
@@ -278,7 +409,9 @@ impl Tree {
             Vec::new()
         };
         let mut ctx = Ctx {
-            balls,
+            centers: balls.iter().map(|b| b.center).collect(),
+            radii: balls.iter().map(|b| b.radius).collect(),
+            strengths: balls.iter().map(|b| b.strength).collect(),
             kernel,
             opts,
             neighbour_start: Vec::new(),
@@ -289,69 +422,69 @@ impl Tree {
         if opts.kind == TreeKind::Bvh {
             (ctx.neighbour_start, ctx.neighbours) = neighbour_lists(balls);
         }
-        let owned: Vec<u32> = (0..balls.len() as u32).collect();
-        let bounds = owned
+        let mut prims: Vec<Prim> = balls
             .iter()
-            .fold(Aabb::EMPTY, |b, &i| b.union(ctx.ball_box(i, f32::INFINITY)));
-        let root = match opts.kind {
-            TreeKind::Bvh => ctx.build_bvh(owned, Vec::new(), bounds, 0),
-            TreeKind::Fitted => {
-                let r_max = ctx.r_max(&owned, &[]);
-                let bounds = owned
-                    .iter()
-                    .fold(Aabb::EMPTY, |b, &i| b.union(ctx.ball_box(i, r_max)));
-                ctx.build_fitted(owned, Vec::new(), bounds, r_max, 0)
-            }
+            .enumerate()
+            .map(|(i, b)| Prim {
+                center: b.center,
+                radius: b.radius,
+                strength: b.strength,
+                id: i as u32,
+            })
+            .collect();
+        let (positive, max_radius) = prims.iter().fold((0u32, 0.0f32), |(n, r), p| {
+            (n + (p.strength > 0.0) as u32, r.max(p.radius))
+        });
+        let r_max = match opts.kind {
+            TreeKind::Bvh => f32::INFINITY,
+            TreeKind::Fitted => ctx.r_max_of(positive, max_radius),
         };
+        let bounds = prims
+            .iter()
+            .fold(Aabb::EMPTY, |b, p| b.union(ctx.prim_box(p, r_max)));
+        let root = NodeInput {
+            split: Vec::new(),
+            geom: Geom {
+                bounds,
+                r_max,
+                centroids: centroid_bounds(&prims),
+            },
+        };
+        let built = ctx.build_par(&mut prims, root, 0);
         let mut tree = Tree {
             kind: opts.kind,
-            nodes: vec![Node {
-                bounds: Aabb::EMPTY,
-                first: 0,
-                count: 0,
-                owned: 0,
-            }],
-            balls: Vec::with_capacity(balls.len() * 2),
+            nodes: vec![BLANK],
+            balls: Vec::with_capacity(balls.len() * 4),
         };
-        tree.flatten(root, 0);
+        tree.emit(built, 0);
         tree
     }
 
-    fn flatten(&mut self, node: BuildNode, at: usize) {
-        match node {
-            BuildNode::Leaf {
-                bounds,
-                owned,
-                split,
-            } => {
-                let first = self.balls.len() as u32;
-                self.balls.extend_from_slice(&owned);
-                self.balls.extend_from_slice(&split);
+    /// Writes a built subtree with its root at `at`.
+    fn emit(&mut self, built: Built, at: usize) {
+        match built {
+            Built::Join(bounds, children) => {
+                let c = self.nodes.len();
+                self.nodes.push(BLANK);
+                self.nodes.push(BLANK);
                 self.nodes[at] = Node {
                     bounds,
-                    first,
-                    count: (owned.len() + split.len()) as u32,
-                    owned: owned.len() as u32,
-                };
-                if self.nodes[at].count == 0 {
-                    // An empty leaf: mark it so it is not read as an interior node.
-                    self.nodes[at].first = u32::MAX;
-                }
-            }
-            BuildNode::Interior { bounds, children } => {
-                let first = self.nodes.len();
-                let blank = self.nodes[at];
-                self.nodes.push(blank);
-                self.nodes.push(blank);
-                self.nodes[at] = Node {
-                    bounds,
-                    first: first as u32,
+                    first: c as u32,
                     count: 0,
                     owned: 0,
                 };
-                let [left, right] = *children;
-                self.flatten(left, first);
-                self.flatten(right, first + 1);
+                let (left, right) = *children;
+                self.emit(left, c);
+                self.emit(right, c + 1);
+            }
+            Built::Chunk(chunk) => {
+                // Chunk node 0 goes to `at`, node k ≥ 1 to `base + k - 1`.
+                let base = self.nodes.len() as u32;
+                let ball_base = self.balls.len() as u32;
+                self.nodes[at] = remap(&chunk.nodes[0], base, ball_base);
+                self.nodes
+                    .extend(chunk.nodes[1..].iter().map(|n| remap(n, base, ball_base)));
+                self.balls.extend_from_slice(&chunk.balls);
             }
         }
     }
@@ -377,6 +510,7 @@ impl Tree {
             s.max_depth = s.max_depth.max(depth);
             if n.is_leaf() {
                 s.leaves += 1;
+                s.mean_leaf_depth += depth as f64;
                 owned += n.owned as usize;
                 split += (n.count - n.owned) as usize;
             } else {
@@ -384,6 +518,7 @@ impl Tree {
                 stack.push((n.first as usize + 1, depth + 1));
             }
         }
+        s.mean_leaf_depth /= s.leaves.max(1) as f64;
         s.owned_per_leaf = owned as f64 / s.leaves.max(1) as f64;
         s.split_per_leaf = split as f64 / s.leaves.max(1) as f64;
         s
@@ -451,33 +586,43 @@ impl Tree {
     }
 }
 
-impl Ctx<'_> {
+impl Ctx {
     /// A ball's box with radius `min(R_i, r_max)` when tight boxes are on.
-    fn ball_box(&self, i: u32, r_max: f32) -> Aabb {
-        let b = &self.balls[i as usize];
+    #[inline]
+    fn ball_box(&self, center: Vec3, radius: f32, r_max: f32) -> Aabb {
         let r = if self.opts.tight_boxes && self.opts.kind == TreeKind::Fitted {
-            b.radius.min(r_max)
+            radius.min(r_max)
         } else {
-            b.radius
+            radius
         };
-        Aabb::around(b.center, r)
+        Aabb::around(center, r)
     }
 
-    /// §5.3.1: no surface made by these balls lies farther than `r_max` from all centres.
-    /// Uses the whole set's largest strength, which only makes `r_max` larger (safe).
-    fn r_max(&self, owned: &[u32], split: &[u32]) -> f32 {
+    #[inline]
+    fn prim_box(&self, p: &Prim, r_max: f32) -> Aabb {
+        self.ball_box(p.center, p.radius, r_max)
+    }
+
+    /// The largest box radius of any ball: `r_max` with tight boxes, unbounded otherwise.
+    #[inline]
+    fn radius_cap(&self, r_max: f32) -> f32 {
+        if self.opts.tight_boxes && self.opts.kind == TreeKind::Fitted {
+            r_max
+        } else {
+            f32::INFINITY
+        }
+    }
+
+    /// §5.3.1: no surface made by `positive` balls of strength at most `q_max` and radius at
+    /// most `max_radius` lies farther than `r_max` from all their centres.
+    fn r_max_of(&self, positive: u32, max_radius: f32) -> f32 {
         if !self.opts.depends_on_isovalue() || self.opts.isovalue <= 0.0 {
             return f32::INFINITY;
         }
-        let (mut n, mut r_k) = (0usize, 0.0f32);
-        for &i in owned.iter().chain(split) {
-            let b = &self.balls[i as usize];
-            n += (b.strength > 0.0) as usize;
-            r_k = r_k.max(b.radius);
-        }
-        if n == 0 || self.q_max <= 0.0 {
+        if positive == 0 || self.q_max <= 0.0 {
             return 0.0;
         }
+        let n = positive as usize;
         let root = match self.root_s_star.get(n) {
             Some(&r) => r,
             None => self
@@ -486,171 +631,303 @@ impl Ctx<'_> {
                 .sqrt(),
         };
         // A hair of margin against rounding in the inverse.
-        r_k * root * 1.0001 + 1e-6
+        max_radius * root * 1.0001 + 1e-6
     }
 
-    fn leaf_cost_f(&self, n: f32) -> f32 {
+    fn leaf_cost(&self, n: f32) -> f32 {
         match self.opts.leaf_cost {
             LeafCost::Squared => n * n,
             LeafCost::Linear => n,
         }
     }
 
-    fn leaf_cost(&self, n: usize) -> f32 {
-        match self.opts.leaf_cost {
-            LeafCost::Squared => (n * n) as f32,
-            LeafCost::Linear => n as f32,
-        }
-    }
-
-    /// Binned SAH over the owned centroids: `(axis, plane, cost)` of the best split.
+    /// Binned SAH over the owned centroids along their longest axis (Wald 2007, as the
+    /// paper). A child's ball count is its owned balls plus the split balls it will get: the
+    /// parent's split balls that reach its side of the plane and the other side's owned balls
+    /// whose spheres cross the plane (both counted along the axis only).
     fn best_split(
         &self,
-        owned: &[u32],
-        split_count: usize,
+        owned: &[Prim],
+        centroids: (Vec3, Vec3),
+        split: &[u32],
         bounds: &Aabb,
         r_max: f32,
-    ) -> Option<(usize, f32, f32)> {
+        scratch: &mut Bins,
+    ) -> Option<Choice> {
+        let (cmin, cmax) = centroids;
+        let extent = cmax - cmin;
+        let axis = extent.max_position();
+        let (lo, hi) = (cmin[axis], cmax[axis]);
+        if !(hi - lo > 1e-6 * (1.0 + hi.abs().max(lo.abs()))) {
+            return None;
+        }
         // Small nodes need few bins: two per ball separates every pair of centres' halves.
         let bins = self.opts.bins.min(2 * owned.len()).clamp(2, MAX_BINS);
-        let (cmin, cmax) = owned.iter().fold(
-            (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)),
-            |(lo, hi), &i| {
-                let c = self.balls[i as usize].center;
-                (lo.min(c), hi.max(c))
-            },
-        );
-        let parent_area = bounds.area().max(1e-20);
-        let mut best: Option<(usize, f32, f32)> = None;
-        let extent = cmax - cmin;
-        let scale = Vec3::splat(bins as f32) / extent.max(Vec3::splat(1e-30));
-        // As in Wald 2007, which the paper follows: bin along the centroids' longest axis.
-        let axis = extent.max_position();
-        let mut count = [0usize; MAX_BINS];
-        let mut boxes = [Aabb::EMPTY; MAX_BINS];
-        let k_max = bins - 1;
-        for &i in owned {
-            let c = self.balls[i as usize].center[axis];
-            let k = (((c - cmin[axis]) * scale[axis]) as usize).min(k_max);
-            count[k] += 1;
-            boxes[k] = boxes[k].union(self.ball_box(i, r_max));
+        let scale = bins as f32 / (hi - lo);
+        let top = (bins - 1) as f32;
+        let bin = |x: f32| ((x - lo) * scale).max(0.0).min(top) as usize;
+        let cap = self.radius_cap(r_max);
+        let Bins { bins: table, right } = scratch;
+        let table = &mut table[..=bins];
+        table.fill(EMPTY_BIN);
+        // `cross_*` and `split_*` are difference arrays over the plane index p (plane p lies
+        // between bins p-1 and p).
+        for p in owned {
+            let c = p.center.to_array()[axis];
+            let k = bin(c);
+            let b = &mut table[k];
+            b.count += 1;
+            b.side.bounds = b
+                .side
+                .bounds
+                .union(Aabb::around(p.center, p.radius.min(cap)));
+            b.side.positive += (p.strength > 0.0) as u32;
+            b.side.max_radius = b.side.max_radius.max(p.radius);
+            // Reaches left of plane p for p in (bin(c - r), k]; right for p in (k, bin(c + r)].
+            table[bin(c - p.radius) + 1].cross_left += 1;
+            table[k + 1].cross_left -= 1;
+            table[k + 1].cross_right += 1;
+            table[bin(c + p.radius) + 1].cross_right -= 1;
         }
-        {
-            let (lo, hi) = (cmin[axis], cmax[axis]);
-            if !(hi - lo > 1e-6 * (1.0 + hi.abs().max(lo.abs()))) {
-                return None;
+        for &i in split {
+            let c = self.centers[i as usize].to_array()[axis];
+            let r = self.radii[i as usize];
+            // Goes left for p > bin(c - r), right for p ≤ bin(c + r).
+            table[bin(c - r) + 1].split_left += 1;
+            table[0].split_right += 1;
+            table[bin(c + r) + 1].split_right -= 1;
+        }
+        let merge = |a: Side, b: Side| Side {
+            bounds: a.bounds.union(b.bounds),
+            positive: a.positive + b.positive,
+            max_radius: a.max_radius.max(b.max_radius),
+        };
+        let mut acc = (0u32, EMPTY_SIDE);
+        for k in (1..bins).rev() {
+            acc = (acc.0 + table[k].count, merge(acc.1, table[k].side));
+            right[k] = acc;
+        }
+        let parent_area = bounds.area().max(1e-20);
+        let mut best: Option<Choice> = None;
+        let mut left = (0u32, EMPTY_SIDE);
+        let (mut xl, mut xr) = (0i32, 0i32);
+        let (mut sl, mut sr) = (0i32, table[0].split_right);
+        for p in 1..bins {
+            left = (
+                left.0 + table[p - 1].count,
+                merge(left.1, table[p - 1].side),
+            );
+            xl += table[p].cross_left;
+            xr += table[p].cross_right;
+            sl += table[p].split_left;
+            sr += table[p].split_right;
+            let (nr_owned, rs) = right[p];
+            if left.0 == 0 || nr_owned == 0 {
+                continue;
             }
-            let scale = scale[axis];
-            // Sweep from the right, then from the left.
-            let mut right = [(0usize, Aabb::EMPTY); MAX_BINS];
-            let mut acc = (0usize, Aabb::EMPTY);
-            for k in (1..bins).rev() {
-                acc = (acc.0 + count[k], acc.1.union(boxes[k]));
-                right[k] = acc;
-            }
-            let mut left = (0usize, Aabb::EMPTY);
-            for k in 1..bins {
-                left = (left.0 + count[k - 1], left.1.union(boxes[k - 1]));
-                let (nr, br) = right[k];
-                if left.0 == 0 || nr == 0 {
-                    continue;
-                }
-                let plane = lo + k as f32 / scale;
-                let (al, ar) = match self.opts.kind {
-                    TreeKind::Bvh => (left.1.area(), br.area()),
-                    TreeKind::Fitted => {
-                        let (hl, hr) = split_box(bounds, axis, plane);
-                        (hl.intersection(left.1).area(), hr.intersection(br).area())
-                    }
-                };
-                let (pl, pr) = (al / parent_area, ar / parent_area);
-                // Split balls of each child, estimated as the parent's share by area.
-                let nl = left.0 as f32 + split_count as f32 * pl;
-                let nr = nr as f32 + split_count as f32 * pr;
-                let cost = TRAVERSAL_COST + pl * self.leaf_cost_f(nl) + pr * self.leaf_cost_f(nr);
-                if best.is_none_or(|b| cost < b.2) {
-                    best = Some((axis, plane, cost));
-                }
+            let plane = lo + p as f32 / scale;
+            let (al, ar) = match self.opts.kind {
+                TreeKind::Bvh => (left.1.bounds.area(), rs.bounds.area()),
+                TreeKind::Fitted => (
+                    clipped_area(bounds, &left.1.bounds, axis, plane, true),
+                    clipped_area(bounds, &rs.bounds, axis, plane, false),
+                ),
+            };
+            let nl = (left.0 as i32 + xl + sl) as f32;
+            let nr = (nr_owned as i32 + xr + sr) as f32;
+            let cost = self.opts.traversal_cost
+                + (al / parent_area) * self.leaf_cost(nl)
+                + (ar / parent_area) * self.leaf_cost(nr);
+            if best.is_none_or(|b| cost < b.cost) {
+                best = Some(Choice {
+                    axis,
+                    plane,
+                    cost,
+                    sides: [left.1, rs],
+                });
             }
         }
         best
     }
 
-    fn partition(&self, owned: Vec<u32>, axis: usize, plane: f32) -> (Vec<u32>, Vec<u32>) {
-        owned
-            .into_iter()
-            .partition(|&i| self.balls[i as usize].center[axis] < plane)
+    /// Moves the balls with centres below `plane` to the front; returns how many there are
+    /// and the bounds of each side's centres.
+    fn partition(owned: &mut [Prim], axis: usize, plane: f32) -> (usize, [(Vec3, Vec3); 2]) {
+        let empty = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
+        let mut sides = [empty; 2];
+        let (mut i, mut j) = (0, owned.len());
+        while i < j {
+            let c = owned[i].center;
+            let right = !(c.to_array()[axis] < plane);
+            let s = &mut sides[usize::from(right)];
+            s.0 = s.0.min(c);
+            s.1 = s.1.max(c);
+            if right {
+                j -= 1;
+                owned.swap(i, j);
+            } else {
+                i += 1;
+            }
+        }
+        (i, sides)
     }
 
-    fn fork<A: Send, B: Send>(
+    /// §5.3.2 on the split list `split` (in place, in `keep`'s order): drops the positive
+    /// split balls whose `r_max` sphere misses `bounds` and whose centre lies at least
+    /// `R_i + r_max` from every other ball of the node. Any surface point in the box lies
+    /// within `r_max` of a positive centre `j` of the node, `j ≠ i`, so such a ball is zero
+    /// there; dropping several at once is safe for the same reason.
+    fn discard(
         &self,
-        big: bool,
-        a: impl FnOnce() -> A + Send,
-        b: impl FnOnce() -> B + Send,
-    ) -> (A, B) {
-        if big {
-            rayon::join(a, b)
-        } else {
-            (a(), b())
+        owned: &[Prim],
+        split: &mut Vec<u32>,
+        from: usize,
+        bounds: &Aabb,
+        r_max: f32,
+        keep: &mut Vec<bool>,
+    ) {
+        if !r_max.is_finite() {
+            return;
         }
+        keep.clear();
+        for &i in &split[from..] {
+            let (c, r) = (self.centers[i as usize], self.radii[i as usize]);
+            let kept = self.strengths[i as usize] <= 0.0 || bounds.overlaps_sphere(c, r_max) || {
+                let reach2 = (r + r_max) * (r + r_max);
+                owned
+                    .iter()
+                    .any(|p| (c - p.center).length_squared() < reach2)
+                    || split[from..].iter().any(|&j| {
+                        j != i && (c - self.centers[j as usize]).length_squared() < reach2
+                    })
+            };
+            keep.push(kept);
+        }
+        let mut w = from;
+        for k in 0..keep.len() {
+            if keep[k] {
+                split[w] = split[from + k];
+                w += 1;
+            }
+        }
+        split.truncate(w);
     }
 
-    /// Algorithm 1.
-    fn build_bvh(&self, owned: Vec<u32>, split: Vec<u32>, bounds: Aabb, depth: usize) -> BuildNode {
-        let n = owned.len() + split.len();
-        let leaf = |owned: Vec<u32>, split: Vec<u32>| BuildNode::Leaf {
-            bounds,
+    /// Decides whether the node with these owned balls and split list `split[from..]` is
+    /// split, after discarding (§5.3.2) on small nodes.
+    #[allow(clippy::too_many_arguments)]
+    fn choose(
+        &self,
+        owned: &[Prim],
+        split: &mut Vec<u32>,
+        from: usize,
+        geom: &Geom,
+        depth: usize,
+        keep: &mut Vec<bool>,
+        bins: &mut Bins,
+    ) -> Option<Choice> {
+        let fitted = self.opts.kind == TreeKind::Fitted;
+        let n_split = split.len() - from;
+        if fitted
+            && self.opts.discard_split
+            && n_split > 0
+            && owned.len() + n_split <= DISCARD_MAX_BALLS
+        {
+            self.discard(owned, split, from, &geom.bounds, geom.r_max, keep);
+        }
+        let n = (owned.len() + split.len() - from) as f32;
+        if owned.len() <= 1 || depth >= MAX_DEPTH || (fitted && geom.bounds.is_empty()) {
+            return None;
+        }
+        let choice = self.best_split(
             owned,
-            split,
-        };
-        if owned.len() <= 1 || depth >= MAX_DEPTH {
-            return leaf(owned, split);
-        }
-        let Some((axis, plane, cost)) =
-            self.best_split(&owned, split.len(), &bounds, f32::INFINITY)
-        else {
-            return leaf(owned, split);
-        };
-        if cost >= self.leaf_cost(n) {
-            return leaf(owned, split);
-        }
-        // `owned` stays sorted by index through the stable partition.
-        let (lo, ro) = self.partition(owned, axis, plane);
-        let bbox = |set: &[u32]| {
-            set.iter().fold(Aabb::EMPTY, |b, &i| {
-                b.union(self.ball_box(i, f32::INFINITY))
-            })
-        };
-        let (lb, rb) = (bbox(&lo), bbox(&ro));
-        let child_split = |own: &[u32], own_box: &Aabb, other: &[u32]| -> Vec<u32> {
-            split
-                .iter()
-                .chain(other)
-                .copied()
-                .filter(|&i| {
-                    let b = &self.balls[i as usize];
-                    own_box.overlaps_sphere(b.center, b.radius)
+            geom.centroids,
+            &split[from..],
+            &geom.bounds,
+            geom.r_max,
+            bins,
+        )?;
+        (choice.cost < self.leaf_cost(n)).then_some(choice)
+    }
+
+    /// Pushes onto `out` the split balls of the child that owns `own` (side `side` of the
+    /// plane), and returns its box and `r_max`: Algorithm 2, lines 11–18, for the Fitted
+    /// BVH; Algorithm 1, lines 14–19, for the BVH.
+    #[allow(clippy::too_many_arguments)]
+    fn child(
+        &self,
+        out: &mut Vec<u32>,
+        sorted: &mut Vec<u32>,
+        parent_split: &[u32],
+        own: &[Prim],
+        other: &[Prim],
+        choice: &Choice,
+        parent_bounds: &Aabb,
+        left: bool,
+    ) -> (Aabb, f32) {
+        let side = choice.sides[usize::from(!left)];
+        let (axis, plane) = (choice.axis, choice.plane);
+        let start = out.len();
+        match self.opts.kind {
+            TreeKind::Fitted => {
+                let (lh, rh) = split_box(parent_bounds, axis, plane);
+                let half = if left { lh } else { rh };
+                let (mut positive, mut max_radius) = (side.positive, side.max_radius);
+                for &i in parent_split {
+                    let (c, r) = (self.centers[i as usize], self.radii[i as usize]);
+                    if half.overlaps_sphere(c, r) {
+                        out.push(i);
+                        positive += (self.strengths[i as usize] > 0.0) as u32;
+                        max_radius = max_radius.max(r);
+                    }
+                }
+                for p in other {
+                    let c = p.center.to_array()[axis];
+                    let crosses = if left {
+                        c - p.radius <= plane
+                    } else {
+                        c + p.radius >= plane
+                    };
+                    if crosses && half.overlaps_sphere(p.center, p.radius) {
+                        out.push(p.id);
+                        positive += (p.strength > 0.0) as u32;
+                        max_radius = max_radius.max(p.radius);
+                    }
+                }
+                let r_child = self.r_max_of(positive, max_radius);
+                let bounds = if self.opts.fit_boxes {
+                    let cap = self.radius_cap(r_child);
+                    let balls = out[start..].iter().fold(side.bounds, |b, &i| {
+                        let r = self.radii[i as usize].min(cap);
+                        b.union(Aabb::around(self.centers[i as usize], r))
+                    });
+                    half.intersection(balls)
+                } else {
+                    half
+                };
+                (bounds, r_child)
+            }
+            TreeKind::Bvh => {
+                let bounds = side.bounds;
+                sorted.clear();
+                sorted.extend(own.iter().map(|p| p.id));
+                sorted.sort_unstable();
+                let candidates = parent_split
+                    .iter()
+                    .copied()
+                    .chain(other.iter().map(|p| p.id));
+                for i in candidates {
+                    if bounds.overlaps_sphere(self.centers[i as usize], self.radii[i as usize])
                         && self
                             .neighbours_of(i)
                             .iter()
-                            .any(|j| own.binary_search(j).is_ok())
-                })
-                .collect()
-        };
-        let big = n > PARALLEL_BALLS;
-        let (ls, rs) = self.fork(
-            big,
-            || child_split(&lo, &lb, &ro),
-            || child_split(&ro, &rb, &lo),
-        );
-        let (left, right) = self.fork(
-            big,
-            || self.build_bvh(lo, ls, lb, depth + 1),
-            || self.build_bvh(ro, rs, rb, depth + 1),
-        );
-        BuildNode::Interior {
-            bounds,
-            children: Box::new([left, right]),
+                            .any(|j| sorted.binary_search(j).is_ok())
+                    {
+                        out.push(i);
+                    }
+                }
+                (bounds, f32::INFINITY)
+            }
         }
     }
 
@@ -660,97 +937,190 @@ impl Ctx<'_> {
         &self.neighbours[s..e]
     }
 
-    /// Algorithm 2 with §5.3.
-    fn build_fitted(
-        &self,
-        owned: Vec<u32>,
-        split: Vec<u32>,
-        bounds: Aabb,
-        r_max: f32,
-        depth: usize,
-    ) -> BuildNode {
-        let n = owned.len() + split.len();
-        let leaf = |owned: Vec<u32>, split: Vec<u32>| BuildNode::Leaf {
-            bounds,
+    /// The top of the tree, forking on rayon; small subtrees are built sequentially.
+    fn build_par(&self, owned: &mut [Prim], node: NodeInput, depth: usize) -> Built {
+        let mut scratch = Scratch::default();
+        let geom = node.geom;
+        if owned.len() <= PARALLEL_BALLS {
+            let mut chunk = Chunk {
+                nodes: vec![BLANK],
+                balls: Vec::with_capacity(owned.len() * 4),
+            };
+            scratch.arena = node.split;
+            self.build_seq(&mut chunk, &mut scratch, 0, owned, 0, &geom, depth);
+            return Built::Chunk(chunk);
+        }
+        let mut split = node.split;
+        let choice = self.choose(
             owned,
-            split,
-        };
-        if owned.len() <= 1 || depth >= MAX_DEPTH || bounds.is_empty() {
-            return leaf(owned, split);
-        }
-        let Some((axis, plane, cost)) = self.best_split(&owned, split.len(), &bounds, r_max) else {
-            return leaf(owned, split);
-        };
-        if cost >= self.leaf_cost(n) {
-            return leaf(owned, split);
-        }
-        let (lo, ro) = self.partition(owned, axis, plane);
-        let (lh, rh) = split_box(&bounds, axis, plane);
-        let big = n > PARALLEL_BALLS;
-        let child = |own: &[u32], half: Aabb, other: &[u32]| -> (Vec<u32>, Aabb, f32) {
-            let mut child_split: Vec<u32> = split
-                .iter()
-                .chain(other)
-                .copied()
-                .filter(|&i| {
-                    let b = &self.balls[i as usize];
-                    half.overlaps_sphere(b.center, b.radius)
-                })
-                .collect();
-            let mut fitted = half;
-            let r_child = self.r_max(own, &child_split);
-            if self.opts.fit_boxes {
-                let balls_box = own
-                    .iter()
-                    .chain(&child_split)
-                    .fold(Aabb::EMPTY, |b, &i| b.union(self.ball_box(i, r_child)));
-                fitted = half.intersection(balls_box);
-            }
-            if self.opts.discard_split
-                && !child_split.is_empty()
-                && own.len() + child_split.len() <= DISCARD_MAX_BALLS
-            {
-                child_split = self.discard(own, child_split, &fitted, r_child);
-            }
-            (child_split, fitted, r_child)
-        };
-        let ((ls, lb, lr), (rs, rb, rr)) =
-            self.fork(big, || child(&lo, lh, &ro), || child(&ro, rh, &lo));
-        let (left, right) = self.fork(
-            big,
-            || self.build_fitted(lo, ls, lb, lr, depth + 1),
-            || self.build_fitted(ro, rs, rb, rr, depth + 1),
+            &mut split,
+            0,
+            &geom,
+            depth,
+            &mut scratch.keep,
+            &mut scratch.bins,
         );
-        BuildNode::Interior {
-            bounds,
-            children: Box::new([left, right]),
-        }
+        let parts = choice.map(|c| (c, Ctx::partition(owned, c.axis, c.plane)));
+        let Some((choice, (mid, centroids))) =
+            parts.filter(|(_, (m, _))| *m > 0 && *m < owned.len())
+        else {
+            let mut chunk = Chunk {
+                nodes: vec![BLANK],
+                balls: Vec::new(),
+            };
+            chunk.nodes[0] = leaf(&mut chunk.balls, geom.bounds, owned, &split);
+            return Built::Chunk(chunk);
+        };
+        let (lo, ro) = owned.split_at_mut(mid);
+        let make = |own: &[Prim], other: &[Prim], left: bool| {
+            let mut out = Vec::new();
+            let (bounds, r_max) = self.child(
+                &mut out,
+                &mut Vec::new(),
+                &split,
+                own,
+                other,
+                &choice,
+                &geom.bounds,
+                left,
+            );
+            NodeInput {
+                split: out,
+                geom: Geom {
+                    bounds,
+                    r_max,
+                    centroids: centroids[usize::from(!left)],
+                },
+            }
+        };
+        let (l, r) = rayon::join(|| make(lo, ro, true), || make(ro, lo, false));
+        let (left, right) = rayon::join(
+            || self.build_par(lo, l, depth + 1),
+            || self.build_par(ro, r, depth + 1),
+        );
+        Built::Join(geom.bounds, Box::new((left, right)))
     }
 
-    /// §5.3.2: drop positive split balls that cannot shape the surface inside `bounds`.
-    fn discard(&self, owned: &[u32], split: Vec<u32>, bounds: &Aabb, r_max: f32) -> Vec<u32> {
-        if !r_max.is_finite() {
-            return split;
+    /// Builds the subtree whose split list is `scratch.arena[from..]` into `chunk` at `at`;
+    /// on return the arena is back to `from` entries.
+    #[allow(clippy::too_many_arguments)]
+    fn build_seq(
+        &self,
+        chunk: &mut Chunk,
+        scratch: &mut Scratch,
+        at: usize,
+        owned: &mut [Prim],
+        from: usize,
+        geom: &Geom,
+        depth: usize,
+    ) {
+        let choice = self.choose(
+            owned,
+            &mut scratch.arena,
+            from,
+            geom,
+            depth,
+            &mut scratch.keep,
+            &mut scratch.bins,
+        );
+        let parts = choice.map(|c| (c, Ctx::partition(owned, c.axis, c.plane)));
+        let Some((choice, (mid, centroids))) =
+            parts.filter(|(_, (m, _))| *m > 0 && *m < owned.len())
+        else {
+            chunk.nodes[at] = leaf(&mut chunk.balls, geom.bounds, owned, &scratch.arena[from..]);
+            scratch.arena.truncate(from);
+            return;
+        };
+        let c = chunk.nodes.len();
+        chunk.nodes.push(BLANK);
+        chunk.nodes.push(BLANK);
+        chunk.nodes[at] = Node {
+            bounds: geom.bounds,
+            first: c as u32,
+            count: 0,
+            owned: 0,
+        };
+        let (lo, ro) = owned.split_at_mut(mid);
+        for (left, slot) in [(true, c), (false, c + 1)] {
+            let (own, other) = if left {
+                (&mut *lo, &*ro)
+            } else {
+                (&mut *ro, &*lo)
+            };
+            scratch.parent.clear();
+            let end = scratch.arena.len();
+            scratch.parent.extend_from_slice(&scratch.arena[from..end]);
+            let (bounds, r_max) = self.child(
+                &mut scratch.arena,
+                &mut scratch.sorted,
+                &scratch.parent,
+                own,
+                other,
+                &choice,
+                &geom.bounds,
+                left,
+            );
+            let child = Geom {
+                bounds,
+                r_max,
+                centroids: centroids[usize::from(!left)],
+            };
+            self.build_seq(chunk, scratch, slot, own, end, &child, depth + 1);
         }
-        split
-            .iter()
-            .copied()
-            .filter(|&i| {
-                let b = &self.balls[i as usize];
-                if b.strength <= 0.0 || bounds.overlaps_sphere(b.center, r_max) {
-                    return true;
-                }
-                owned.iter().chain(&split).any(|&j| {
-                    if j == i {
-                        return false;
-                    }
-                    let o = &self.balls[j as usize];
-                    let reach = b.radius.max(o.radius) + r_max;
-                    (b.center - o.center).length_squared() < reach * reach
-                })
-            })
-            .collect()
+        scratch.arena.truncate(from);
     }
+}
+
+/// A chunk's node moved into the tree: children from local index `k ≥ 1` to `base + k - 1`,
+/// leaf balls shifted by `ball_base`.
+fn remap(n: &Node, base: u32, ball_base: u32) -> Node {
+    if n.count > 0 {
+        Node {
+            first: n.first + ball_base,
+            ..*n
+        }
+    } else if n.first == u32::MAX {
+        *n
+    } else {
+        Node {
+            first: base + n.first - 1,
+            ..*n
+        }
+    }
+}
+
+/// A leaf node over `owned` then `split`, its balls appended to `balls`.
+fn leaf(balls: &mut Vec<u32>, bounds: Aabb, owned: &[Prim], split: &[u32]) -> Node {
+    let count = (owned.len() + split.len()) as u32;
+    if count == 0 {
+        return Node { bounds, ..BLANK };
+    }
+    let first = balls.len() as u32;
+    balls.extend(owned.iter().map(|p| p.id));
+    balls.extend_from_slice(split);
+    Node {
+        bounds,
+        first,
+        count,
+        owned: owned.len() as u32,
+    }
+}
+
+/// The area of `b ∩ half`, `half` the side of `parent` below (`left`) or above `plane`.
+#[inline]
+fn clipped_area(parent: &Aabb, b: &Aabb, axis: usize, plane: f32, left: bool) -> f32 {
+    let mut min = parent.min.max(b.min).to_array();
+    let mut max = parent.max.min(b.max).to_array();
+    if left {
+        max[axis] = max[axis].min(plane);
+    } else {
+        min[axis] = min[axis].max(plane);
+    }
+    let d = [max[0] - min[0], max[1] - min[1], max[2] - min[2]];
+    if d[0] < 0.0 || d[1] < 0.0 || d[2] < 0.0 {
+        return 0.0;
+    }
+    2.0 * (d[0] * d[1] + d[1] * d[2] + d[2] * d[0])
 }
 
 /// The box cut at `plane` along `axis`, the plane clamped into the box.

@@ -1,0 +1,59 @@
+//! Helpers every benchmark shares: the machine line printed with each table, medians, and
+//! writing the `--json` report.
+
+use serde::Serialize;
+use std::path::Path;
+
+/// The machine a table was measured on: CPU model, `nproc`, and the worker threads used.
+#[derive(Clone, Debug, Serialize)]
+pub struct Machine {
+    pub cpu: String,
+    pub nproc: usize,
+    pub threads: usize,
+}
+
+impl Machine {
+    pub fn here() -> Machine {
+        let cpu = std::fs::read_to_string("/proc/cpuinfo")
+            .ok()
+            .and_then(|s| {
+                s.lines()
+                    .find(|l| l.starts_with("model name"))
+                    .and_then(|l| l.split(':').nth(1))
+                    .map(|m| m.trim().to_string())
+            })
+            .unwrap_or_else(|| "unknown CPU".into());
+        Machine {
+            cpu,
+            nproc: std::thread::available_parallelism().map_or(1, |n| n.get()),
+            threads: rayon::current_num_threads(),
+        }
+    }
+
+    pub fn line(&self) -> String {
+        format!(
+            "{} (nproc {}), {} worker threads",
+            self.cpu, self.nproc, self.threads
+        )
+    }
+}
+
+/// The median of `v` (the upper one of an even count); 0 when empty.
+pub fn median(mut v: Vec<f64>) -> f64 {
+    if v.is_empty() {
+        return 0.0;
+    }
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
+}
+
+/// `n / d`, 0 when `d` is 0.
+pub fn per(n: u64, d: u64) -> f64 {
+    n as f64 / d.max(1) as f64
+}
+
+/// Writes `report` as pretty JSON to `path`.
+pub fn write_json(path: &Path, report: &impl Serialize) -> Result<(), String> {
+    let text = serde_json::to_string_pretty(report).map_err(|e| e.to_string())?;
+    std::fs::write(path, text).map_err(|e| format!("could not write {}: {e}", path.display()))
+}
