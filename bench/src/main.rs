@@ -4,6 +4,7 @@
 
 mod common;
 mod metaballs;
+mod tets;
 
 use clap::{Parser, Subcommand};
 
@@ -21,6 +22,8 @@ enum Command {
     Metaballs(metaballs::MetaballsArgs),
     /// FBVH build time with each of the paper's steps switched off in turn (and the BVH).
     Build(metaballs::BuildArgs),
+    /// The tet paper's tables (§8): builds, fps, traversal counters, memory, time steps.
+    Tets(tets::TetsArgs),
 }
 
 fn main() {
@@ -28,6 +31,7 @@ fn main() {
     let result = match cli.command {
         Command::Metaballs(args) => metaballs::run(args),
         Command::Build(args) => metaballs::build_ablation(args),
+        Command::Tets(args) => tets::run(args),
     };
     if let Err(e) = result {
         eprintln!("isoray-bench: {e}");

@@ -11,7 +11,7 @@
 //! - [`integrator`] follows a camera ray, asks the scene for the first hit and shades it.
 //! - [`PreparedScene`] is a scene plus its acceleration structure, built once per state and
 //!   shared by every view of that state; it answers "first hit along this ray segment".
-//! - [`Scene`] is the closed set of primitive kinds (metaballs for now).
+//! - [`Scene`] is the closed set of primitive kinds (metaballs and tetrahedral meshes).
 
 // `!(a < b)` is the engine's NaN-rejecting comparison: it is true when either side is NaN,
 // which `a >= b` is not. The lint would have us lose that.
@@ -28,6 +28,7 @@ pub mod sampling;
 pub mod scene;
 pub mod scenes;
 pub mod shade;
+pub mod tet;
 
 pub use backend::{Accumulator, CpuBackend, FrameRays};
 pub use camera::Camera;

@@ -1,14 +1,17 @@
 //! The closed set of primitive kinds, and a scene prepared for tracing.
 //!
 //! Preparing a state builds its acceleration structure from scratch (for metaballs the Fitted
-//! BVH of fitted-bvh-metaballs.txt by default, see [`crate::metaball::tree`]); the prepared
-//! state is then shared, read-only, by every view of it.
+//! BVH of fitted-bvh-metaballs.txt by default, see [`crate::metaball::tree`]; for tets the
+//! implicit min–max BVH of tetrahedral-isosurface-ray-tracing.txt, see [`crate::tet`], built
+//! once per mesh and refitted per step); the prepared state is then shared, read-only, by
+//! every view of it.
 
 use crate::metaball::{
     MetaballError, MetaballScene, PrepareOptions, PreparedMetaballs, RayCounters,
 };
 use crate::ray::{Hit, Ray};
 use crate::shade::Lighting;
+use crate::tet::{PreparedTets, TetCounters, TetError, TetOptions, TetScene};
 use std::sync::Arc;
 
 /// One state of a scene: the primitives and how they are lit.
@@ -22,6 +25,8 @@ pub struct Scene {
 #[derive(Clone, Debug, PartialEq)]
 pub enum Geometry {
     Metaballs(MetaballScene),
+    /// A tetrahedral mesh with one scalar field (one time step).
+    Tets(TetScene),
 }
 
 /// Why scene data was rejected.
@@ -29,6 +34,8 @@ pub enum Geometry {
 pub enum SceneError {
     #[error(transparent)]
     Metaball(#[from] MetaballError),
+    #[error(transparent)]
+    Tet(#[from] TetError),
 }
 
 impl Scene {
@@ -36,6 +43,7 @@ impl Scene {
     pub fn validate(&self, primitive_limit: usize) -> Result<(), SceneError> {
         match &self.geometry {
             Geometry::Metaballs(m) => m.validate(primitive_limit)?,
+            Geometry::Tets(t) => t.validate(primitive_limit)?,
         }
         Ok(())
     }
@@ -44,6 +52,7 @@ impl Scene {
     pub fn primitive_count(&self) -> usize {
         match &self.geometry {
             Geometry::Metaballs(m) => m.balls.len(),
+            Geometry::Tets(t) => t.tet_count(),
         }
     }
 
@@ -51,23 +60,50 @@ impl Scene {
     pub fn isovalue_range(&self) -> (f32, f32) {
         match &self.geometry {
             Geometry::Metaballs(m) => m.isovalue_range(),
+            Geometry::Tets(t) => t.isovalue_range(),
         }
     }
 
     /// Builds what tracing needs (acceleration structures) for this state: the Fitted BVH
-    /// with every optimisation, for the state's lowest isovalue, and Bézier clipping.
+    /// with every optimisation, for the state's lowest isovalue, and Bézier clipping; for
+    /// tets the [`TetOptions`] defaults (BIH-style build, shared BVH refitted per step).
     pub fn prepare(self: Arc<Self>) -> PreparedScene {
-        let options = match &self.geometry {
-            Geometry::Metaballs(m) => PrepareOptions::fitted(m.min_isovalue),
-        };
-        self.prepare_with(options)
+        match &self.geometry {
+            Geometry::Metaballs(m) => {
+                let options = PrepareOptions::fitted(m.min_isovalue);
+                self.prepare_with(options)
+            }
+            Geometry::Tets(_) => self.prepare_tets_with(TetOptions::default()),
+        }
     }
 
-    /// [`Scene::prepare`] with a chosen acceleration structure and root finder.
+    /// [`Scene::prepare`] with a chosen acceleration structure and root finder (a tet scene
+    /// ignores them and takes its defaults).
     pub fn prepare_with(self: Arc<Self>, options: PrepareOptions) -> PreparedScene {
+        self.prepare_kind(options, TetOptions::default())
+    }
+
+    /// [`Scene::prepare`] with chosen tet options (a metaball scene ignores them and takes
+    /// its defaults).
+    pub fn prepare_tets_with(self: Arc<Self>, tet_options: TetOptions) -> PreparedScene {
+        let options = match &self.geometry {
+            Geometry::Metaballs(m) => PrepareOptions::fitted(m.min_isovalue),
+            Geometry::Tets(_) => PrepareOptions::fitted(0.0),
+        };
+        self.prepare_kind(options, tet_options)
+    }
+
+    fn prepare_kind(
+        self: Arc<Self>,
+        options: PrepareOptions,
+        tet_options: TetOptions,
+    ) -> PreparedScene {
         let prepared = match &self.geometry {
             Geometry::Metaballs(m) => {
                 PreparedGeometry::Metaballs(Arc::new(PreparedMetaballs::new(m.clone(), options)))
+            }
+            Geometry::Tets(t) => {
+                PreparedGeometry::Tets(Arc::new(PreparedTets::new(t.clone(), tet_options)))
             }
         };
         PreparedScene {
@@ -88,6 +124,7 @@ pub struct PreparedScene {
 #[derive(Clone, Debug)]
 pub enum PreparedGeometry {
     Metaballs(Arc<PreparedMetaballs>),
+    Tets(Arc<PreparedTets>),
 }
 
 impl PreparedScene {
@@ -103,6 +140,7 @@ impl PreparedScene {
     pub fn build_ms(&self) -> f64 {
         match &self.prepared {
             PreparedGeometry::Metaballs(m) => m.build_ms(),
+            PreparedGeometry::Tets(t) => t.build_ms() + t.shading_ms(),
         }
     }
 
@@ -110,6 +148,20 @@ impl PreparedScene {
     pub fn first_hit(&self, ray: &Ray, t_min: f32, t_max: f32, isovalue: f32) -> Option<Hit> {
         match &self.prepared {
             PreparedGeometry::Metaballs(m) => m.first_hit(ray, t_min, t_max, isovalue),
+            PreparedGeometry::Tets(t) => {
+                let q = t.query(isovalue);
+                let mut c = TetCounters::default();
+                let hit = t.first_hit(ray, t_min, t_max, &q, &mut c)?;
+                Some(t.hit_record(ray, &hit, &q))
+            }
+        }
+    }
+
+    /// Whether the isosurface crosses `ray` anywhere within `[t_min, t_max]` (shadow rays).
+    pub fn any_hit(&self, ray: &Ray, t_min: f32, t_max: f32, isovalue: f32) -> bool {
+        match &self.prepared {
+            PreparedGeometry::Metaballs(m) => m.first_hit(ray, t_min, t_max, isovalue).is_some(),
+            PreparedGeometry::Tets(t) => t.any_hit(ray, t_min, t_max, &t.query(isovalue)),
         }
     }
 
@@ -125,6 +177,13 @@ impl PreparedScene {
         match &self.prepared {
             PreparedGeometry::Metaballs(m) => {
                 m.first_hit_counted(ray, t_min, t_max, isovalue, counters)
+            }
+            PreparedGeometry::Tets(_) => {
+                // Tets count their own work (TetCounters); here only rays and hits.
+                let hit = self.first_hit(ray, t_min, t_max, isovalue);
+                counters.rays += 1;
+                counters.hits += hit.is_some() as u64;
+                hit
             }
         }
     }

@@ -32,10 +32,12 @@ pub enum DemoScene {
     Molecule,
     /// fitted-bvh-metaballs.txt "Pool", 10,000 balls.
     Pool,
+    /// A tet mesh with a time-varying gyroid field (tetrahedral-isosurface-ray-tracing.txt).
+    TetGyroid,
 }
 
 impl DemoScene {
-    pub const ALL: [DemoScene; 7] = [
+    pub const ALL: [DemoScene; 8] = [
         DemoScene::Blobs,
         DemoScene::Scattered30k,
         DemoScene::Scattered100k,
@@ -43,6 +45,7 @@ impl DemoScene {
         DemoScene::Tornado128k,
         DemoScene::Molecule,
         DemoScene::Pool,
+        DemoScene::TetGyroid,
     ];
 
     /// The scenes of the Fitted BVH paper's Table 1.
@@ -65,6 +68,7 @@ impl DemoScene {
             DemoScene::Tornado128k => "tornado-128k",
             DemoScene::Molecule => "molecule",
             DemoScene::Pool => "pool",
+            DemoScene::TetGyroid => "tets-gyroid",
         }
     }
 
@@ -77,6 +81,7 @@ impl DemoScene {
             DemoScene::Tornado128k => "Tornado 128k",
             DemoScene::Molecule => "Molecule",
             DemoScene::Pool => "Pool",
+            DemoScene::TetGyroid => "Gyroid (tets)",
         }
     }
 
@@ -91,10 +96,11 @@ impl DemoScene {
                 "5,440-atom synthetic molecule, CPK colours (Fitted BVH paper, Table 1)"
             }
             DemoScene::Pool => "10,000 metaballs of a fluid pool (Fitted BVH paper, Table 1)",
+            DemoScene::TetGyroid => "time-varying gyroid field on a ball of 43,000 tets",
         }
     }
 
-    /// Number of balls in every state.
+    /// Number of primitives (balls, or tets) in every state.
     pub fn ball_count(self) -> usize {
         match self {
             DemoScene::Blobs => 48,
@@ -104,6 +110,7 @@ impl DemoScene {
             DemoScene::Tornado128k => 128_000,
             DemoScene::Molecule => 5_440,
             DemoScene::Pool => 10_000,
+            DemoScene::TetGyroid => crate::tet::generate::demo_mesh().tets().len(),
         }
     }
 
@@ -126,17 +133,22 @@ impl DemoScene {
             }
             DemoScene::Molecule => look(Vec3::new(0.0, 10.0, 95.0), Vec3::ZERO, 45.0),
             DemoScene::Pool => look(Vec3::new(0.0, 14.0, 26.0), Vec3::new(0.0, 1.0, 0.0), 50.0),
+            DemoScene::TetGyroid => look(Vec3::new(3.0, 2.2, 5.2), Vec3::ZERO, 40.0),
         }
     }
 
     /// The isovalue a viewer starts with, and a useful slider range.
     pub fn default_isovalue(self) -> f32 {
-        0.5
+        match self {
+            DemoScene::TetGyroid => 0.0,
+            _ => 0.5,
+        }
     }
 
     pub fn isovalue_slider(self) -> (f32, f32) {
         match self {
             DemoScene::Blobs => (0.05, 1.5),
+            DemoScene::TetGyroid => (-1.5, 1.0),
             _ => (MIN_ISOVALUE, 1.5),
         }
     }
@@ -151,6 +163,12 @@ impl DemoScene {
             DemoScene::Tornado4k | DemoScene::Tornado128k => tornado(self.ball_count(), time),
             DemoScene::Molecule => molecule(self.ball_count(), time),
             DemoScene::Pool => pool(time),
+            DemoScene::TetGyroid => {
+                return Scene {
+                    geometry: Geometry::Tets(crate::tet::generate::demo_state(time)),
+                    lighting: Lighting::default(),
+                }
+            }
         };
         Scene {
             geometry: Geometry::Metaballs(metaballs),

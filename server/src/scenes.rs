@@ -325,7 +325,10 @@ impl SceneEntry {
             } => SceneInfo {
                 id: self.id.clone(),
                 name: demo.name().to_string(),
-                kind: SceneKind::Metaballs,
+                kind: match demo {
+                    DemoScene::TetGyroid => SceneKind::Tets,
+                    _ => SceneKind::Metaballs,
+                },
                 description: demo.description().to_string(),
                 animated: true,
                 source: "demo".into(),
