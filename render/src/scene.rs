@@ -11,7 +11,7 @@ use crate::metaball::{
 };
 use crate::ray::{Hit, Ray};
 use crate::shade::Lighting;
-use crate::tet::{PreparedTets, TetCounters, TetError, TetOptions, TetScene};
+use crate::tet::{PreparedTets, TetCounters, TetError, TetOptions, TetQuery, TetScene};
 use std::sync::Arc;
 
 /// One state of a scene: the primitives and how they are lit.
@@ -148,20 +148,7 @@ impl PreparedScene {
     pub fn first_hit(&self, ray: &Ray, t_min: f32, t_max: f32, isovalue: f32) -> Option<Hit> {
         match &self.prepared {
             PreparedGeometry::Metaballs(m) => m.first_hit(ray, t_min, t_max, isovalue),
-            PreparedGeometry::Tets(t) => {
-                let q = t.query(isovalue);
-                let mut c = TetCounters::default();
-                let hit = t.first_hit(ray, t_min, t_max, &q, &mut c)?;
-                Some(t.hit_record(ray, &hit, &q))
-            }
-        }
-    }
-
-    /// Whether the isosurface crosses `ray` anywhere within `[t_min, t_max]` (shadow rays).
-    pub fn any_hit(&self, ray: &Ray, t_min: f32, t_max: f32, isovalue: f32) -> bool {
-        match &self.prepared {
-            PreparedGeometry::Metaballs(m) => m.first_hit(ray, t_min, t_max, isovalue).is_some(),
-            PreparedGeometry::Tets(t) => t.any_hit(ray, t_min, t_max, &t.query(isovalue)),
+            PreparedGeometry::Tets(t) => tet_first_hit(t, ray, t_min, t_max, isovalue),
         }
     }
 
@@ -178,9 +165,9 @@ impl PreparedScene {
             PreparedGeometry::Metaballs(m) => {
                 m.first_hit_counted(ray, t_min, t_max, isovalue, counters)
             }
-            PreparedGeometry::Tets(_) => {
+            PreparedGeometry::Tets(t) => {
                 // Tets count their own work (TetCounters); here only rays and hits.
-                let hit = self.first_hit(ray, t_min, t_max, isovalue);
+                let hit = tet_first_hit(t, ray, t_min, t_max, isovalue);
                 counters.rays += 1;
                 counters.hits += hit.is_some() as u64;
                 hit
@@ -206,6 +193,13 @@ impl PreparedScene {
             PreparedGeometry::Metaballs(m) => {
                 m.any_hit_counted(ray, t_min, t_max, isovalue, counters)
             }
+            PreparedGeometry::Tets(t) => {
+                let mut c = TetCounters::default();
+                let hit = t.any_hit(ray, t_min, t_max, &TetQuery::single(isovalue), &mut c);
+                counters.rays += 1;
+                counters.hits += hit.is_some() as u64;
+                hit.map(|h| h.t)
+            }
         }
     }
 
@@ -222,6 +216,11 @@ impl PreparedScene {
             PreparedGeometry::Metaballs(m) => {
                 m.exit_hit_counted(ray, t_min, t_max, isovalue, counters)
             }
+            // Every crossing of a tet isosurface is a surface (no root sits at the segment's
+            // start to mean "inside"), so the way out is the first crossing.
+            PreparedGeometry::Tets(_) => {
+                self.first_hit_counted(ray, t_min, t_max, isovalue, counters)
+            }
         }
     }
 
@@ -229,6 +228,22 @@ impl PreparedScene {
     pub fn optical_depth(&self, ray: &Ray, t_min: f32, t_max: f32) -> f32 {
         match &self.prepared {
             PreparedGeometry::Metaballs(m) => m.optical_depth(ray, t_min, t_max),
+            // The tet paper renders isosurfaces only (§8.8): no density to absorb.
+            PreparedGeometry::Tets(_) => 0.0,
         }
     }
+}
+
+/// The nearest crossing of one tet isosurface, as a shaded-ready hit.
+fn tet_first_hit(
+    t: &PreparedTets,
+    ray: &Ray,
+    t_min: f32,
+    t_max: f32,
+    isovalue: f32,
+) -> Option<Hit> {
+    let q = TetQuery::single(isovalue);
+    let mut c = TetCounters::default();
+    let hit = t.first_hit(ray, t_min, t_max, &q, &mut c)?;
+    Some(t.hit_record(ray, &hit, &q))
 }

@@ -385,7 +385,9 @@ fn accelerations_render_the_same_image_on_every_paper_scene() {
     eprintln!("Acceleration modes against the FBVH, {width}×{height}, Bézier clipping:");
     let mut problems = Vec::new();
     for demo in DemoScene::PAPER {
-        let Geometry::Metaballs(scene) = demo.state_at(1.0).geometry;
+        let Geometry::Metaballs(scene) = demo.state_at(1.0).geometry else {
+            panic!("{demo:?} is a metaball scene");
+        };
         let isovalue = demo.default_isovalue();
         let floor = demo.isovalue_slider().0;
         let rays = demo.default_camera().rays(width, height);

@@ -181,16 +181,15 @@ impl TetMesh {
 }
 
 /// One time step of a tet scene: the shared mesh, this step's scalars (and positions, for a
-/// deforming mesh), the extra isosurfaces shown with the viewer's isovalue, how isovalues map
-/// to colour, and an optional clip box.
+/// deforming mesh) and how isovalues map to colour. Further isosurfaces and the clip box are
+/// the scene's effects (`Lighting`), common to every primitive kind; [`TetQuery`] carries
+/// them into one traversal.
 #[derive(Clone, Debug, PartialEq)]
 pub struct TetScene {
     mesh: Arc<TetMesh>,
     scalars: Arc<[f32]>,
     positions: Option<Arc<[Vec3]>>,
-    extra_isovalues: Vec<f32>,
     color_range: (f32, f32),
-    clip: Option<ClipBox>,
 }
 
 impl TetScene {
@@ -215,9 +214,7 @@ impl TetScene {
             mesh,
             scalars,
             positions: None,
-            extra_isovalues: Vec::new(),
             color_range,
-            clip: None,
         })
     }
 
@@ -237,31 +234,11 @@ impl TetScene {
         Ok(self)
     }
 
-    /// Isosurfaces drawn besides the viewer's isovalue (at most `MAX_ISOSURFACES - 1`).
-    pub fn with_extra_isovalues(mut self, isovalues: Vec<f32>) -> Result<TetScene, TetError> {
-        if isovalues.len() >= MAX_ISOSURFACES {
-            return Err(TetError::TooManyIsovalues {
-                count: isovalues.len() + 1,
-            });
-        }
-        if let Some(index) = isovalues.iter().position(|v| !v.is_finite()) {
-            return Err(TetError::IsovalueNotFinite { index });
-        }
-        self.extra_isovalues = isovalues;
-        Ok(self)
-    }
-
     /// The scalar values mapped to the two ends of the colour map (any finite pair).
     pub fn with_color_range(mut self, lo: f32, hi: f32) -> TetScene {
         if lo.is_finite() && hi.is_finite() && lo != hi {
             self.color_range = (lo, hi);
         }
-        self
-    }
-
-    /// Removes every surface point inside `clip` (§7, clipping boxes).
-    pub fn with_clip(mut self, clip: Option<ClipBox>) -> TetScene {
-        self.clip = clip;
         self
     }
 
@@ -281,14 +258,6 @@ impl TetScene {
     /// Whether this step moves the vertices away from the rest positions.
     pub fn deforms(&self) -> bool {
         self.positions.is_some()
-    }
-
-    pub fn extra_isovalues(&self) -> &[f32] {
-        &self.extra_isovalues
-    }
-
-    pub fn clip(&self) -> Option<ClipBox> {
-        self.clip
     }
 
     pub fn tet_count(&self) -> usize {
@@ -510,20 +479,19 @@ mod tests {
             TetError::Inverted { tet: 0, .. }
         ));
         assert_eq!(
-            step.clone()
-                .with_extra_isovalues(vec![0.5, 1.0, 1.5, 2.0])
-                .expect_err("rejected"),
+            TetQuery::new(&[0.5, 1.0, 1.5, 2.0, 2.5], None).expect_err("rejected"),
             TetError::TooManyIsovalues { count: 5 }
         );
         assert_eq!(
-            step.clone()
-                .with_extra_isovalues(vec![0.5, f32::INFINITY])
-                .expect_err("rejected"),
+            TetQuery::new(&[0.5, f32::INFINITY], None).expect_err("rejected"),
             TetError::IsovalueNotFinite { index: 1 }
         );
-        let scene = step.with_extra_isovalues(vec![0.5]).expect("valid");
         assert_eq!(
-            scene.validate(0).expect_err("rejected"),
+            ClipBox::new(Vec3::ONE, Vec3::ZERO).expect_err("rejected"),
+            TetError::BadClipBox
+        );
+        assert_eq!(
+            step.validate(0).expect_err("rejected"),
             TetError::TooMany { count: 1, limit: 0 }
         );
     }

@@ -144,11 +144,6 @@ impl PreparedTets {
                 .map_or(0, |g| g.len() * std::mem::size_of::<Vec3>())
     }
 
-    /// The viewer's isovalue, the scene's extra isosurfaces and its clip box.
-    pub fn query(&self, isovalue: f32) -> TetQuery {
-        TetQuery::from_parts(isovalue, self.scene.extra_isovalues(), self.scene.clip())
-    }
-
     /// The nearest hit along `ray` within `[t_min, t_max]`.
     pub fn first_hit(
         &self,
@@ -161,11 +156,17 @@ impl PreparedTets {
         traverse::trace::<false>(&self.bvh, &self.verts, ray, t_min, t_max, q, counters)
     }
 
-    /// Whether anything lies along `ray` within `[t_min, t_max]` (shadow rays): stops at the
-    /// first hit found.
-    pub fn any_hit(&self, ray: &Ray, t_min: f32, t_max: f32, q: &TetQuery) -> bool {
-        let mut c = TetCounters::default();
-        traverse::trace::<true>(&self.bvh, &self.verts, ray, t_min, t_max, q, &mut c).is_some()
+    /// Some hit along `ray` within `[t_min, t_max]`, not necessarily the nearest (shadow
+    /// rays): traversal stops at the first one found.
+    pub fn any_hit(
+        &self,
+        ray: &Ray,
+        t_min: f32,
+        t_max: f32,
+        q: &TetQuery,
+        counters: &mut TetCounters,
+    ) -> Option<TetHit> {
+        traverse::trace::<true>(&self.bvh, &self.verts, ray, t_min, t_max, q, counters)
     }
 
     /// [`PreparedTets::first_hit`] for every ray of a packet (same answers, less work).
@@ -193,7 +194,8 @@ impl PreparedTets {
         );
     }
 
-    /// Position, normal (facing the ray: an isosurface has no inside) and colour of a hit.
+    /// Position, normal and colour of a hit. The normal points out of the solid `f > v`
+    /// (towards lower values, as for metaballs); shading turns it towards the viewer.
     pub fn hit_record(&self, ray: &Ray, hit: &TetHit, q: &TetQuery) -> Hit {
         let ids = self.scene.mesh().tets()[hit.tet as usize];
         let corners = ids.map(|v| self.verts[v as usize]);
@@ -203,13 +205,10 @@ impl PreparedTets {
             let l = barycentric(corners, position);
             (0..4).fold(Vec3::ZERO, |n, i| n + l[i] * g[ids[i] as usize])
         });
-        let mut normal = match smooth {
+        let gradient = match smooth {
             Some(n) if n.length_squared() > 1e-12 * facet.length_squared() => n,
             _ => facet,
         };
-        if normal.dot(ray.dir) > 0.0 {
-            normal = -normal;
-        }
         let isovalue = q
             .isovalues()
             .get(hit.surface as usize)
@@ -218,8 +217,9 @@ impl PreparedTets {
         Hit {
             t: hit.t,
             position,
-            normal: normal.normalize_or(-ray.dir),
+            normal: (-gradient).normalize_or(-ray.dir),
             albedo: self.scene.color_of(isovalue),
+            primitive: hit.tet,
         }
     }
 }

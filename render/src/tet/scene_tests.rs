@@ -361,7 +361,14 @@ fn multiple_isosurfaces_peel_front_to_back_and_any_hit_agrees() {
         );
         let t_max = rng.range(1.0, 5.0);
         let first = p.first_hit(&ray, 0.0, t_max, &q, &mut c);
-        assert_eq!(p.any_hit(&ray, 0.0, t_max, &q), first.is_some());
+        let any = p.any_hit(&ray, 0.0, t_max, &q, &mut c);
+        assert_eq!(any.is_some(), first.is_some());
+        if let (Some(a), Some(f)) = (any, first) {
+            assert!(
+                a.t >= f.t && a.t <= t_max,
+                "any hit {a:?} lies on the segment"
+            );
+        }
     }
     // A NaN isovalue (a bad view) matches nothing and does not panic.
     assert!(p
@@ -402,11 +409,11 @@ fn the_clip_box_removes_surface_and_skips_subtrees() {
     assert!(c.clipped_subtrees > 0, "whole subtrees were skipped");
     // Clipped geometry casts no shadow.
     let shadow = Ray::new(Vec3::new(0.3, 0.0, 3.0), Vec3::NEG_Z);
-    assert!(!p.any_hit(&shadow, 0.0, 100.0, &q));
+    assert!(p.any_hit(&shadow, 0.0, 100.0, &q, &mut c).is_none());
 }
 
 #[test]
-fn normals_face_the_ray_and_follow_the_gradient() {
+fn normals_point_down_the_gradient() {
     let (mesh, scalars) = radial_mesh(16);
     let scene = TetScene::new(mesh, scalars).expect("valid");
     for normals in [Normals::Faceted, Normals::Smooth] {
@@ -426,10 +433,10 @@ fn normals_face_the_ray_and_follow_the_gradient() {
             let ray = Ray::new(Vec3::new(0.0, 0.0, 3.0), target - Vec3::new(0.0, 0.0, 3.0));
             let hit = p.first_hit(&ray, 0.0, 100.0, &q, &mut c).expect("hits");
             let rec = p.hit_record(&ray, &hit, &q);
-            assert!(rec.normal.dot(ray.dir) <= 0.0, "faces the ray");
             assert!((rec.normal.length() - 1.0).abs() < 1e-4);
-            // The sphere's outward normal, seen from outside.
-            worst = worst.max(1.0 - rec.normal.dot(rec.position.normalize()));
+            assert_eq!(rec.primitive, hit.tet);
+            // Out of the solid |x| > v: towards the centre.
+            worst = worst.max(1.0 + rec.normal.dot(rec.position.normalize()));
         }
         let limit = match normals {
             Normals::Faceted => 0.05,

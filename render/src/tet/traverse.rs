@@ -86,17 +86,6 @@ impl TetQuery {
         Ok(q)
     }
 
-    /// `first`, then as many of `extra` as fit; a NaN isovalue matches nothing.
-    pub(crate) fn from_parts(first: f32, extra: &[f32], clip: Option<ClipBox>) -> TetQuery {
-        let mut q = TetQuery::single(first);
-        for &v in extra.iter().take(MAX_ISOSURFACES - 1) {
-            q.isovalues[q.count] = v;
-            q.count += 1;
-        }
-        q.clip = clip;
-        q
-    }
-
     pub fn isovalues(&self) -> &[f32] {
         &self.isovalues[..self.count]
     }
