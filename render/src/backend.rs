@@ -5,7 +5,7 @@
 
 use crate::effects::{Effects, EffectsPlan, RayCounts, RayKind};
 use crate::framebuffer::Framebuffer;
-use crate::integrator::{trace_primary, Tracer};
+use crate::integrator::{shade_primary, Tracer, T_MAX};
 use crate::metaball::RayCounters;
 use crate::sampling::PixelRng;
 use crate::scene::PreparedScene;
@@ -67,13 +67,10 @@ fn render_tiles(scene: &PreparedScene, view: &View) -> Framebuffer {
             let n = ((x1 - x0) * (y1 - y0)) as usize;
             let mut rgb = Vec::with_capacity(n * 3);
             let mut depth = Vec::with_capacity(n);
-            for y in y0..y1 {
-                for x in x0..x1 {
-                    let ray = rays.through_pixel(x, y);
-                    let (color, t) = trace_primary(scene, &ray, view.isovalue);
-                    rgb.extend([color.x, color.y, color.z].map(linear_to_srgb8));
-                    depth.push(t * ray.dir.dot(forward));
-                }
+            for (ray, hit) in scene.primary_hits(&rays, (x0, y0, x1, y1), view.isovalue, T_MAX) {
+                let (color, t) = shade_primary(scene, &ray, hit.as_ref());
+                rgb.extend([color.x, color.y, color.z].map(linear_to_srgb8));
+                depth.push(t * ray.dir.dot(forward));
             }
             (x0, y0, rgb, depth)
         })

@@ -49,6 +49,22 @@ impl PrimaryRays {
         Ray::new(self.eye, dir)
     }
 
+    /// Where `point` appears in the image: the continuous pixel coordinates `(x, y)` whose
+    /// ray passes through it (pixel `(x, y)`'s own ray has exactly those), or `None` unless
+    /// the point lies in front of the eye.
+    pub fn pixel_of(&self, point: Vec3) -> Option<(f32, f32)> {
+        let v = point - self.eye;
+        let depth = v.dot(self.forward);
+        if !(depth > 1e-6 * v.length()) {
+            return None;
+        }
+        // Scaled so its component along `forward` is 1, like every unnormalised pixel ray.
+        let rel = v / depth - self.top_left;
+        let x = rel.dot(self.right_step) / self.right_step.length_squared() - 0.5;
+        let y = rel.dot(self.down_step) / self.down_step.length_squared() - 0.5;
+        Some((x, y))
+    }
+
     /// Unit vector along the view axis, for depth along the view direction.
     pub fn forward(&self) -> Vec3 {
         self.forward
@@ -72,5 +88,20 @@ mod tests {
         assert!((ray.dir - Vec3::NEG_Z).length() < 1e-6);
         let top = rays.through_pixel(50, 0);
         assert!(top.dir.y > 0.0, "row 0 is the top of the image");
+        let (x, y) = rays.pixel_of(top.at(3.0)).expect("in front of the eye");
+        assert!((x - 50.0).abs() < 1e-3 && y.abs() < 1e-3, "{x} {y}");
+        let corner = camera.rays(64, 48).through_pixel(63, 47);
+        let (x, y) = camera
+            .rays(64, 48)
+            .pixel_of(corner.at(7.0))
+            .expect("in front");
+        assert!(
+            (x - 63.0).abs() < 1e-3 && (y - 47.0).abs() < 1e-3,
+            "{x} {y}"
+        );
+        assert!(
+            rays.pixel_of(Vec3::new(0.0, 0.0, 6.0)).is_none(),
+            "behind the eye"
+        );
     }
 }

@@ -40,9 +40,19 @@ pub const T_MAX: f32 = 1.0e4;
 /// casting alone.
 #[inline]
 pub fn trace_primary(scene: &PreparedScene, ray: &Ray, isovalue: f32) -> (Vec3, f32) {
+    shade_primary(
+        scene,
+        ray,
+        scene.first_hit(ray, 0.0, T_MAX, isovalue).as_ref(),
+    )
+}
+
+/// [`trace_primary`] once the hit is known (the backend finds a tile's hits together).
+#[inline]
+pub fn shade_primary(scene: &PreparedScene, ray: &Ray, hit: Option<&Hit>) -> (Vec3, f32) {
     let lighting = &scene.scene().lighting;
-    match scene.first_hit(ray, 0.0, T_MAX, isovalue) {
-        Some(hit) => (lighting.shade(&hit, ray.dir), hit.t),
+    match hit {
+        Some(hit) => (lighting.shade(hit, ray.dir), hit.t),
         None => (lighting.background(ray.dir.y), f32::INFINITY),
     }
 }

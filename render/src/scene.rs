@@ -6,12 +6,15 @@
 //! once per mesh and refitted per step); the prepared state is then shared, read-only, by
 //! every view of it.
 
+use crate::camera::PrimaryRays;
 use crate::metaball::{
     MetaballError, MetaballScene, PrepareOptions, PreparedMetaballs, RayCounters,
 };
 use crate::ray::{Hit, Ray};
 use crate::shade::Lighting;
-use crate::tet::{PreparedTets, TetCounters, TetError, TetOptions, TetQuery, TetScene};
+use crate::tet::{
+    PacketScratch, PreparedTets, RayPacket, TetCounters, TetError, TetOptions, TetQuery, TetScene,
+};
 use std::sync::Arc;
 
 /// One state of a scene: the primitives and how they are lit.
@@ -171,6 +174,50 @@ impl PreparedScene {
                 counters.rays += 1;
                 counters.hits += hit.is_some() as u64;
                 hit
+            }
+        }
+    }
+}
+
+/// Primary rays a tile at a time: the one query that sees many rays from one eye at once.
+impl PreparedScene {
+    /// Each primary ray through pixels `x0..x1 × y0..y1` of `rays` (row by row) and its
+    /// first hit, exactly as [`PreparedScene::first_hit`] would find it ray by ray. Tets trace
+    /// the tile as one packet (tetrahedral-isosurface-ray-tracing.txt §5.2); metaballs ray by
+    /// ray.
+    pub fn primary_hits(
+        &self,
+        rays: &PrimaryRays,
+        rect: (u32, u32, u32, u32),
+        isovalue: f32,
+        t_max: f32,
+    ) -> Vec<(Ray, Option<Hit>)> {
+        let (x0, y0, x1, y1) = rect;
+        match &self.prepared {
+            PreparedGeometry::Metaballs(m) => (y0..y1)
+                .flat_map(|y| (x0..x1).map(move |x| rays.through_pixel(x, y)))
+                .map(|ray| (ray, m.first_hit(&ray, 0.0, t_max, isovalue)))
+                .collect(),
+            PreparedGeometry::Tets(t) => {
+                let mut dirs = Vec::new();
+                let packet = RayPacket::tile(rays, rect, &mut dirs);
+                let mut hits = vec![None; packet.dirs.len()];
+                let q = TetQuery::single(isovalue);
+                let mut c = TetCounters::default();
+                let mut scratch = PacketScratch::default();
+                t.first_hits_packet(&packet, 0.0, t_max, &q, &mut scratch, &mut hits, &mut c);
+                packet
+                    .dirs
+                    .iter()
+                    .zip(hits)
+                    .map(|(&dir, hit)| {
+                        let ray = Ray {
+                            origin: packet.origin,
+                            dir,
+                        };
+                        (ray, hit.map(|h| t.hit_record(&ray, &h, &q)))
+                    })
+                    .collect()
             }
         }
     }

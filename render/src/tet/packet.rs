@@ -16,12 +16,20 @@
 //!    frustum test (§4.3) skips the packet (full miss) or the edge tests (full hit); else each
 //!    active ray pays a few dot products.
 //!
+//! One addition for packets that are tiles of a camera's pixel grid ([`RayPacket::tile`]):
+//! the frustum tests are sharpened to the pixels a node or an isopolygon covers. Its corners
+//! projected onto the image bound (widened by a pixel) the rays that can meet it, so step 4
+//! searches only those rays and step 5 tests only those (or skips the polygon when none).
+//! This is the corner-ray idea of §4.3 applied to sub-rectangles of the tile; it matters when
+//! a node or polygon covers a few of the 256 pixels, which is most of the time.
+//!
 //! Every test is conservative and the per-ray arithmetic is the single-ray path's, so a
 //! packet returns, ray for ray, exactly what [`super::traverse`] returns.
 
 use super::bvh::{Bvh, Node};
 use super::march::{extract, FrustumTest, PolygonFromOrigin};
 use super::traverse::{slab, Stack, TetCounters, TetHit, TetQuery};
+use crate::camera::PrimaryRays;
 use glam::{Vec3, Vec4, Vec4Swizzles};
 
 /// Rays from one origin. `corners` are four rays such that every ray of the packet is a
@@ -32,6 +40,84 @@ pub struct RayPacket<'a> {
     /// Unit directions.
     pub dirs: &'a [Vec3],
     pub corners: [Vec3; 4],
+    /// The pixel grid, when the packet is a tile of one (row-major `dirs`).
+    pub grid: Option<TileGrid>,
+}
+
+/// The pixels of a tile: `width × height` from `(x0, y0)` of a camera's image.
+#[derive(Clone, Copy, Debug)]
+pub struct TileGrid {
+    rays: PrimaryRays,
+    x0: u32,
+    y0: u32,
+    width: u32,
+    height: u32,
+}
+
+/// The tile pixels whose rays may meet a convex shape.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Cover {
+    /// No bound (a corner is not in front of the eye).
+    Unknown,
+    /// No pixel of the tile.
+    Empty,
+    /// Tile-relative columns `c0..=c1` and rows `r0..=r1`.
+    Rect { c0: u32, c1: u32, r0: u32, r1: u32 },
+}
+
+impl TileGrid {
+    /// The pixels of the projection of the convex hull of `points`, widened by one pixel
+    /// (far beyond rounding) and clipped to the tile.
+    #[inline]
+    fn cover(&self, points: impl Iterator<Item = Vec3>) -> Cover {
+        let (mut lo_x, mut lo_y) = (f32::INFINITY, f32::INFINITY);
+        let (mut hi_x, mut hi_y) = (f32::NEG_INFINITY, f32::NEG_INFINITY);
+        for p in points {
+            let Some((x, y)) = self.rays.pixel_of(p) else {
+                return Cover::Unknown;
+            };
+            lo_x = lo_x.min(x);
+            lo_y = lo_y.min(y);
+            hi_x = hi_x.max(x);
+            hi_y = hi_y.max(y);
+        }
+        let (x0, y0) = (self.x0 as f32, self.y0 as f32);
+        let (x1, y1) = (x0 + self.width as f32 - 1.0, y0 + self.height as f32 - 1.0);
+        let (lo_x, lo_y) = ((lo_x - 1.0).max(x0), (lo_y - 1.0).max(y0));
+        let (hi_x, hi_y) = ((hi_x + 1.0).min(x1), (hi_y + 1.0).min(y1));
+        if !(lo_x <= hi_x && lo_y <= hi_y) {
+            return Cover::Empty;
+        }
+        Cover::Rect {
+            c0: (lo_x.ceil() - x0) as u32,
+            c1: (hi_x.floor() - x0) as u32,
+            r0: (lo_y.ceil() - y0) as u32,
+            r1: (hi_y.floor() - y0) as u32,
+        }
+    }
+}
+
+impl Cover {
+    /// Ray indices (row-major in a tile `width` wide) in the cover, from `from` on; all of
+    /// `from..n` when there is no bound.
+    #[inline]
+    fn rays(self, width: u32, from: usize, n: usize) -> impl Iterator<Item = usize> {
+        let (rect, all) = match self {
+            Cover::Rect { c0, c1, r0, r1 } => (Some((c0, c1, r0, r1)), 0..0),
+            Cover::Empty => (None, 0..0),
+            Cover::Unknown => (None, from..n),
+        };
+        let w = width as usize;
+        let in_rect = rect.into_iter().flat_map(move |(c0, c1, r0, r1)| {
+            let first_row = (from / w).max(r0 as usize);
+            (first_row..=r1 as usize).flat_map(move |r| {
+                (c0 as usize..=c1 as usize)
+                    .map(move |c| r * w + c)
+                    .filter(move |&i| i >= from)
+            })
+        });
+        all.chain(in_rect)
+    }
 }
 
 impl<'a> RayPacket<'a> {
@@ -55,6 +141,13 @@ impl<'a> RayPacket<'a> {
             origin: rays.through_pixel(x0, y0).origin,
             dirs,
             corners,
+            grid: Some(TileGrid {
+                rays: *rays,
+                x0,
+                y0,
+                width: x1 - x0,
+                height: y1 - y0,
+            }),
         }
     }
 }
@@ -170,12 +263,17 @@ pub(crate) fn first_hits(
             if frustum.misses(node, t_min, far_best) {
                 continue;
             }
-            fa += 1;
-            while fa < n && !hits(fa, c, best) {
-                fa += 1;
-            }
-            if fa == n {
-                continue;
+            let cover = match &packet.grid {
+                Some(grid) => {
+                    c.frustum_box_tests += 1;
+                    grid.cover(box_corners(node))
+                }
+                None => Cover::Unknown,
+            };
+            let width = packet.grid.map_or(1, |g| g.width);
+            match cover.rays(width, fa + 1, n).find(|&r| hits(r, c, best)) {
+                Some(r) => fa = r,
+                None => continue,
             }
         }
         if node.is_leaf() {
@@ -189,24 +287,40 @@ pub(crate) fn first_hits(
                         continue;
                     };
                     c.extractions += 1;
+                    let cover = match &packet.grid {
+                        Some(grid) => grid.cover(poly.points[..poly.count].iter().copied()),
+                        None => Cover::Unknown,
+                    };
+                    if cover == Cover::Empty {
+                        c.polygons_culled += 1;
+                        continue;
+                    }
                     // The corner test is four ray–isopolygon tests (for a 2×2 packet it is
                     // the whole packet's).
                     c.polygon_tests += 4;
                     let prep = PolygonFromOrigin::new(&poly, origin);
                     let verdict = prep.frustum(&packet.corners);
                     let tet = bvh.leaf_ids[k];
-                    match verdict {
+                    let tested = match verdict {
                         FrustumTest::Miss => {
                             c.polygons_culled += 1;
                             continue;
                         }
-                        FrustumTest::Hit => c.polygons_full += 1,
-                        FrustumTest::Partial => c.polygon_tests += (n - fa) as u64,
-                    }
-                    for (r, &dir) in packet.dirs.iter().enumerate().skip(fa) {
+                        FrustumTest::Hit => {
+                            c.polygons_full += 1;
+                            Cover::Unknown
+                        }
+                        FrustumTest::Partial => cover,
+                    };
+                    let width = packet.grid.map_or(1, |g| g.width);
+                    for r in tested.rays(width, fa, n) {
+                        let dir = packet.dirs[r];
                         let t = match verdict {
                             FrustumTest::Hit => prep.distance(dir),
-                            _ => prep.intersect(dir),
+                            _ => {
+                                c.polygon_tests += 1;
+                                prep.intersect(dir)
+                            }
                         };
                         let Some(t) = t else { continue };
                         if t >= t_min && best[r].beaten_by(t, tet) && !q.clipped(origin + t * dir) {
@@ -253,4 +367,17 @@ pub(crate) fn first_hits(
             *o = Some(*b);
         }
     }
+}
+
+/// The eight corners of a node's box.
+#[inline]
+fn box_corners(node: &Node) -> impl Iterator<Item = Vec3> {
+    let (lo, hi) = (node.lo.xyz(), node.hi.xyz());
+    (0..8).map(move |i| {
+        Vec3::new(
+            if i & 1 != 0 { hi.x } else { lo.x },
+            if i & 2 != 0 { hi.y } else { lo.y },
+            if i & 4 != 0 { hi.z } else { lo.z },
+        )
+    })
 }

@@ -468,3 +468,33 @@ fn the_demo_renders_the_same_on_one_and_two_threads() {
     };
     assert_eq!(verts, super::generate::demo_mesh().vertices().len());
 }
+
+#[test]
+fn the_server_path_traces_tiles_as_packets_with_the_same_image() {
+    use crate::integrator::trace_primary;
+    use crate::scenes::DemoScene;
+    use crate::shade::linear_to_srgb8;
+    use crate::{CpuBackend, View};
+    let demo = DemoScene::TetGyroid;
+    let scene = Arc::new(demo.state_at(2.5)).prepare();
+    let view = View {
+        width: 53,
+        height: 37,
+        camera: demo.default_camera(),
+        isovalue: demo.default_isovalue(),
+    };
+    let fb = CpuBackend::new(2).expect("pool").render(&scene, &view);
+    let rays = view.camera.rays(view.width, view.height);
+    for y in 0..view.height {
+        for x in 0..view.width {
+            let (c, _) = trace_primary(&scene, &rays.through_pixel(x, y), view.isovalue);
+            let i = ((y * view.width + x) * 3) as usize;
+            assert_eq!(
+                fb.rgb[i..i + 3],
+                [c.x, c.y, c.z].map(linear_to_srgb8),
+                "pixel {x}, {y}"
+            );
+        }
+    }
+    assert!(fb.hit_count() > 200);
+}
