@@ -14,6 +14,7 @@ pub mod effects;
 pub mod encode;
 pub mod error;
 pub mod input;
+pub mod kind;
 pub mod metrics;
 pub mod refine;
 pub mod scenes;

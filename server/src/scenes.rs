@@ -7,14 +7,12 @@
 //! sees the step with the largest time not after it. Prepared stored steps share one cache
 //! bounded in bytes across all scenes (`--cache-bytes`), least recently used first out.
 
-use crate::api::convert;
+use crate::kind::SceneSetup;
 use crate::store::{Retention, Store, StoredScene, StoredStep};
 use isoray_protocol::api::{SceneInfo, SceneKind};
 use isoray_protocol::SceneSummary;
-use isoray_render::metaball::{Kernel, Metaball, MetaballScene};
-use isoray_render::scene::Geometry;
 use isoray_render::scenes::DemoScene;
-use isoray_render::{Camera, Lighting, PreparedScene, Scene};
+use isoray_render::{Camera, PreparedScene, Scene};
 use std::collections::{BTreeMap, VecDeque};
 use std::sync::{Arc, Mutex, RwLock};
 use std::time::Instant;
@@ -153,6 +151,9 @@ pub struct PreparedState {
     pub update_us: u32,
     /// Time to build the acceleration structure, microseconds.
     pub build_us: u32,
+    /// The time of the stored step this state shows (`None` for demos, whose states are
+    /// functions of the requested time, and before a stored scene's first step).
+    pub step_time: Option<f64>,
 }
 
 /// What a viewer starts with: camera, isovalue and slider range.
@@ -177,15 +178,6 @@ impl SceneLook {
     }
 }
 
-/// Per-ball values for columns a step leaves out.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct BallDefaults {
-    pub kernel: Kernel,
-    pub radius: f32,
-    pub strength: f32,
-    pub color: glam::Vec3,
-}
-
 /// A scene and where its states come from.
 pub struct SceneEntry {
     id: String,
@@ -202,9 +194,7 @@ enum Source {
     },
     Stored {
         scene: Arc<StoredScene>,
-        look: SceneLook,
-        lighting: Lighting,
-        defaults: BallDefaults,
+        setup: SceneSetup,
         cache: Arc<PreparedCache>,
     },
 }
@@ -225,34 +215,11 @@ impl SceneEntry {
     }
 
     fn stored(scene: Arc<StoredScene>, cache: Arc<PreparedCache>) -> SceneEntry {
-        // The spec was validated when the scene was created; a hand-edited file that no longer
-        // converts falls back to the defaults rather than taking the scene offline.
-        let spec = &scene.meta.spec;
-        let (look, lighting, defaults) = convert::scene_setup(spec).unwrap_or_else(|e| {
-            tracing::warn!(scene = %scene.meta.id, error = %e.message, "stored scene settings invalid; using defaults");
-            convert::scene_setup(&isoray_protocol::api::CreateScene {
-                kind: SceneKind::Metaballs,
-                name: None,
-                description: None,
-                metaballs: None,
-                lighting: None,
-                camera: None,
-                isovalue: None,
-                isovalue_slider: None,
-            })
-            .expect("the default scene settings are valid")
-        });
         SceneEntry {
             id: scene.meta.id.clone(),
             source: Source::Stored {
+                setup: scene.setup.clone(),
                 scene,
-                look: SceneLook {
-                    camera: look.0,
-                    isovalue: look.1,
-                    slider: look.2,
-                },
-                lighting,
-                defaults,
                 cache,
             },
         }
@@ -270,7 +237,11 @@ impl SceneEntry {
                 isovalue: demo.default_isovalue(),
                 slider: demo.isovalue_slider(),
             },
-            Source::Stored { look, .. } => *look,
+            Source::Stored { setup, .. } => SceneLook {
+                camera: setup.camera,
+                isovalue: setup.isovalue,
+                slider: setup.slider,
+            },
         }
     }
 
@@ -377,35 +348,26 @@ impl SceneEntry {
 
     /// A stored step prepared for tracing (an empty scene before the first push).
     pub fn prepared_step(&self, step: Option<&StoredStep>) -> PreparedState {
-        let Source::Stored {
-            lighting,
-            defaults,
-            cache,
-            ..
-        } = &self.source
-        else {
+        let Source::Stored { setup, cache, .. } = &self.source else {
             return self.prepared_at(0.0, false);
         };
         let build = |step: Option<&StoredStep>| {
             let t0 = Instant::now();
-            let balls = step.map_or_else(Vec::new, |s| balls_from_step(s, defaults));
-            let scene = Scene {
-                geometry: Geometry::Metaballs(MetaballScene::new(defaults.kernel, balls)),
-                lighting: lighting.clone(),
-            };
+            let scene = setup.scene(step.map(|s| (s.header.columns, s.payload())));
             let t1 = Instant::now();
             let prepared = Arc::new(scene).prepare();
             PreparedState {
                 prepared,
                 update_us: micros(t1 - t0),
                 build_us: micros(t1.elapsed()),
+                step_time: step.map(|s| s.header.time),
             }
         };
         match step {
             None => build(None),
             Some(s) => {
                 let key = (self.id.clone(), s.header.index, s.header.checksum);
-                let bytes = s.header.rows * std::mem::size_of::<Metaball>() as u64;
+                let bytes = setup.prepared_bytes(s.header.rows);
                 cache.get_or_build(key, bytes, || build(Some(s)))
             }
         }
@@ -435,36 +397,13 @@ fn demo_prepared_at(
         prepared,
         update_us: micros(t1 - t0),
         build_us: micros(t1.elapsed()),
+        step_time: None,
     };
     if cache.len() == CACHED_STATES {
         cache.remove(0);
     }
     cache.push((key, state.clone()));
     state
-}
-
-/// Engine balls from a step's f32 rows (read straight from the memory-mapped file).
-fn balls_from_step(step: &StoredStep, d: &BallDefaults) -> Vec<Metaball> {
-    let columns = step.header.columns as usize;
-    let mut row = [0f32; 8];
-    step.payload()
-        .chunks_exact(columns * 4)
-        .map(|bytes| {
-            for (v, b) in row.iter_mut().zip(bytes.chunks_exact(4)) {
-                *v = f32::from_le_bytes(b.try_into().expect("4-byte chunk"));
-            }
-            Metaball::sphere(
-                glam::Vec3::new(row[0], row[1], row[2]),
-                if columns >= 4 { row[3] } else { d.radius },
-                if columns >= 5 { row[4] } else { d.strength },
-                if columns >= 8 {
-                    glam::Vec3::new(row[5], row[6], row[7])
-                } else {
-                    d.color
-                },
-            )
-        })
-        .collect()
 }
 
 type CacheKey = (String, u64, u128);

@@ -582,7 +582,8 @@ fn render_frame(
             trace_us: micros(t1 - t0),
             encode_us: micros(t1.elapsed()),
         },
-        scene_time: time,
+        // A stored scene's frame shows its step's time, not the live clock's.
+        scene_time: state.step_time.unwrap_or(time),
     };
     m::stage("update", header.timings.update_us);
     m::stage("build", header.timings.build_us);

@@ -1,21 +1,18 @@
 //! From API types to engine types, validating at the boundary: every non-finite or
-//! out-of-range value is refused with the field that holds it.
+//! out-of-range value is refused with the field that holds it. What depends on the scene's
+//! kind is in `crate::kind`.
 
 use super::error::ApiError;
 use crate::effects::EffectLimits;
-use crate::scenes::BallDefaults;
 use glam::Vec3;
-use isoray_protocol::api::{
-    ApiCamera, CreateScene, LightKind, LightSpec, LightingSpec, MaterialSpec,
-};
-use isoray_render::metaball::Kernel;
+use isoray_protocol::api::{ApiCamera, LightKind, LightSpec, LightingSpec, MaterialSpec};
 use isoray_render::shade::{ClipBox, Floor, Isosurface, Light, Material, MaterialGroup, Volume};
 use isoray_render::{Camera, Lighting};
 
 /// Largest coordinate accepted: keeps values exact enough in f32.
 const MAX_COORDINATE: f64 = 1.0e6;
 
-fn finite(v: f64, field: &str) -> Result<f32, ApiError> {
+pub fn finite(v: f64, field: &str) -> Result<f32, ApiError> {
     if v.is_finite() && v.abs() <= MAX_COORDINATE {
         Ok(v as f32)
     } else {
@@ -27,7 +24,7 @@ fn finite(v: f64, field: &str) -> Result<f32, ApiError> {
     }
 }
 
-fn vec3(v: [f64; 3], field: &str) -> Result<Vec3, ApiError> {
+pub fn vec3(v: [f64; 3], field: &str) -> Result<Vec3, ApiError> {
     Ok(Vec3::new(
         finite(v[0], &format!("{field}[0]"))?,
         finite(v[1], &format!("{field}[1]"))?,
@@ -202,7 +199,7 @@ fn material_index(index: u16, count: usize, field: String) -> Result<u16, ApiErr
     }
 }
 
-fn lighting(spec: &LightingSpec, limits: &EffectLimits) -> Result<Lighting, ApiError> {
+pub fn lighting(spec: &LightingSpec, limits: &EffectLimits) -> Result<Lighting, ApiError> {
     let mut l = Lighting::default();
     if let Some(lights) = &spec.lights {
         if lights.len() > MAX_LIGHTS {
@@ -353,77 +350,4 @@ fn lighting(spec: &LightingSpec, limits: &EffectLimits) -> Result<Lighting, ApiE
         })?;
     }
     Ok(l)
-}
-
-/// What a new scene's viewers start with, how it is lit, and its ball defaults.
-pub type SceneSetup = ((Camera, f32, (f32, f32)), Lighting, BallDefaults);
-
-/// Validates a creation request's settings against the engine's limits and converts them.
-pub fn scene_setup(spec: &CreateScene) -> Result<SceneSetup, ApiError> {
-    scene_setup_within(spec, &EffectLimits::ENGINE)
-}
-
-/// [`scene_setup`], with effect quality checked against the server's configured `limits`.
-pub fn scene_setup_within(
-    spec: &CreateScene,
-    limits: &EffectLimits,
-) -> Result<SceneSetup, ApiError> {
-    let camera = match &spec.camera {
-        Some(c) => camera(c, "camera")?,
-        None => Camera {
-            eye: Vec3::new(0.0, 1.5, 7.5),
-            target: Vec3::ZERO,
-            up: Vec3::Y,
-            fov_y_deg: 45.0,
-        },
-    };
-    let isovalue = finite(spec.isovalue.unwrap_or(0.5), "isovalue")?;
-    if isovalue <= 0.0 {
-        return Err(
-            ApiError::bad_request("invalid_value", "isovalue must be positive").field("isovalue"),
-        );
-    }
-    let slider = match spec.isovalue_slider {
-        Some([lo, hi]) => {
-            let (lo, hi) = (
-                finite(lo, "isovalue_slider[0]")?,
-                finite(hi, "isovalue_slider[1]")?,
-            );
-            if !(0.0 < lo && lo < hi) {
-                return Err(ApiError::bad_request(
-                    "invalid_value",
-                    "isovalue_slider must be [lo, hi] with 0 < lo < hi",
-                )
-                .field("isovalue_slider"));
-            }
-            (lo, hi)
-        }
-        None => (0.05, 1.5),
-    };
-    let lighting = lighting(&spec.lighting.clone().unwrap_or_default(), limits)?;
-    let d = spec.metaballs.clone().unwrap_or_default();
-    let kernel = match d.kernel.as_str() {
-        "wyvill" => Kernel::Wyvill,
-        other => {
-            return Err(ApiError::bad_request(
-                "invalid_value",
-                format!("kernel `{other}` is not known; the engine has `wyvill`"),
-            )
-            .field("metaballs.kernel"))
-        }
-    };
-    let radius = finite(d.radius, "metaballs.radius")?;
-    if radius <= 0.0 {
-        return Err(
-            ApiError::bad_request("invalid_value", "metaballs.radius must be positive")
-                .field("metaballs.radius"),
-        );
-    }
-    let defaults = BallDefaults {
-        kernel,
-        radius,
-        strength: finite(d.strength, "metaballs.strength")?,
-        color: vec3(d.color, "metaballs.color")?,
-    };
-    Ok(((camera, isovalue, slider), lighting, defaults))
 }

@@ -15,6 +15,7 @@ pub mod client;
 pub mod convert;
 pub mod error;
 
+use crate::kind::{SceneSetup, StepLayout};
 use crate::scenes::SceneEntry;
 use crate::store::ingest::{
     ingest_json, ingest_npy, ingest_raw, BodyAbort, BodyReader, IngestLimits, Target,
@@ -340,17 +341,6 @@ async fn create_scene(
 ) -> Result<(StatusCode, Json<CreatedScene>), ApiError> {
     shared.writes.check(client)?;
     let spec: CreateScene = read_json(&app, body).await?;
-    if spec.kind != SceneKind::Metaballs {
-        return Err(ApiError::new(
-            StatusCode::UNPROCESSABLE_ENTITY,
-            "unsupported_kind",
-            format!(
-                "kind `{}` is not supported yet: this server's engine traces `metaballs` only",
-                spec.kind.as_str()
-            ),
-        )
-        .field("kind"));
-    }
     for (field, text, max) in [
         ("name", &spec.name, 200),
         ("description", &spec.description, 4000),
@@ -363,7 +353,7 @@ async fn create_scene(
             .field(field));
         }
     }
-    convert::scene_setup_within(
+    let setup = SceneSetup::from_spec(
         &spec,
         &crate::effects::EffectLimits::from_config(app.config()),
     )?;
@@ -384,7 +374,7 @@ async fn create_scene(
             .duration_since(std::time::UNIX_EPOCH)
             .map_or(0, |d| d.as_secs()),
     };
-    let scene = blocking(move || store.create_scene(meta))
+    let scene = blocking(move || store.create_scene(meta, setup))
         .await?
         .map_err(ApiError::internal)?;
     let entry = app.scenes().add_stored(scene);
@@ -677,6 +667,7 @@ async fn push_step(
         .ok_or_else(|| ApiError::internal("stored scene without a store"))?;
     let retention = store.retention();
     let limits = IngestLimits {
+        layout: scene.setup.layout(),
         max_rows: config.max_primitives as u64,
         max_step_bytes: retention.max_bytes_per_scene.min(retention.max_total_bytes),
     };
@@ -697,10 +688,13 @@ async fn push_step(
         time,
     };
     let written = match format {
-        PushFormat::Json => {
-            let step: JsonStep = read_json(&app, body).await?;
-            blocking(move || ingest_json(&step, &limits, target)).await??
-        }
+        // The JSON shape is per kind (rows of balls for metaballs).
+        PushFormat::Json => match limits.layout {
+            StepLayout::Metaballs => {
+                let step: JsonStep = read_json(&app, body).await?;
+                blocking(move || ingest_json(&step, &limits, target)).await??
+            }
+        },
         PushFormat::Npy | PushFormat::Raw => {
             let (tx, rx) = tokio::sync::mpsc::channel(BODY_QUEUE);
             let worker = tokio::task::spawn_blocking(move || {

@@ -5,7 +5,7 @@
 //! | --- | --- | --- |
 //! | 0 | 8 | magic `ISORAYST` |
 //! | 8 | 4 | format version (1) |
-//! | 12 | 4 | columns: 3 (`x y z`), 4 (+ radius), 5 (+ strength), 8 (+ `r g b`) |
+//! | 12 | 4 | columns, 1..=16 (what they hold depends on the scene's kind: `crate::kind`) |
 //! | 16 | 8 | rows |
 //! | 24 | 8 | step index |
 //! | 32 | 8 | step time (f64) |
@@ -21,8 +21,8 @@ pub const MAGIC: [u8; 8] = *b"ISORAYST";
 pub const VERSION: u32 = 1;
 pub const HEADER_LEN: usize = 64;
 
-/// Column counts a step may have, and what they hold.
-pub const ALLOWED_COLUMNS: [u32; 4] = [3, 4, 5, 8];
+/// Most columns a step file may have, whatever the kind.
+pub const MAX_COLUMNS: u32 = 16;
 
 /// The fixed fields of a step file.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -55,7 +55,7 @@ pub enum FormatError {
 
 impl StepHeader {
     pub fn payload_bytes(&self) -> u64 {
-        self.rows * u64::from(self.columns) * 4
+        self.rows.saturating_mul(u64::from(self.columns) * 4)
     }
 
     pub fn encode(&self) -> [u8; HEADER_LEN] {
@@ -97,7 +97,7 @@ impl StepHeader {
             time: f64::from_bits(u64_at(32)),
             checksum: u128::from_le_bytes(file[40..56].try_into().expect("16 bytes")),
         };
-        if !ALLOWED_COLUMNS.contains(&header.columns) {
+        if !(1..=MAX_COLUMNS).contains(&header.columns) {
             return Err(FormatError::Columns(header.columns));
         }
         let actual = (file.len() - HEADER_LEN) as u64;

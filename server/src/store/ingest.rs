@@ -10,7 +10,8 @@
 //! so a rejected push leaves the store as it was. Every error names the field (`shape`,
 //! `descr`, `positions[3][1]`, …) or the byte offset in the body where the input went wrong.
 
-use super::format::{StepHeader, ALLOWED_COLUMNS, HEADER_LEN};
+use super::format::{StepHeader, HEADER_LEN};
+use crate::kind::StepLayout;
 use axum::body::Bytes;
 use isoray_protocol::api::{JsonStep, RAW_STEP_HEADER_LEN, RAW_STEP_MAGIC};
 use std::fs::File;
@@ -20,9 +21,6 @@ use xxhash_rust::xxh3::Xxh3;
 
 /// Bytes of rows converted and written per batch.
 const BATCH_BYTES: usize = 1 << 20;
-
-/// Names of the columns, for error messages.
-const COLUMN_NAMES: [&str; 8] = ["x", "y", "z", "radius", "strength", "r", "g", "b"];
 
 /// What went wrong with a push, and where.
 #[derive(Debug, thiserror::Error)]
@@ -200,9 +198,10 @@ impl Read for BodyReader {
     }
 }
 
-/// Limits a push is checked against.
+/// What a push is checked against: its scene's step layout and the limits.
 #[derive(Clone, Copy, Debug)]
 pub struct IngestLimits {
+    pub layout: StepLayout,
     pub max_rows: u64,
     /// Largest step file, in bytes (the smaller of the per-scene and total budgets).
     pub max_step_bytes: u64,
@@ -312,6 +311,12 @@ impl StepWriter {
             .seek(SeekFrom::Start(0))
             .and_then(|_| self.file.write_all(&header.encode()))
             .and_then(|()| self.file.sync_all())
+            .and_then(|()| {
+                // Write-once: the store maps step files and never opens them for writing again.
+                let mut permissions = self.file.metadata()?.permissions();
+                permissions.set_readonly(true);
+                self.file.set_permissions(permissions)
+            })
             .map_err(IngestError::io)?;
         Ok(WrittenStep {
             temp: self.temp,
@@ -323,6 +328,7 @@ impl StepWriter {
 /// Checks a batch of whole rows. `first_row` numbers the batch's first row; `value_offset`
 /// maps a value's position in the batch to its byte offset in the body.
 fn check_rows(
+    layout: StepLayout,
     values: &[f32],
     columns: usize,
     first_row: u64,
@@ -330,28 +336,22 @@ fn check_rows(
 ) -> Result<(), IngestError> {
     // A branch-free pass first (it vectorises); the slow search only runs on bad data.
     let all_finite = values.iter().fold(true, |ok, v| ok & v.is_finite());
-    let radii_positive = columns < 4
-        || values
-            .chunks_exact(columns)
-            .fold(true, |ok, row| ok & (row[3] > 0.0));
-    if all_finite && radii_positive {
+    if all_finite && layout.rows_valid(values, columns) {
         return Ok(());
     }
     for (i, v) in values.iter().enumerate() {
         let (row, col) = (first_row + (i / columns) as u64, i % columns);
-        let bad = if !v.is_finite() {
-            Some(format!("is {v}, not a finite number"))
-        } else if col == 3 && *v <= 0.0 {
-            Some(format!("is {v}; a radius must be positive"))
+        let bad = if v.is_finite() {
+            layout.check_value(col, *v)
         } else {
-            None
+            Some(format!("is {v}, not a finite number"))
         };
         if let Some(what) = bad {
             return Err(IngestError::invalid(
                 "invalid_value",
                 format!(
                     "row {row}, column {col} ({}) {what} (byte offset {})",
-                    COLUMN_NAMES[col],
+                    layout.column_name(col),
                     value_offset(i)
                 ),
             )
@@ -366,13 +366,13 @@ fn check_rows(
 fn check_shape(rows: u64, columns: u64, limits: &IngestLimits) -> Result<u32, IngestError> {
     let columns = u32::try_from(columns)
         .ok()
-        .filter(|c| ALLOWED_COLUMNS.contains(c))
+        .filter(|c| limits.layout.allowed_columns().contains(c))
         .ok_or_else(|| {
             IngestError::invalid(
                 "bad_shape",
                 format!(
-                    "an array of {columns} columns; a metaball step has 3 (x y z), 4 (+ radius), \
-                     5 (+ strength) or 8 (+ r g b)"
+                    "an array of {columns} columns; {}",
+                    limits.layout.columns_help()
                 ),
             )
             .at_field("shape")
@@ -384,7 +384,9 @@ fn check_shape(rows: u64, columns: u64, limits: &IngestLimits) -> Result<u32, In
         )
         .at_field("shape"));
     }
-    let step_bytes = rows * u64::from(columns) * 4 + HEADER_LEN as u64;
+    let step_bytes = rows
+        .saturating_mul(u64::from(columns) * 4)
+        .saturating_add(HEADER_LEN as u64);
     if step_bytes > limits.max_step_bytes {
         return Err(IngestError {
             kind: IngestErrorKind::TooLarge,
@@ -402,6 +404,7 @@ fn check_shape(rows: u64, columns: u64, limits: &IngestLimits) -> Result<u32, In
 
 /// Reads `rows × columns` values of `dtype`, starting at the reader's current offset.
 fn copy_values(
+    layout: StepLayout,
     body: &mut BodyReader,
     dtype: Dtype,
     rows: u64,
@@ -433,7 +436,7 @@ fn copy_values(
             ),
         }
         let size = dtype.size() as u64;
-        check_rows(&values, columns as usize, row, |i| {
+        check_rows(layout, &values, columns as usize, row, |i| {
             batch_offset + i as u64 * size
         })?;
         writer.write_rows(&values)?;
@@ -504,7 +507,7 @@ pub fn ingest_npy(
     };
     let columns = check_shape(rows, columns, limits)?;
     let mut writer = StepWriter::create(target.temp_path, columns)?;
-    copy_values(&mut body, dtype, rows, columns, &mut writer)?;
+    copy_values(limits.layout, &mut body, dtype, rows, columns, &mut writer)?;
     body.expect_end()?;
     writer.finish(rows, target.index, target.time)
 }
@@ -599,7 +602,7 @@ pub fn ingest_raw(
     let rows = u64::from_le_bytes(h[8..16].try_into().expect("8 bytes"));
     let columns = check_shape(rows, columns, limits).map_err(|e| e.at_offset(6))?;
     let mut writer = StepWriter::create(target.temp_path, columns)?;
-    copy_values(&mut body, dtype, rows, columns, &mut writer)?;
+    copy_values(limits.layout, &mut body, dtype, rows, columns, &mut writer)?;
     body.expect_end()?;
     writer.finish(rows, target.index, target.time)
 }
@@ -662,7 +665,7 @@ pub fn ingest_json(
         }
         values.extend(row[..columns].iter().map(|&v| v as f32));
     }
-    check_rows(&values, columns, 0, |_| 0).map_err(|mut e| {
+    check_rows(limits.layout, &values, columns, 0, |_| 0).map_err(|mut e| {
         // Name the JSON field rather than a row/column pair.
         if let Some(field) = e.field.take() {
             let nums: Vec<usize> = field
@@ -706,6 +709,7 @@ mod tests {
 
     fn limits() -> IngestLimits {
         IngestLimits {
+            layout: StepLayout::Metaballs,
             max_rows: 1000,
             max_step_bytes: 1 << 20,
         }

@@ -15,17 +15,26 @@
 //! every step's header and payload checksum are verified; a damaged step is renamed to
 //! `.corrupt` with a log line and not served, and temporary files are removed.
 //!
+//! Memory mapping: a loaded step's file is mapped read-only (the `filebuffer` crate, a safe API
+//! over `mmap`, so the server keeps `unsafe_code = "forbid"`), and its payload is served and
+//! turned into primitives straight from the mapping. The contract that makes this sound is
+//! the store's own: a step file is written once under a temporary name, made read-only, and
+//! renamed into place; nothing opens it for writing again. Replacing a step renames a new file
+//! over the name and deleting unlinks it, and an existing mapping keeps the old inode alive,
+//! so a mapped view never changes underneath a reader. Editing the data directory by hand
+//! while the server runs is outside this contract, as it is for any database.
+//!
 //! Architecture invariant: everything here blocks on the file system; the HTTP handlers call
 //! it through `spawn_blocking`, never on the async runtime's threads.
 
 pub mod format;
 pub mod ingest;
-mod mmap;
 
+use crate::kind::SceneSetup;
+use filebuffer::FileBuffer;
 use format::{checksum_hex, verify_payload, StepHeader, HEADER_LEN};
 use ingest::WrittenStep;
 use isoray_protocol::api::{CreateScene, SceneKind, StepInfo};
-use memmap2::Mmap;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::fs::File;
@@ -59,7 +68,7 @@ pub struct StoredStep {
     pub file_bytes: u64,
     /// Write order across the whole store: retention evicts the smallest first.
     seq: u64,
-    map: Mmap,
+    map: FileBuffer,
     path: PathBuf,
 }
 
@@ -89,6 +98,8 @@ impl StoredStep {
 /// A pushed scene and its steps.
 pub struct StoredScene {
     pub meta: SceneMeta,
+    /// `meta.spec`, validated and converted.
+    pub setup: SceneSetup,
     dir: PathBuf,
     steps: RwLock<BTreeMap<u64, Arc<StoredStep>>>,
     /// Serialises commits, deletions and evictions of this scene's steps.
@@ -230,6 +241,19 @@ impl Store {
                     drop(step);
                     quarantine(&path, "the file name does not match the step index inside");
                 }
+                Ok(step)
+                    if !scene
+                        .setup
+                        .layout()
+                        .allowed_columns()
+                        .contains(&step.header.columns) =>
+                {
+                    drop(step);
+                    quarantine(
+                        &path,
+                        "the step's column count does not fit the scene's kind",
+                    );
+                }
                 Ok(step) => {
                     scene
                         .write_steps()
@@ -275,7 +299,11 @@ impl Store {
     }
 
     /// Writes a new scene's directory crash-safely and registers it.
-    pub fn create_scene(&self, meta: SceneMeta) -> std::io::Result<Arc<StoredScene>> {
+    pub fn create_scene(
+        &self,
+        meta: SceneMeta,
+        setup: SceneSetup,
+    ) -> std::io::Result<Arc<StoredScene>> {
         let scenes_dir = self.root.join("scenes");
         let temp = scenes_dir.join(format!(".tmp-{}", meta.id));
         let dir = scenes_dir.join(&meta.id);
@@ -290,6 +318,7 @@ impl Store {
         sync_dir(&scenes_dir)?;
         let scene = Arc::new(StoredScene {
             meta,
+            setup,
             dir,
             steps: RwLock::new(BTreeMap::new()),
             commit: Mutex::new(()),
@@ -468,6 +497,14 @@ fn load_scene(dir: &Path) -> Result<(StoredScene, LoadedSteps), String> {
     if meta.id != file_name(dir) {
         return Err(format!("scene.json names scene {}", meta.id));
     }
+    let setup =
+        SceneSetup::from_spec(&meta.spec, &crate::effects::EffectLimits::ENGINE).map_err(|e| {
+            format!(
+                "scene.json: {} ({})",
+                e.message,
+                e.field.as_deref().unwrap_or("spec")
+            )
+        })?;
     let steps_dir = dir.join("steps");
     let mut steps = Vec::new();
     let entries = std::fs::read_dir(&steps_dir).map_err(|e| format!("steps/: {e}"))?;
@@ -494,6 +531,7 @@ fn load_scene(dir: &Path) -> Result<(StoredScene, LoadedSteps), String> {
     Ok((
         StoredScene {
             meta,
+            setup,
             dir: dir.to_path_buf(),
             steps: RwLock::new(BTreeMap::new()),
             commit: Mutex::new(()),
@@ -511,8 +549,7 @@ fn open_step(path: &Path, seq: u64) -> Result<StoredStep, String> {
 
 /// Maps a step file and checks its header; the payload checksum was computed while writing.
 fn open_step_trusted(path: &Path, seq: u64) -> std::io::Result<StoredStep> {
-    let file = File::open(path)?;
-    let map = mmap::map_readonly(&file)?;
+    let map = FileBuffer::open(path)?;
     let header = StepHeader::decode(&map).map_err(std::io::Error::other)?;
     Ok(StoredStep {
         header,
