@@ -151,8 +151,8 @@ pub struct PreparedState {
     pub update_us: u32,
     /// Time to build the acceleration structure, microseconds.
     pub build_us: u32,
-    /// The time of the stored step this state shows (`None` for demos, whose states are
-    /// functions of the requested time, and before a stored scene's first step).
+    /// For a stored scene, the time of the step this state shows (0 before its first step);
+    /// `None` for demos, whose states are functions of the requested time.
     pub step_time: Option<f64>,
 }
 
@@ -360,7 +360,7 @@ impl SceneEntry {
                 prepared,
                 update_us: micros(t1 - t0),
                 build_us: micros(t1.elapsed()),
-                step_time: step.map(|s| s.header.time),
+                step_time: Some(step.map_or(0.0, |s| s.header.time)),
             }
         };
         match step {

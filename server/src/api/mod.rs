@@ -63,14 +63,17 @@ const DEFAULT_RENDER_SIZE: (u32, u32) = (640, 480);
             rows are `x y z [radius [strength [r g b]]]`. Errors are JSON `{code, message, \
             field?, offset?}`."
     ),
-    paths(stream_doc),
+    paths(stream_doc, index_doc, asset_doc, healthz_doc, metrics_doc),
     components(schemas(
         ApiErrorBody, CreateScene, CreatedScene, SceneInfo, SceneInfoList, StepInfo, StepList,
         PushResult, JsonStep, RenderRequest, ApiCamera, LightingSpec, LightSpec,
         MetaballDefaults, SceneKind, ImageFormat
     )),
     modifiers(&BearerSecurity),
-    tags((name = "scenes", description = "Scenes, their steps, and images of them"))
+    tags(
+        (name = "scenes", description = "Scenes, their steps, and images of them"),
+        (name = "server", description = "The browser viewer, health and metrics")
+    )
 )]
 struct ApiDoc;
 
@@ -139,7 +142,8 @@ impl<S: Send + Sync> FromRequestParts<S> for ClientAddr {
 }
 
 /// The websocket that streams frames of a scene (protocol v1, see PROTOCOL.md). Served by
-/// the app router; described here so the document lists every route.
+/// the app router; described here, like the other routes of `lib.rs`, so the document lists
+/// every route (a test checks each `.route(...)` in the source against it).
 #[utoipa::path(
     get,
     path = "/api/v1/scenes/{id}/stream",
@@ -153,6 +157,50 @@ impl<S: Send + Sync> FromRequestParts<S> for ClientAddr {
 )]
 #[allow(dead_code)] // documentation only: `lib.rs` routes this path to `stream`
 async fn stream_doc() {}
+
+/// The browser viewer.
+#[utoipa::path(
+    get,
+    path = "/",
+    tag = "server",
+    responses((status = 200, description = "The viewer's page", content_type = "text/html"))
+)]
+#[allow(dead_code)] // documentation only: `lib.rs` routes this path
+async fn index_doc() {}
+
+/// A file of the browser viewer (`app.js`, `protocol.js`, `style.css`, ...).
+#[utoipa::path(
+    get,
+    path = "/{file}",
+    tag = "server",
+    params(("file" = String, Path, description = "File name")),
+    responses(
+        (status = 200, description = "The file"),
+        (status = 404, description = "No such file", content_type = "text/plain")
+    )
+)]
+#[allow(dead_code)] // documentation only: `lib.rs` routes this path
+async fn asset_doc() {}
+
+/// Liveness: answers `ok` while the server runs.
+#[utoipa::path(
+    get,
+    path = "/healthz",
+    tag = "server",
+    responses((status = 200, description = "`ok`", content_type = "text/plain"))
+)]
+#[allow(dead_code)] // documentation only: `lib.rs` routes this path
+async fn healthz_doc() {}
+
+/// Prometheus metrics in the text exposition format.
+#[utoipa::path(
+    get,
+    path = "/metrics",
+    tag = "server",
+    responses((status = 200, description = "Metrics", content_type = "text/plain"))
+)]
+#[allow(dead_code)] // documentation only: `lib.rs` routes this path
+async fn metrics_doc() {}
 
 /// This document.
 #[utoipa::path(
@@ -264,8 +312,20 @@ async fn read_json<T: serde::de::DeserializeOwned>(
     body: Body,
 ) -> Result<T, ApiError> {
     let limit = app.config().max_json_bytes;
-    let bytes = axum::body::to_bytes(body, usize::try_from(limit).unwrap_or(usize::MAX))
+    let timeout = Duration::from_secs(app.config().push_timeout_secs);
+    let read = axum::body::to_bytes(body, usize::try_from(limit).unwrap_or(usize::MAX));
+    let bytes = tokio::time::timeout(timeout, read)
         .await
+        .map_err(|_| {
+            ApiError::new(
+                StatusCode::REQUEST_TIMEOUT,
+                "timeout",
+                format!(
+                    "the body did not arrive within {} s (--push-timeout-secs)",
+                    timeout.as_secs()
+                ),
+            )
+        })?
         .map_err(|e| {
             too_large(limit).with_message(format!(
                 "the body could not be read within the limit of {limit} bytes: {e}"

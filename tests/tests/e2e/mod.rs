@@ -5,4 +5,4 @@ mod lifecycle;
 mod metrics;
 mod slow_client;
 mod stream;
-mod support;
+pub mod support;
