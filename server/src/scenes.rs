@@ -12,7 +12,7 @@ use crate::store::{Retention, Store, StoredScene, StoredStep};
 use isoray_protocol::api::{SceneInfo, SceneKind};
 use isoray_protocol::SceneSummary;
 use isoray_render::scenes::DemoScene;
-use isoray_render::{Camera, PreparedScene, Scene};
+use isoray_render::{Camera, Lighting, PreparedScene, Scene};
 use std::collections::{BTreeMap, VecDeque};
 use std::sync::{Arc, Mutex, RwLock};
 use std::time::Instant;
@@ -256,7 +256,8 @@ impl SceneEntry {
     /// How the scene is lit and shaded (demo scenes keep one look for all their states).
     pub fn lighting(&self) -> &Lighting {
         match &self.source {
-            Source::Demo { lighting, .. } | Source::Stored { lighting, .. } => lighting,
+            Source::Demo { lighting, .. } => lighting,
+            Source::Stored { setup, .. } => &setup.lighting,
         }
     }
 
