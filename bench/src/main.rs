@@ -3,6 +3,7 @@
 //! measures and at what size.
 
 mod common;
+mod ingest;
 mod metaballs;
 mod tets;
 
@@ -24,6 +25,8 @@ enum Command {
     Build(metaballs::BuildArgs),
     /// The tet paper's tables (§8): builds, fps, traversal counters, memory, time steps.
     Tets(tets::TetsArgs),
+    /// Store ingest: MB/s of `.npy` steps pushed over loopback HTTP into the scene store.
+    Ingest(ingest::IngestArgs),
 }
 
 fn main() {
@@ -32,6 +35,7 @@ fn main() {
         Command::Metaballs(args) => metaballs::run(args),
         Command::Build(args) => metaballs::build_ablation(args),
         Command::Tets(args) => tets::run(args),
+        Command::Ingest(args) => ingest::run(args),
     };
     if let Err(e) = result {
         eprintln!("isoray-bench: {e}");
