@@ -344,6 +344,10 @@ pub struct RenderRequest {
     /// JPEG quality 1–100 (default 90).
     #[serde(default)]
     pub quality: Option<u8>,
+    /// Effect changes over the scene's own starting effects (as in the `effects` websocket
+    /// message). One pass is traced: soft effects are not refined as on a still view.
+    #[serde(default)]
+    pub effects: Option<crate::effects::EffectChanges>,
 }
 
 /// Every API error: a stable code, a message for people, and where the input was wrong.

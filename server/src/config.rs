@@ -7,7 +7,13 @@ use std::path::PathBuf;
 
 /// isoray: a remote ray tracer for dynamic implicit surfaces and isosurfaces.
 #[derive(Clone, Debug, Parser)]
-#[command(name = "isoray", version, about)]
+#[command(
+    name = "isoray",
+    version,
+    about,
+    after_help = "Other commands: `isoray push --help` (push .npy steps to a server), \
+                  `isoray render --help` (one image of a scene, offline)."
+)]
 pub struct Config {
     /// Address to listen on.
     #[arg(long, env = "ISORAY_LISTEN", default_value = "127.0.0.1:8080")]

@@ -1,4 +1,8 @@
-//! The `isoray` binary: parse flags, start logging, serve until Ctrl-C or SIGTERM.
+//! The `isoray` binary: parse flags, start logging, serve until Ctrl-C or SIGTERM. With no
+//! arguments it serves the built-in demos on 127.0.0.1:8080. Two commands do other things:
+//! `isoray push` sends step files to a server and `isoray render` draws one image offline.
+
+mod cli;
 
 use clap::Parser;
 use isoray_server::{serve, AppState, Config};
@@ -6,6 +10,26 @@ use tokio::net::TcpListener;
 use tracing_subscriber::EnvFilter;
 
 fn main() -> std::process::ExitCode {
+    // The commands are picked by the first argument, so that every flag-only (or empty)
+    // command line still starts the server exactly as before.
+    let command = std::env::args_os().nth(1);
+    let outcome = match command.as_ref().and_then(|c| c.to_str()) {
+        Some("push") => Some(cli::push::run(cli::push::PushArgs::parse_from(
+            std::env::args_os().skip(1),
+        ))),
+        Some("render") => Some(cli::render::run(cli::render::RenderArgs::parse_from(
+            std::env::args_os().skip(1),
+        ))),
+        _ => None,
+    };
+    match outcome {
+        Some(Ok(())) => return std::process::ExitCode::SUCCESS,
+        Some(Err(e)) => {
+            eprintln!("isoray: {e}");
+            return std::process::ExitCode::FAILURE;
+        }
+        None => {}
+    }
     let config = Config::parse();
     let filter = EnvFilter::try_new(&config.log).unwrap_or_else(|e| {
         eprintln!(

@@ -990,6 +990,13 @@ async fn render(
             ApiError::bad_request("invalid_value", "time must be in [0, 1e9]").field("time"),
         );
     }
+    let limits = crate::effects::EffectLimits::from_config(app.config());
+    let mut fx = crate::effects::clamp(&entry.lighting().effects, &limits);
+    if let Some(changes) = &req.effects {
+        fx = crate::effects::apply(&fx, changes, &limits).map_err(|e| {
+            ApiError::bad_request("invalid_value", e.message).field(format!("effects.{}", e.field))
+        })?;
+    }
     let view = View {
         width,
         height,
@@ -1004,7 +1011,9 @@ async fn render(
             (_, Some(_)) => entry.prepared_step(step.as_deref()),
             (_, None) => entry.prepared_at(time, false),
         };
-        let fb = job_app.backend().render(&state.prepared, &view);
+        let (fb, _) = job_app
+            .backend()
+            .render_effects(&state.prepared, &view, &fx);
         let encoded = match format {
             ImageFormat::Png => crate::encode::png(&fb),
             ImageFormat::Jpeg => crate::encode::jpeg(&fb, quality),

@@ -1,6 +1,7 @@
 //! The REST API and the scene store over real sockets: wrong pushes, crash safety under
 //! SIGKILL, the Python example watched live over a websocket, limits, and the OpenAPI document.
 
+mod cli;
 mod crash;
 mod limits;
 mod openapi;
@@ -12,8 +13,11 @@ use isoray_server::api::client::{npy_header_f32, Body, Client, Response};
 use isoray_server::{AppState, Config};
 use serde_json::Value;
 use std::collections::BTreeMap;
+use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
 use std::sync::OnceLock;
+use std::time::Duration;
 
 /// A server in-process on an ephemeral port over a data directory.
 pub struct Server {
@@ -207,4 +211,53 @@ pub fn repo_root() -> PathBuf {
         .parent()
         .expect("tests/ is inside the repository")
         .to_path_buf()
+}
+
+/// A running `isoray` child process and its base URL.
+pub struct Process {
+    child: Child,
+    pub base: String,
+}
+
+impl Process {
+    pub fn start(data_dir: &Path) -> Process {
+        let dir = data_dir.to_str().expect("utf-8 path");
+        Process::spawn(&["--data-dir", dir], &[])
+    }
+
+    /// Starts `isoray --listen 127.0.0.1:0 --threads 1 ARGS` with extra environment variables.
+    pub fn spawn(args: &[&str], env: &[(&str, &std::ffi::OsStr)]) -> Process {
+        let mut child = Command::new(isoray_binary())
+            .args(["--listen", "127.0.0.1:0", "--threads", "1", "--log", "info"])
+            .args(args)
+            .envs(env.iter().copied())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::inherit())
+            .spawn()
+            .expect("isoray starts");
+        let stdout = child.stdout.take().expect("piped stdout");
+        let (tx, rx) = std::sync::mpsc::channel();
+        // Drain the child's output for its whole life so it never blocks on a full pipe.
+        std::thread::spawn(move || {
+            for line in BufReader::new(stdout).lines().map_while(Result::ok) {
+                if let Some(at) = line.find("http://") {
+                    let url: String = line[at..]
+                        .chars()
+                        .take_while(|c| !c.is_whitespace())
+                        .collect();
+                    let _ = tx.send(url.trim_end_matches('/').to_string());
+                }
+            }
+        });
+        let base = rx
+            .recv_timeout(Duration::from_secs(60))
+            .expect("isoray prints the address it serves on");
+        Process { child, base }
+    }
+
+    /// SIGKILL: no shutdown code runs.
+    pub fn kill(mut self) {
+        self.child.kill().expect("SIGKILL");
+        self.child.wait().expect("reaped");
+    }
 }

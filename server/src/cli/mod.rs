@@ -1,0 +1,5 @@
+//! The `isoray` binary's commands besides serving: `isoray push` (steps from files to a
+//! server) and `isoray render` (one image of a scene, offline).
+
+pub mod push;
+pub mod render;

@@ -1,0 +1,272 @@
+//! `isoray render`: one image of a scene, offline: no server, no network. The scene is a
+//! description (the JSON body of `POST /api/v1/scenes`) plus one step file, or a built-in
+//! demo at a time. Step files go through the same validating parsers as pushed steps, and the
+//! image is the one the server's `POST /api/v1/scenes/{id}/render` gives for the same scene,
+//! step, camera, isovalue, size and effects (a test compares them byte for byte).
+
+use clap::Parser;
+use isoray_protocol::api::{ApiCamera, CreateScene, JsonStep};
+use isoray_protocol::effects::EffectChanges;
+use isoray_render::scenes::DemoScene;
+use isoray_render::{Camera, CpuBackend, Scene, View};
+use isoray_server::api::convert;
+use isoray_server::effects::{self, EffectLimits};
+use isoray_server::kind::SceneSetup;
+use isoray_server::store::format::{verify_payload, StepHeader, HEADER_LEN};
+use isoray_server::store::ingest::{
+    ingest_json, ingest_npy, ingest_raw, BodyReader, IngestLimits, Target,
+};
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+/// Render one image of a scene file, offline.
+///
+/// Either a step file (`.npy`, a JSON step `.json`, a store `.step` file, or a raw `ISRA`
+/// array) with an optional scene description (`--spec`), or a built-in demo (`--demo ID`).
+/// The output's extension picks PNG or JPEG.
+#[derive(Debug, Parser)]
+#[command(name = "isoray render")]
+pub struct RenderArgs {
+    /// The step to show.
+    #[arg(required_unless_present = "demo", conflicts_with = "demo")]
+    pub step: Option<PathBuf>,
+    /// Scene description: a JSON file like the body of `POST /api/v1/scenes` (default:
+    /// `{"kind": "metaballs"}`).
+    #[arg(long, conflicts_with = "demo")]
+    pub spec: Option<PathBuf>,
+    /// A built-in demo scene instead of a step file (e.g. `blobs`).
+    #[arg(long)]
+    pub demo: Option<String>,
+    /// Time of the demo scene, seconds.
+    #[arg(long, default_value_t = 0.0, requires = "demo")]
+    pub time: f64,
+    /// Where to write the image: `.png`, `.jpg` or `.jpeg`.
+    #[arg(long, short)]
+    pub output: PathBuf,
+    #[arg(long, default_value_t = 640)]
+    pub width: u32,
+    #[arg(long, default_value_t = 480)]
+    pub height: u32,
+    /// Isovalue (default: the scene's).
+    #[arg(long)]
+    pub isovalue: Option<f64>,
+    /// Camera position `x,y,z` (default: the scene's camera).
+    #[arg(long, value_parser = parse_vec3, allow_hyphen_values = true)]
+    pub eye: Option<[f64; 3]>,
+    /// Point the camera looks at, `x,y,z`.
+    #[arg(long, value_parser = parse_vec3, allow_hyphen_values = true)]
+    pub target: Option<[f64; 3]>,
+    /// Vertical field of view in degrees.
+    #[arg(long)]
+    pub fov: Option<f64>,
+    /// Effect changes over the scene's own, as JSON (as in the `effects` websocket message),
+    /// e.g. `{"shadows": true}`.
+    #[arg(long)]
+    pub effects: Option<String>,
+    /// JPEG quality, 1–100.
+    #[arg(long, default_value_t = 90)]
+    pub quality: u8,
+    /// Render threads (0: one per core).
+    #[arg(long, default_value_t = 0)]
+    pub threads: usize,
+}
+
+fn parse_vec3(s: &str) -> Result<[f64; 3], String> {
+    let v: Vec<f64> = s
+        .split(',')
+        .map(|p| p.trim().parse::<f64>())
+        .collect::<Result<_, _>>()
+        .map_err(|e| format!("`{s}`: {e}; expected x,y,z"))?;
+    <[f64; 3]>::try_from(v).map_err(|_| format!("`{s}`: expected three numbers x,y,z"))
+}
+
+/// What was loaded: the scene state and what a viewer starts with.
+struct Loaded {
+    scene: Scene,
+    camera: Camera,
+    isovalue: f32,
+}
+
+/// Runs the command; the error is what to print.
+pub fn run(args: RenderArgs) -> Result<(), String> {
+    let loaded = match &args.demo {
+        Some(id) => {
+            let demo = DemoScene::ALL
+                .iter()
+                .copied()
+                .find(|d| d.id() == id)
+                .ok_or_else(|| {
+                    let ids: Vec<&str> = DemoScene::ALL.iter().map(|d| d.id()).collect();
+                    format!("no demo `{id}`; the demos are {}", ids.join(", "))
+                })?;
+            if !(args.time.is_finite() && args.time >= 0.0) {
+                return Err(format!(
+                    "--time {} must be a non-negative number",
+                    args.time
+                ));
+            }
+            Loaded {
+                scene: demo.state_at(args.time),
+                camera: demo.default_camera(),
+                isovalue: demo.default_isovalue(),
+            }
+        }
+        None => {
+            let step = args
+                .step
+                .as_deref()
+                .ok_or("a step file or --demo is needed")?;
+            load(args.spec.as_deref(), step)?
+        }
+    };
+    let error = |e: isoray_server::api::error::ApiError| {
+        format!(
+            "{}{}",
+            e.field.map(|f| format!("{f}: ")).unwrap_or_default(),
+            e.message
+        )
+    };
+    let camera = if args.eye.is_some() || args.target.is_some() || args.fov.is_some() {
+        let c = loaded.camera;
+        let api = ApiCamera {
+            eye: args.eye.unwrap_or(c.eye.to_array().map(f64::from)),
+            target: args.target.unwrap_or(c.target.to_array().map(f64::from)),
+            up: c.up.to_array().map(f64::from),
+            fov_y_deg: args.fov.unwrap_or(f64::from(c.fov_y_deg)),
+        };
+        convert::camera(&api, "camera").map_err(error)?
+    } else {
+        loaded.camera
+    };
+    let isovalue = match args.isovalue {
+        Some(v) if v.is_finite() && v > 0.0 => v as f32,
+        Some(v) => return Err(format!("--isovalue {v} must be a positive number")),
+        None => loaded.isovalue,
+    };
+    for (name, v) in [("--width", args.width), ("--height", args.height)] {
+        if !(1..=16384).contains(&v) {
+            return Err(format!("{name} {v} must be in 1..=16384"));
+        }
+    }
+    let limits = EffectLimits::ENGINE;
+    let mut fx = effects::clamp(&loaded.scene.lighting.effects, &limits);
+    if let Some(text) = &args.effects {
+        let changes: EffectChanges =
+            serde_json::from_str(text).map_err(|e| format!("--effects: {e}"))?;
+        fx = effects::apply(&fx, &changes, &limits)
+            .map_err(|e| format!("--effects: {}: {}", e.field, e.message))?;
+    }
+    let format = match args
+        .output
+        .extension()
+        .map(|e| e.to_string_lossy().to_ascii_lowercase())
+        .as_deref()
+    {
+        Some("png") => Format::Png,
+        Some("jpg" | "jpeg") => Format::Jpeg,
+        _ => {
+            return Err(format!(
+                "{}: write .png, .jpg or .jpeg",
+                args.output.display()
+            ))
+        }
+    };
+    if !(1..=100).contains(&args.quality) {
+        return Err(format!("--quality {} must be in 1..=100", args.quality));
+    }
+    let backend = CpuBackend::new(args.threads).map_err(|e| e.to_string())?;
+    let prepared = Arc::new(loaded.scene).prepare();
+    let view = View {
+        width: args.width,
+        height: args.height,
+        camera,
+        isovalue,
+    };
+    let (fb, _) = backend.render_effects(&prepared, &view, &fx);
+    let bytes = match format {
+        Format::Png => isoray_server::encode::png(&fb),
+        Format::Jpeg => isoray_server::encode::jpeg(&fb, args.quality),
+    }
+    .map_err(|e| e.to_string())?;
+    std::fs::write(&args.output, bytes).map_err(|e| format!("{}: {e}", args.output.display()))?;
+    println!(
+        "wrote {} ({}×{})",
+        args.output.display(),
+        args.width,
+        args.height
+    );
+    Ok(())
+}
+
+enum Format {
+    Png,
+    Jpeg,
+}
+
+/// Reads the scene description and the step, checking both as the server would.
+fn load(spec_path: Option<&Path>, step_path: &Path) -> Result<Loaded, String> {
+    let spec: CreateScene = match spec_path {
+        Some(p) => {
+            let text = std::fs::read(p).map_err(|e| format!("{}: {e}", p.display()))?;
+            serde_json::from_slice(&text).map_err(|e| format!("{}: {e}", p.display()))?
+        }
+        None => serde_json::from_str(r#"{"kind":"metaballs"}"#).map_err(|e| e.to_string())?,
+    };
+    let setup = SceneSetup::from_spec(&spec, &EffectLimits::ENGINE).map_err(|e| {
+        format!(
+            "{}: {}{}",
+            spec_path.map_or("scene".into(), |p| p.display().to_string()),
+            e.field.map(|f| format!("{f}: ")).unwrap_or_default(),
+            e.message
+        )
+    })?;
+    let bytes = std::fs::read(step_path).map_err(|e| format!("{}: {e}", step_path.display()))?;
+    let shown = step_path.display();
+    let ext = step_path
+        .extension()
+        .map(|e| e.to_string_lossy().to_ascii_lowercase());
+    let (columns, payload) = if ext.as_deref() == Some("step") {
+        // A step file from a store's data directory, checked like the store checks it.
+        let header = StepHeader::decode(&bytes).map_err(|e| format!("{shown}: {e}"))?;
+        verify_payload(&header, &bytes[HEADER_LEN..]).map_err(|e| format!("{shown}: {e}"))?;
+        (header.columns, bytes[HEADER_LEN..].to_vec())
+    } else {
+        let limits = IngestLimits {
+            layout: setup.layout(),
+            max_rows: u64::from(u32::MAX),
+            max_step_bytes: u64::MAX,
+        };
+        let target = Target {
+            temp_path: std::env::temp_dir().join(format!(
+                ".tmp-isoray-render-{}-{}.step",
+                std::process::id(),
+                isoray_server::api::auth::random_hex(8)
+            )),
+            index: 0,
+            time: 0.0,
+        };
+        let written = match ext.as_deref() {
+            Some("npy") => ingest_npy(BodyReader::from_bytes(bytes.into()), &limits, target),
+            Some("json") => {
+                let step: JsonStep =
+                    serde_json::from_slice(&bytes).map_err(|e| format!("{shown}: {e}"))?;
+                ingest_json(&step, &limits, target)
+            }
+            _ => ingest_raw(BodyReader::from_bytes(bytes.into()), &limits, target),
+        }
+        .map_err(|e| {
+            format!(
+                "{shown}: {}{}",
+                e.field.map(|f| format!("{f}: ")).unwrap_or_default(),
+                e.message
+            )
+        })?;
+        let file = std::fs::read(written.temp.path()).map_err(|e| e.to_string())?;
+        (written.header.columns, file[HEADER_LEN..].to_vec())
+    };
+    Ok(Loaded {
+        scene: setup.scene(Some((columns, &payload))),
+        camera: setup.camera,
+        isovalue: setup.isovalue,
+    })
+}
