@@ -291,7 +291,9 @@ mod tests {
             .flat_map(|v| v.to_le_bytes())
             .collect();
         let scene = setup.scene(Some((3, &payload)));
-        let Geometry::Metaballs(m) = &scene.geometry;
+        let Geometry::Metaballs(m) = &scene.geometry else {
+            panic!("a metaball scene gives metaball geometry");
+        };
         assert_eq!(m.kernel, Kernel::Quartic);
         assert_eq!(m.balls.len(), 2);
         assert_eq!(m.balls[0].center, Vec3::new(1.0, 2.0, 3.0));
