@@ -5,8 +5,8 @@
 //! With the `openapi` feature every type also derives `utoipa::ToSchema`, so the server's
 //! generated OpenAPI document describes exactly these shapes.
 //!
-//! Binary step payloads are described in `PROTOCOL.md`'s REST section and on
-//! [`RAW_STEP_MAGIC`]: a NumPy `.npy` array or a raw little-endian array with a 16-byte header.
+//! Binary step payloads are described in the README's API section and on [`RAW_STEP_MAGIC`]:
+//! a NumPy `.npy` array or a raw little-endian array with a 16-byte header.
 
 pub use crate::effects::{
     ClipBoxSpec, EffectChanges, FloorSpec, GroupSpec, IsosurfaceSpec, LightKind, MaterialSpec,
