@@ -459,3 +459,130 @@ fn accelerations_render_the_same_image_on_every_paper_scene() {
     }
     assert!(problems.is_empty(), "{}", problems.join("\n"));
 }
+
+#[test]
+fn extreme_but_finite_balls_render_without_panicking() {
+    // Values validation lets through (finite, positive radius) but that push f32 to its
+    // limits: every mode and finder must answer without panicking or hanging.
+    let extremes = [
+        Metaball::sphere(Vec3::splat(1e30), 1.0, 1.0, Vec3::ONE),
+        Metaball::sphere(Vec3::ZERO, 1e-30, 1.0, Vec3::ONE),
+        Metaball::sphere(Vec3::new(0.5, 0.0, 0.0), 1e30, 1e-30, Vec3::ONE),
+        Metaball::sphere(Vec3::new(-1e-7, 0.0, 0.0), 0.7, 1e30, Vec3::ONE),
+        Metaball::sphere(Vec3::new(0.0, 1e-7, 0.0), 0.7, -1e30, Vec3::ONE),
+        Metaball::sphere(Vec3::new(0.2, 0.1, 0.0), 1.0, 1.0, Vec3::ONE),
+        Metaball::sphere(Vec3::new(0.2, 0.1, 0.0), 1.0, 1.0, Vec3::ONE),
+    ];
+    let scene = MetaballScene::new(Kernel::Wyvill, extremes.to_vec());
+    scene.validate(100).expect("finite and positive: valid");
+    for accel in [
+        AccelKind::BruteForce,
+        AccelKind::ActiveList,
+        AccelKind::Tree(BuildOptions::bvh()),
+        AccelKind::Tree(BuildOptions::fitted(0.5)),
+    ] {
+        for finder in RootFinder::ALL {
+            let options = PrepareOptions::fitted(0.5)
+                .with_accel(accel)
+                .with_finder(finder);
+            let engine = PreparedMetaballs::new(scene.clone(), options);
+            for ray in random_rays(7, 64) {
+                let _ = engine.first_hit(&ray, 0.0, T_MAX, 0.5);
+            }
+        }
+    }
+}
+
+/// Where Debian's `pymol-data` keeps its PDB files (`bash .ci/run` installs the package).
+const PYMOL_DATA: &str = "/usr/share/pymol/data";
+
+#[test]
+fn real_molecules_from_pymol_data_load_and_render_like_brute_force() {
+    use isoray_render::metaball::pdb::{molecule_scene, parse_pdb, Element};
+    use isoray_render::Camera;
+    // HIV-1 protease with an inhibitor (old format: serial numbers where newer files keep the
+    // element), and a larger complex with element columns.
+    for file in ["tut/1hpv.pdb", "demo/1tii.pdb"] {
+        let path = std::path::Path::new(PYMOL_DATA).join(file);
+        let text = std::fs::read_to_string(&path).unwrap_or_else(|e| {
+            panic!(
+                "{}: {e}; install Debian's pymol-data (bash .ci/run does)",
+                path.display()
+            )
+        });
+        let records = text
+            .lines()
+            .take_while(|l| !l.starts_with("ENDMDL"))
+            .filter(|l| l.starts_with("ATOM") || l.starts_with("HETATM"))
+            .count();
+        let atoms = parse_pdb(&text).expect("a real PDB file parses");
+        assert_eq!(atoms.len(), records, "{file}: one ball per atom record");
+        assert!(atoms.len() > 1000, "{file}: {} atoms", atoms.len());
+        // Proteins are carbon, nitrogen, oxygen and sulphur (these files carry no hydrogens).
+        let organic = atoms
+            .iter()
+            .filter(|a| matches!(a.element, Element::C | Element::N | Element::O | Element::S))
+            .count();
+        let carbon = atoms.iter().filter(|a| a.element == Element::C).count();
+        assert!(
+            organic * 100 >= atoms.len() * 98,
+            "{file}: {organic} of {}",
+            atoms.len()
+        );
+        assert!(
+            carbon * 2 > atoms.len(),
+            "{file}: carbon is the majority ({carbon})"
+        );
+        let scene = molecule_scene(&atoms);
+        scene.validate(usize::MAX).expect("valid balls");
+        let (lo, hi) = scene.bounds().expect("atoms");
+        let center = 0.5 * (lo + hi);
+        let radius = 0.5 * (hi - lo).length();
+        let camera = Camera {
+            eye: center + Vec3::new(0.3, 0.4, 1.7) * radius,
+            target: center,
+            up: Vec3::Y,
+            fov_y_deg: 40.0,
+        };
+        let rays = camera.rays(40, 30);
+        let isovalue = 0.5;
+        let fbvh = PreparedMetaballs::new(
+            scene.clone(),
+            PrepareOptions {
+                tolerance: TOLERANCE,
+                ..PrepareOptions::fitted(0.25)
+            },
+        );
+        let brute = PreparedMetaballs::new(
+            scene.clone(),
+            PrepareOptions {
+                tolerance: TOLERANCE,
+                ..PrepareOptions::fitted(0.25)
+            }
+            .with_accel(AccelKind::BruteForce),
+        );
+        let mut hits = 0;
+        for y in 0..30 {
+            for x in 0..40 {
+                let ray = rays.through_pixel(x, y);
+                let a = fbvh.first_hit(&ray, 0.0, T_MAX, isovalue).map(|h| h.t);
+                let b = brute.first_hit(&ray, 0.0, T_MAX, isovalue).map(|h| h.t);
+                hits += a.is_some() as usize;
+                let agree = match (a, b) {
+                    (Some(a), Some(b)) => (a - b).abs() <= 2.0 * TOLERANCE,
+                    (None, None) => true,
+                    _ => false,
+                };
+                assert!(
+                    agree || explained_by_grazing(&scene, &ray, isovalue, [a, b]),
+                    "{file} pixel ({x}, {y}): FBVH {a:?}, brute force {b:?}"
+                );
+            }
+        }
+        eprintln!("{file}: {} atoms, {hits} of 1200 pixels hit", atoms.len());
+        assert!(
+            hits > 200 && hits < 1200,
+            "{file}: the molecule fills part of the view ({hits})"
+        );
+    }
+}

@@ -2,10 +2,15 @@
 //! the caches of prepared states, so every session watching the same state shares one
 //! acceleration structure.
 //!
-//! A demo is a pure function of time, cached per scene for the last few times. A stored scene
-//! is a sequence of pushed steps: a live viewer sees the newest step, a viewer who pins a time
-//! sees the step with the largest time not after it. Prepared stored steps share one cache
-//! bounded in bytes across all scenes (`--cache-bytes`), least recently used first out.
+//! A demo is a pure function of time, cached per scene for the last few times. Its states are
+//! built on a build pool of their own, apart from the render pool, and live views are
+//! pipelined as in fitted-bvh-metaballs.txt Fig. 7: a live request takes the newest state
+//! already built and starts building the state at the current time, so the build of state
+//! k+1 overlaps the rendering of state k (see [`DemoPipeline`]). A pinned time gets exactly
+//! that state. A stored scene is a sequence of pushed steps: a live viewer sees the newest
+//! step, a viewer who pins a time sees the step with the largest time not after it. Prepared
+//! stored steps share one cache bounded in bytes across all scenes (`--cache-bytes`), least
+//! recently used first out.
 
 use crate::kind::SceneSetup;
 use crate::store::{Retention, Store, StoredScene, StoredStep};
@@ -14,7 +19,7 @@ use isoray_protocol::SceneSummary;
 use isoray_render::scenes::DemoScene;
 use isoray_render::{Camera, Lighting, PreparedScene, Scene};
 use std::collections::{BTreeMap, VecDeque};
-use std::sync::{Arc, Mutex, RwLock};
+use std::sync::{Arc, Condvar, Mutex, RwLock};
 use std::time::Instant;
 
 /// Prepared states kept per demo scene: the live step plus a few pinned ones.
@@ -34,14 +39,22 @@ pub struct SceneRegistry {
 }
 
 impl SceneRegistry {
-    /// The built-in demo scenes only.
+    /// The built-in demo scenes only, built on a pool of one thread per core.
     pub fn with_demos() -> SceneRegistry {
-        SceneRegistry::new(None, 0)
+        SceneRegistry::new(None, 0, 0, 1.0 / 30.0)
     }
 
-    /// The demos plus every scene in `store`, with a prepared-step cache of `cache_bytes`.
-    pub fn new(store: Option<Arc<Store>>, cache_bytes: u64) -> SceneRegistry {
+    /// The demos plus every scene in `store`, with a prepared-step cache of `cache_bytes`;
+    /// demo states are built on a pool of `build_threads` (0: one per core), live ones at
+    /// least `frame_interval_secs` apart.
+    pub fn new(
+        store: Option<Arc<Store>>,
+        cache_bytes: u64,
+        build_threads: usize,
+        frame_interval_secs: f64,
+    ) -> SceneRegistry {
         let cache = Arc::new(PreparedCache::new(cache_bytes));
+        let builder = Arc::new(Builder::new(build_threads));
         let stored = store
             .iter()
             .flat_map(|s| s.scenes())
@@ -53,7 +66,11 @@ impl SceneRegistry {
         SceneRegistry {
             demos: DemoScene::ALL
                 .iter()
-                .map(|&demo| Arc::new(SceneEntry::demo_entry(demo)))
+                .map(|&demo| {
+                    let pipeline =
+                        DemoPipeline::new(demo, Arc::clone(&builder), frame_interval_secs);
+                    Arc::new(SceneEntry::demo_entry(demo, pipeline))
+                })
                 .collect(),
             stored: RwLock::new(stored),
             store,
@@ -87,7 +104,12 @@ impl SceneRegistry {
                 }
             }
         });
-        SceneRegistry::new(store, config.cache_bytes)
+        SceneRegistry::new(
+            store,
+            config.cache_bytes,
+            config.threads,
+            1.0 / config.max_fps,
+        )
     }
 
     /// The store of pushed scenes, when the server has a data directory.
@@ -151,8 +173,9 @@ pub struct PreparedState {
     pub update_us: u32,
     /// Time to build the acceleration structure, microseconds.
     pub build_us: u32,
-    /// For a stored scene, the time of the step this state shows (0 before its first step);
-    /// `None` for demos, whose states are functions of the requested time.
+    /// The time of the state shown, when it is not simply the requested time: a stored
+    /// scene's step (0 before its first step), or the demo state a live view shows (the
+    /// newest built, up to a frame away from the view's clock).
     pub step_time: Option<f64>,
 }
 
@@ -190,7 +213,7 @@ enum Source {
         primitives: usize,
         isovalue_range: (f32, f32),
         lighting: Lighting,
-        cache: Mutex<Vec<(u64, PreparedState)>>,
+        pipeline: DemoPipeline,
     },
     Stored {
         scene: Arc<StoredScene>,
@@ -200,7 +223,7 @@ enum Source {
 }
 
 impl SceneEntry {
-    fn demo_entry(demo: DemoScene) -> SceneEntry {
+    fn demo_entry(demo: DemoScene, pipeline: DemoPipeline) -> SceneEntry {
         let first = demo.state_at(0.0);
         SceneEntry {
             id: demo.id().to_string(),
@@ -209,7 +232,7 @@ impl SceneEntry {
                 primitives: first.primitive_count(),
                 isovalue_range: first.isovalue_range(),
                 lighting: first.lighting.clone(),
-                cache: Mutex::new(Vec::with_capacity(CACHED_STATES)),
+                pipeline,
             },
         }
     }
@@ -335,7 +358,8 @@ impl SceneEntry {
     /// cache hit reports zero update and build time.
     pub fn prepared_at(&self, time: f64, live: bool) -> PreparedState {
         match &self.source {
-            Source::Demo { demo, cache, .. } => demo_prepared_at(*demo, cache, time),
+            Source::Demo { pipeline, .. } if live => pipeline.live(time),
+            Source::Demo { pipeline, .. } => pipeline.pinned(time),
             Source::Stored { scene, .. } => {
                 let step = if live {
                     scene.latest()
@@ -375,36 +399,289 @@ impl SceneEntry {
     }
 }
 
-fn demo_prepared_at(
+/// The pool demo states are built on: apart from the render pool, so that a render thread
+/// waiting for a build never waits for work queued behind itself, and sized to every core,
+/// so a build (which forks on rayon) uses both cores while a frame renders.
+pub struct Builder {
+    pool: Option<rayon::ThreadPool>,
+}
+
+impl Builder {
+    fn new(threads: usize) -> Builder {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .thread_name(|i| format!("isoray-build-{i}"))
+            .build();
+        if let Err(e) = &pool {
+            tracing::warn!(error = %e, "no build pool: demo states are built where they are needed");
+        }
+        Builder { pool: pool.ok() }
+    }
+
+    /// Runs `job` on the pool without waiting.
+    fn spawn(&self, job: impl FnOnce() + Send + 'static) {
+        match &self.pool {
+            Some(pool) => pool.spawn(job),
+            None => job(),
+        }
+    }
+}
+
+/// One demo state being built: waiters block on it (they are render threads; the build runs
+/// on the build pool, so it always makes progress).
+struct Pending {
+    slot: Mutex<PendingSlot>,
+    done: Condvar,
+}
+
+enum PendingSlot {
+    Building,
+    Ready(PreparedState),
+    /// The build panicked; waiters build for themselves.
+    Failed,
+}
+
+impl Pending {
+    fn wait(&self) -> Option<PreparedState> {
+        let mut slot = self.slot.lock().unwrap_or_else(|e| e.into_inner());
+        loop {
+            match &*slot {
+                PendingSlot::Building => {
+                    slot = self.done.wait(slot).unwrap_or_else(|e| e.into_inner())
+                }
+                PendingSlot::Ready(state) => return Some(state.clone()),
+                PendingSlot::Failed => return None,
+            }
+        }
+    }
+
+    fn finish(&self, outcome: PendingSlot) {
+        *self.slot.lock().unwrap_or_else(|e| e.into_inner()) = outcome;
+        self.done.notify_all();
+    }
+}
+
+/// Marks a build failed if it unwinds before finishing.
+struct FailOnDrop(Option<Arc<Pending>>);
+
+impl Drop for FailOnDrop {
+    fn drop(&mut self) {
+        if let Some(pending) = self.0.take() {
+            pending.finish(PendingSlot::Failed);
+        }
+    }
+}
+
+/// A demo's prepared states and its live pipeline (fitted-bvh-metaballs.txt Fig. 7).
+///
+/// A live request takes the newest live state built since the previous live request took
+/// one; if there is none it waits for the build in flight (or, at the very start, builds its
+/// own time). Then, if no build is in flight, it starts building the state one frame period
+/// ahead on the build pool and returns without waiting: that build runs while this frame
+/// renders, and the next live request shows it. The frame period is the spacing of recent
+/// live requests, at least the frame interval. A live view thus shows states up to a frame
+/// away from its clock, and the frame header carries the time of the state shown. A pinned
+/// request gets exactly its time, built then if not cached.
+pub struct DemoPipeline {
     demo: DemoScene,
-    cache: &Mutex<Vec<(u64, PreparedState)>>,
+    builder: Arc<Builder>,
+    frame_interval_secs: f64,
+    inner: Arc<Mutex<PipelineState>>,
+}
+
+/// One prepared demo state in the cache.
+struct Cached {
     time: f64,
-) -> PreparedState {
-    let key = time.to_bits();
-    // A poisoned lock only means another render panicked; the cache holds plain values.
-    let mut cache = cache.lock().unwrap_or_else(|e| e.into_inner());
-    if let Some((_, hit)) = cache.iter().find(|(k, _)| *k == key) {
-        return PreparedState {
+    state: PreparedState,
+    /// Built by the live pipeline (pinned states are not offered to live views).
+    live: bool,
+    /// Whether a frame has shown it yet.
+    served: bool,
+}
+
+#[derive(Default)]
+struct PipelineState {
+    /// Built states, oldest first.
+    ready: VecDeque<Cached>,
+    /// The live build in flight.
+    in_flight: Option<(f64, Arc<Pending>)>,
+    /// Time of the newest state a live request took.
+    last_live: Option<f64>,
+    /// The previous live request's time, and the smoothed spacing of live requests.
+    last_request: Option<f64>,
+    spacing_secs: f64,
+}
+
+impl PipelineState {
+    fn newest_live(&mut self) -> Option<&mut Cached> {
+        self.ready
+            .iter_mut()
+            .filter(|e| e.live)
+            .max_by(|a, b| a.time.total_cmp(&b.time))
+    }
+
+    fn insert(&mut self, cached: Cached) {
+        if self.ready.len() >= CACHED_STATES {
+            self.ready.pop_front();
+        }
+        self.ready.push_back(cached);
+    }
+
+    /// Takes the cached state at `time` for a frame.
+    fn take(&mut self, time: f64, live: bool) -> Option<PreparedState> {
+        let entry = self
+            .ready
+            .iter_mut()
+            .find(|e| e.time == time && (e.live || !live))?;
+        let first_use = !std::mem::replace(&mut entry.served, true);
+        Some(served(entry.state.clone(), first_use))
+    }
+}
+
+impl DemoPipeline {
+    fn new(demo: DemoScene, builder: Arc<Builder>, frame_interval_secs: f64) -> DemoPipeline {
+        DemoPipeline {
+            demo,
+            builder,
+            frame_interval_secs,
+            inner: Arc::new(Mutex::new(PipelineState::default())),
+        }
+    }
+
+    fn lock(&self) -> std::sync::MutexGuard<'_, PipelineState> {
+        // A poisoned lock only means another thread panicked; the state holds plain values.
+        self.inner.lock().unwrap_or_else(|e| e.into_inner())
+    }
+
+    /// The state a live view whose clock reads `time` shows (see the type's documentation).
+    pub fn live(&self, time: f64) -> PreparedState {
+        let mut inner = self.lock();
+        if let Some(previous) = inner.last_request {
+            // A viewer that paused does not stretch the estimate past a second.
+            let gap = (time - previous).min(1.0);
+            if gap > 0.0 {
+                inner.spacing_secs = if inner.spacing_secs > 0.0 {
+                    0.75 * inner.spacing_secs + 0.25 * gap
+                } else {
+                    gap
+                };
+            }
+        }
+        inner.last_request = Some(time);
+        let last_live = inner.last_live;
+        let fresh = inner
+            .newest_live()
+            .filter(|e| last_live.is_none_or(|l| e.time > l))
+            .map(|e| e.time);
+        let shown = match (fresh, inner.in_flight.clone()) {
+            (Some(t), _) => inner.take(t, true).map(|s| (t, s)),
+            (None, Some((t, pending))) => {
+                drop(inner);
+                let state = pending.wait();
+                inner = self.lock();
+                state.and_then(|_| inner.take(t, true)).map(|s| (t, s))
+            }
+            (None, None) => {
+                let newest = inner.newest_live().map(|e| e.time);
+                match newest.filter(|&n| n >= time) {
+                    // Nothing newer is due (another viewer took it): show it again.
+                    Some(t) => inner.take(t, true).map(|s| (t, s)),
+                    None => {
+                        let pending = self.start(time);
+                        inner.in_flight = Some((time, Arc::clone(&pending)));
+                        drop(inner);
+                        let state = pending.wait();
+                        inner = self.lock();
+                        state
+                            .and_then(|_| inner.take(time, true))
+                            .map(|s| (time, s))
+                    }
+                }
+            }
+        };
+        let Some((shown_time, state)) = shown else {
+            // The build failed or was evicted at once: build here.
+            drop(inner);
+            return self.pinned(time);
+        };
+        inner.last_live = Some(inner.last_live.map_or(shown_time, |l| l.max(shown_time)));
+        if inner.in_flight.is_none() {
+            let next = time.max(shown_time) + inner.spacing_secs.max(self.frame_interval_secs);
+            let pending = self.start(next);
+            inner.in_flight = Some((next, pending));
+        }
+        state
+    }
+
+    /// Exactly the state at `time`.
+    pub fn pinned(&self, time: f64) -> PreparedState {
+        if let Some(state) = self.lock().take(time, false) {
+            return state;
+        }
+        let state = build_demo(self.demo, time);
+        self.lock().insert(Cached {
+            time,
+            state: state.clone(),
+            live: false,
+            served: true,
+        });
+        state
+    }
+
+    /// Starts building the live state at `time` on the build pool.
+    fn start(&self, time: f64) -> Arc<Pending> {
+        let pending = Arc::new(Pending {
+            slot: Mutex::new(PendingSlot::Building),
+            done: Condvar::new(),
+        });
+        let (demo, inner, job_pending) = (self.demo, Arc::clone(&self.inner), Arc::clone(&pending));
+        self.builder.spawn(move || {
+            let mut guard = FailOnDrop(Some(Arc::clone(&job_pending)));
+            let state = build_demo(demo, time);
+            {
+                let mut inner = inner.lock().unwrap_or_else(|e| e.into_inner());
+                inner.insert(Cached {
+                    time,
+                    state: state.clone(),
+                    live: true,
+                    served: false,
+                });
+                inner.in_flight = None;
+            }
+            guard.0 = None;
+            job_pending.finish(PendingSlot::Ready(state));
+        });
+        pending
+    }
+}
+
+/// A cached state as a frame reports it: the first frame to show a state reports what it
+/// cost to make (for a prefetched state, work that overlapped the previous frame); later
+/// frames report zero.
+fn served(state: PreparedState, first_use: bool) -> PreparedState {
+    if first_use {
+        state
+    } else {
+        PreparedState {
             update_us: 0,
             build_us: 0,
-            ..hit.clone()
-        };
+            ..state
+        }
     }
+}
+
+/// Generates and prepares the demo's state at `time` (on the calling thread's pool).
+fn build_demo(demo: DemoScene, time: f64) -> PreparedState {
     let t0 = Instant::now();
     let scene: Scene = demo.state_at(time);
     let t1 = Instant::now();
     let prepared = Arc::new(scene).prepare();
-    let state = PreparedState {
+    PreparedState {
         prepared,
         update_us: micros(t1 - t0),
         build_us: micros(t1.elapsed()),
-        step_time: None,
-    };
-    if cache.len() == CACHED_STATES {
-        cache.remove(0);
+        step_time: Some(time),
     }
-    cache.push((key, state.clone()));
-    state
 }
 
 type CacheKey = (String, u64, u128);
@@ -492,4 +769,47 @@ impl PreparedCache {
 /// A duration in whole microseconds, saturating.
 pub fn micros(d: std::time::Duration) -> u32 {
     u32::try_from(d.as_micros()).unwrap_or(u32::MAX)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::time::Duration;
+
+    /// Waits until the pipeline has no build in flight.
+    fn settle(p: &DemoPipeline) {
+        let deadline = Instant::now() + Duration::from_secs(60);
+        while p.lock().in_flight.is_some() {
+            assert!(Instant::now() < deadline, "the build finishes");
+            std::thread::sleep(Duration::from_millis(5));
+        }
+    }
+
+    #[test]
+    fn a_live_frame_starts_building_the_next_state_and_the_next_frame_shows_it() {
+        let p = DemoPipeline::new(DemoScene::Tornado4k, Arc::new(Builder::new(2)), 0.1);
+        // Cold start: the first state is built for the request itself.
+        let first = p.live(1.0);
+        assert_eq!(first.step_time, Some(1.0));
+        assert!(first.build_us > 0);
+        // Returning, it left the next state (one frame interval ahead) building on the pool,
+        // to run while this frame renders (fitted-bvh-metaballs.txt Fig. 7).
+        assert_eq!(p.lock().in_flight.as_ref().map(|f| f.0), Some(1.1));
+        settle(&p);
+        let second = p.live(1.05);
+        assert_eq!(second.step_time, Some(1.1), "the prefetched state, not a new build");
+        assert!(second.build_us > 0, "its first frame reports its build");
+        // The request spacing (0.05 s) is below the frame interval: the next is 0.1 ahead.
+        let next = p.lock().in_flight.as_ref().map(|f| f.0);
+        assert!(next.is_some_and(|t| (t - 1.2).abs() < 1e-9), "{next:?}");
+        settle(&p);
+        // A pinned view gets exactly its time, and the same state twice reports no build.
+        let pinned = p.pinned(7.0);
+        assert_eq!(pinned.step_time, Some(7.0));
+        assert!(pinned.build_us > 0);
+        let again = p.pinned(7.0);
+        assert_eq!((again.step_time, again.build_us), (Some(7.0), 0));
+        // Pinned states are never offered to live views.
+        assert!(p.live(1.1).step_time.is_some_and(|t| (t - 1.2).abs() < 1e-9));
+    }
 }

@@ -582,7 +582,7 @@ fn render_frame(
             trace_us: micros(t1 - t0),
             encode_us: micros(t1.elapsed()),
         },
-        // A stored scene's frame shows its step's time, not the live clock's.
+        // A stored scene's frame shows its step's time, a live demo's the state it shows.
         scene_time: state.step_time.unwrap_or(time),
     };
     m::stage("update", header.timings.update_us);

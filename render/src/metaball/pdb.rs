@@ -125,21 +125,33 @@ pub fn parse_pdb(text: &str) -> Result<Vec<Atom>, PdbError> {
             coord(38, 46, "y")?,
             coord(46, 54, "z")?,
         );
-        let symbol = field(76, 78).trim();
-        let element = if symbol.is_empty() {
-            // Old files: the atom name's letters, e.g. " CA " is carbon alpha.
-            let name: String = field(12, 16)
-                .chars()
-                .filter(|c| c.is_ascii_alphabetic())
-                .take(1)
-                .collect();
-            Element::from_symbol(&name)
-        } else {
-            Element::from_symbol(symbol)
-        };
+        let element = element_of(field(76, 78), field(12, 16), line.starts_with("HETATM"));
         atoms.push(Atom { position, element });
     }
     Ok(atoms)
+}
+
+/// The element of a record: the symbol in columns 77–78 when it is one (old files keep a
+/// serial number there), else the atom name's columns 13–14, where PDB right-justifies the
+/// symbol: " CA " is a carbon (alpha), "CA  " in a `HETATM` calcium, "1HG1" a hydrogen.
+fn element_of(symbol: &str, name: &str, hetero: bool) -> Element {
+    let symbol = symbol.trim();
+    if !symbol.is_empty() && symbol.chars().all(|c| c.is_ascii_alphabetic()) {
+        return Element::from_symbol(symbol);
+    }
+    let name: Vec<char> = name.chars().collect();
+    let first = name.first().copied().unwrap_or(' ');
+    let second = name.get(1).copied().unwrap_or(' ');
+    if first == ' ' || first.is_ascii_digit() {
+        return Element::from_symbol(&second.to_string());
+    }
+    if hetero && second.is_ascii_alphabetic() {
+        let two = Element::from_symbol(&format!("{first}{second}"));
+        if two != Element::Other {
+            return two;
+        }
+    }
+    Element::from_symbol(&first.to_string())
 }
 
 /// The atoms as Wyvill balls, centred on their centroid.
@@ -172,6 +184,9 @@ HEADER    TINY TEST
 ATOM      1  O   HOH A   1       0.000   0.000   0.000  1.00  0.00           O
 ATOM      2  H1  HOH A   1       0.957   0.000   0.000  1.00  0.00           H
 HETATM    3  H2  HOH A   1      -0.240   0.927   0.000  1.00  0.00
+HETATM    4 FE   HEM A   2       1.000   1.000   1.000  1.00  0.00      1HPV 186
+HETATM    5 1HG1 VAL A   3       2.000   1.000   1.000  1.00  0.00
+ATOM      6  CA  GLY A   4       3.000   1.000   1.000  1.00  0.00      1HPV 187
 ENDMDL
 ATOM      4  C   XXX A   2       9.000   9.000   9.000  1.00  0.00           C
 ";
@@ -179,13 +194,16 @@ ATOM      4  C   XXX A   2       9.000   9.000   9.000  1.00  0.00           C
     #[test]
     fn parses_atoms_elements_and_stops_at_the_first_model() {
         let atoms = parse_pdb(WATER).expect("parses");
-        assert_eq!(atoms.len(), 3);
+        assert_eq!(atoms.len(), 6);
         assert_eq!(atoms[0].element, Element::O);
         assert_eq!(atoms[1].element, Element::H);
         assert_eq!(atoms[2].element, Element::H, "from the atom name");
+        assert_eq!(atoms[3].element, Element::Fe, "a two-letter hetero atom");
+        assert_eq!(atoms[4].element, Element::H, "a digit before the symbol");
+        assert_eq!(atoms[5].element, Element::C, "an alpha carbon, not calcium");
         assert!((atoms[1].position.x - 0.957).abs() < 1e-6);
         let scene = molecule_scene(&atoms);
-        assert_eq!(scene.balls.len(), 3);
+        assert_eq!(scene.balls.len(), 6);
         assert!((scene.balls[0].radius - 3.04).abs() < 1e-6);
         scene.validate(10).expect("valid");
     }

@@ -9,6 +9,8 @@ mod push_errors;
 mod python_example;
 mod restart;
 
+mod bad_balls;
+
 use isoray_server::api::client::{npy_header_f32, Body, Client, Response};
 use isoray_server::{AppState, Config};
 use serde_json::Value;

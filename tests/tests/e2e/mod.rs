@@ -3,6 +3,7 @@
 mod bad_input;
 mod lifecycle;
 mod metrics;
+mod paper_scenes;
 mod slow_client;
 mod stream;
 pub mod support;
