@@ -797,7 +797,11 @@ mod tests {
         assert_eq!(p.lock().in_flight.as_ref().map(|f| f.0), Some(1.1));
         settle(&p);
         let second = p.live(1.05);
-        assert_eq!(second.step_time, Some(1.1), "the prefetched state, not a new build");
+        assert_eq!(
+            second.step_time,
+            Some(1.1),
+            "the prefetched state, not a new build"
+        );
         assert!(second.build_us > 0, "its first frame reports its build");
         // The request spacing (0.05 s) is below the frame interval: the next is 0.1 ahead.
         let next = p.lock().in_flight.as_ref().map(|f| f.0);
@@ -810,6 +814,9 @@ mod tests {
         let again = p.pinned(7.0);
         assert_eq!((again.step_time, again.build_us), (Some(7.0), 0));
         // Pinned states are never offered to live views.
-        assert!(p.live(1.1).step_time.is_some_and(|t| (t - 1.2).abs() < 1e-9));
+        assert!(p
+            .live(1.1)
+            .step_time
+            .is_some_and(|t| (t - 1.2).abs() < 1e-9));
     }
 }

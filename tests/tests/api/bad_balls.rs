@@ -1,13 +1,15 @@
 //! Bad metaball data in a pushed step — a NaN or infinite position, a zero or negative radius,
 //! more balls than `--max-primitives` — is refused with a 4xx that names the offending ball
-//! (row and column, or the JSON field with its index), and nothing stored changes.
+//! (row and column, or the JSON field with its index), and nothing stored changes. (The
+//! issue's list, each case on its own; `push_errors` covers every other way a push is wrong.)
 
 use super::*;
 
 #[tokio::test]
 async fn bad_balls_are_refused_naming_the_ball_and_nothing_changes() {
     let dir = tempfile::tempdir().expect("temp dir");
-    let (base, stop, handle) = start(dir.path(), &["--max-primitives", "4"]).await;
+    let server = Server::start(dir.path(), &["--max-primitives", "4"]).await;
+    let base = server.base.clone();
     call(move || {
         let (id, token) = create(&base);
         // Rows are x y z radius.
@@ -79,6 +81,5 @@ async fn bad_balls_are_refused_naming_the_ball_and_nothing_changes() {
         assert_eq!(steps(&base, &id), before, "refused pushes stored nothing");
     })
     .await;
-    let _ = stop.send(());
-    handle.await.expect("server task").expect("server ran");
+    server.stop().await;
 }

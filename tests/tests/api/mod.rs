@@ -1,6 +1,7 @@
 //! The REST API and the scene store over real sockets: wrong pushes, crash safety under
 //! SIGKILL, the Python example watched live over a websocket, limits, and the OpenAPI document.
 
+mod bad_balls;
 mod cli;
 mod crash;
 mod limits;
@@ -8,8 +9,6 @@ mod openapi;
 mod push_errors;
 mod python_example;
 mod restart;
-
-mod bad_balls;
 
 use isoray_server::api::client::{npy_header_f32, Body, Client, Response};
 use isoray_server::{AppState, Config};
