@@ -354,3 +354,195 @@ mod tests {
         assert!(one.hit_count() < 37 * 23, "and some background");
     }
 }
+
+#[cfg(test)]
+mod effects_tests {
+    use super::*;
+    use crate::effects::{Effects, RayKind};
+    use crate::scenes::DemoScene;
+    use crate::shade::Lighting;
+    use crate::{Scene, View};
+    use std::sync::Arc;
+
+    fn view(demo: DemoScene) -> View {
+        View {
+            width: 40,
+            height: 30,
+            camera: demo.default_camera(),
+            isovalue: 0.5,
+        }
+    }
+
+    /// Renders `scene` with `a` and with `b` and asserts equal ray counts per kind and
+    /// identical images; returns the counts.
+    fn same_rays(scene: &PreparedScene, v: &View, a: Effects, b: Effects) -> RayCounts {
+        let backend = CpuBackend::new(2).expect("pool");
+        let (fa, ra) = backend.render_effects(scene, v, &a);
+        let (fb, rb) = backend.render_effects(scene, v, &b);
+        for kind in RayKind::ALL {
+            assert_eq!(
+                ra.rays.get(kind),
+                rb.rays.get(kind),
+                "{} rays differ between {a:?} and {b:?}",
+                kind.name()
+            );
+        }
+        assert_eq!(fa, fb, "the images differ");
+        ra.rays
+    }
+
+    #[test]
+    fn effects_no_material_can_use_trace_no_rays() {
+        // Blobs: one directional light, one opaque, non-reflective material.
+        let demo = DemoScene::Blobs;
+        let scene = Arc::new(demo.state_at(1.0)).prepare();
+        let v = view(demo);
+        let pixels = (v.width * v.height) as u64;
+        let off = Effects::OFF;
+        let rays = same_rays(
+            &scene,
+            &v,
+            off,
+            Effects {
+                reflections: true,
+                depth: 3,
+                refraction: true,
+                transparency: true,
+                soft_shadows: true,
+                clip_box: true,
+                isosurfaces: true,
+                ..off
+            },
+        );
+        assert_eq!(rays.get(RayKind::Primary), pixels);
+        assert_eq!(rays.total(), pixels, "ray casting alone");
+
+        // With shadows on (so the full integrator runs), unusable effects still add nothing.
+        let shadows = Effects {
+            shadows: true,
+            ..off
+        };
+        let rays = same_rays(
+            &scene,
+            &v,
+            shadows,
+            Effects {
+                reflections: true,
+                refraction: true,
+                transparency: true,
+                depth: 3,
+                ..shadows
+            },
+        );
+        assert!(rays.get(RayKind::Shadow) > 0, "the light casts shadows");
+        assert_eq!(rays.get(RayKind::Reflection), 0);
+        assert_eq!(rays.get(RayKind::Refraction), 0);
+        assert_eq!(rays.get(RayKind::Transparency), 0);
+
+        // No light: shadows switched on trace nothing.
+        let dark = Scene {
+            lighting: Lighting {
+                lights: Vec::new(),
+                ..Lighting::default()
+            },
+            ..demo.state_at(1.0)
+        };
+        let dark = Arc::new(dark).prepare();
+        let rays = same_rays(&dark, &v, off, shadows);
+        assert_eq!(rays.total(), pixels);
+    }
+
+    #[test]
+    fn effects_a_material_uses_trace_their_rays() {
+        let demo = DemoScene::Glass;
+        let scene = Arc::new(demo.state_at(1.0)).prepare();
+        let v = view(demo);
+        let backend = CpuBackend::new(2).expect("pool");
+        let on = Effects {
+            depth: 1,
+            ..scene.scene().lighting.effects
+        };
+        let (_, rays) = backend.render_effects(&scene, &v, &on);
+        for kind in [RayKind::Shadow, RayKind::Reflection, RayKind::Refraction] {
+            assert!(rays.rays.get(kind) > 0, "{} rays", kind.name());
+        }
+        let deeper = Effects { depth: 3, ..on };
+        let (_, deep) = backend.render_effects(&scene, &v, &deeper);
+        assert!(deep.rays.get(RayKind::Reflection) > rays.rays.get(RayKind::Reflection));
+    }
+
+    fn soft_shadow_view() -> (PreparedScene, View, Effects) {
+        let demo = DemoScene::Glass;
+        let scene = Arc::new(demo.state_at(1.0)).prepare();
+        let effects = Effects {
+            shadows: true,
+            soft_shadows: true,
+            light_samples: 2,
+            ..Effects::OFF
+        };
+        (scene, view(demo), effects)
+    }
+
+    #[test]
+    fn refinement_of_soft_shadows_converges() {
+        let (scene, v, effects) = soft_shadow_view();
+        let backend = CpuBackend::new(2).expect("pool");
+        let mut acc = Accumulator::new(40);
+        acc.threshold = 0.0;
+        let mut deltas = Vec::new();
+        loop {
+            backend.refine(&scene, &v, &effects, &mut acc);
+            if acc.passes() >= 2 {
+                deltas.push(acc.last_delta());
+            }
+            if acc.converged() {
+                break;
+            }
+        }
+        assert_eq!(acc.passes(), 40);
+        // The change from one pass to the next falls monotonically on average: its means over
+        // blocks of eight passes strictly decrease (it goes as 1/k for a running mean).
+        let blocks: Vec<f32> = deltas
+            .chunks(8)
+            .map(|c| c.iter().sum::<f32>() / c.len() as f32)
+            .collect();
+        assert!(
+            blocks.windows(2).all(|w| w[1] < w[0]),
+            "block means {blocks:?}"
+        );
+        assert!(blocks[0] > 0.0, "soft shadows are sampled");
+        assert!(
+            blocks[blocks.len() - 1] < blocks[0] / 4.0,
+            "block means {blocks:?}"
+        );
+    }
+
+    #[test]
+    fn refinement_stops_once_converged() {
+        let (scene, v, effects) = soft_shadow_view();
+        let backend = CpuBackend::new(2).expect("pool");
+        let mut acc = Accumulator::new(2000);
+        let mut image = backend.refine(&scene, &v, &effects, &mut acc);
+        while !acc.converged() {
+            image = backend.refine(&scene, &v, &effects, &mut acc);
+        }
+        let passes = acc.passes();
+        assert!(
+            (2..2000).contains(&passes),
+            "converged by its threshold after {passes} passes"
+        );
+        assert!(acc.last_delta() < acc.threshold);
+        // Converged: further calls render nothing and return the same image.
+        let again = backend.refine(&scene, &v, &effects, &mut acc);
+        assert_eq!(acc.passes(), passes);
+        assert_eq!(again, image);
+        // Without anything random in the plan, one pass is final.
+        let hard = Effects {
+            soft_shadows: false,
+            ..effects
+        };
+        let mut acc = Accumulator::new(2000);
+        backend.refine(&scene, &v, &hard, &mut acc);
+        assert!(acc.converged() && acc.passes() == 1);
+    }
+}

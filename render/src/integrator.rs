@@ -247,7 +247,10 @@ impl<'a> Tracer<'a> {
             color += self.local(&material, hit, normal, view, above, rng);
         }
 
-        let transmits = material.is_transparent() && (self.plan.layers > 0);
+        // Transparency is on (some visible material is transparent) when either kind of
+        // transmitted ray is planned; with neither, transparent surfaces look opaque.
+        let transmits =
+            material.is_transparent() && (self.plan.layers > 0 || self.plan.refraction_depth > 0);
         if transmits {
             let behind = if material.is_refractive() && depth < self.plan.refraction_depth {
                 Some(self.refract(&material, hit, normal, view, entering, depth, layers, rng))

@@ -19,6 +19,7 @@
 
 pub mod backend;
 pub mod camera;
+mod demo_effects;
 pub mod effects;
 pub mod framebuffer;
 pub mod integrator;

@@ -9,6 +9,7 @@
 //! travelling waves). All use Wyvill's kernel at `T = 0.5`.
 
 use crate::camera::Camera;
+use crate::demo_effects;
 use crate::metaball::pdb::Element;
 use crate::metaball::{Kernel, Metaball, MetaballScene};
 use crate::scene::{Geometry, Scene};
@@ -34,10 +35,17 @@ pub enum DemoScene {
     Pool,
     /// A tet mesh with a time-varying gyroid field (tetrahedral-isosurface-ray-tracing.txt).
     TetGyroid,
+    // The effects demos (see `demo_effects`).
+    /// Diffuse, glass and mirror blobs over a floor under a sphere area light.
+    Glass,
+    /// Blobs as an absorbing volume (bezier-clipping-metaballs.txt §5).
+    Clouds,
+    /// Nested isosurfaces cut by a clip box (tetrahedral-isosurface-ray-tracing.txt §7).
+    Shells,
 }
 
 impl DemoScene {
-    pub const ALL: [DemoScene; 8] = [
+    pub const ALL: [DemoScene; 11] = [
         DemoScene::Blobs,
         DemoScene::Scattered30k,
         DemoScene::Scattered100k,
@@ -46,7 +54,13 @@ impl DemoScene {
         DemoScene::Molecule,
         DemoScene::Pool,
         DemoScene::TetGyroid,
+        DemoScene::Glass,
+        DemoScene::Clouds,
+        DemoScene::Shells,
     ];
+
+    /// The scenes made to show the effects.
+    pub const EFFECTS: [DemoScene; 3] = [DemoScene::Glass, DemoScene::Clouds, DemoScene::Shells];
 
     /// The scenes of the Fitted BVH paper's Table 1.
     pub const PAPER: [DemoScene; 6] = [
@@ -69,6 +83,9 @@ impl DemoScene {
             DemoScene::Molecule => "molecule",
             DemoScene::Pool => "pool",
             DemoScene::TetGyroid => "tets-gyroid",
+            DemoScene::Glass => "glass",
+            DemoScene::Clouds => "clouds",
+            DemoScene::Shells => "shells",
         }
     }
 
@@ -82,6 +99,9 @@ impl DemoScene {
             DemoScene::Molecule => "Molecule",
             DemoScene::Pool => "Pool",
             DemoScene::TetGyroid => "Gyroid (tets)",
+            DemoScene::Glass => "Glass and mirrors",
+            DemoScene::Clouds => "Clouds",
+            DemoScene::Shells => "Shells",
         }
     }
 
@@ -97,6 +117,11 @@ impl DemoScene {
             }
             DemoScene::Pool => "10,000 metaballs of a fluid pool (Fitted BVH paper, Table 1)",
             DemoScene::TetGyroid => "time-varying gyroid field on a ball of 43,000 tets",
+            DemoScene::Glass => {
+                "diffuse, glass and mirror blobs over a floor, lit by a sphere area light"
+            }
+            DemoScene::Clouds => "metaballs rendered as an absorbing volume over a floor",
+            DemoScene::Shells => "three nested isosurfaces of one field, cut open by a clip box",
         }
     }
 
@@ -111,6 +136,9 @@ impl DemoScene {
             DemoScene::Molecule => 5_440,
             DemoScene::Pool => 10_000,
             DemoScene::TetGyroid => crate::tet::generate::demo_mesh().tets().len(),
+            DemoScene::Glass => demo_effects::GLASS_BALLS,
+            DemoScene::Clouds => demo_effects::CLOUD_BALLS,
+            DemoScene::Shells => demo_effects::SHELL_BALLS,
         }
     }
 
@@ -134,6 +162,9 @@ impl DemoScene {
             DemoScene::Molecule => look(Vec3::new(0.0, 10.0, 95.0), Vec3::ZERO, 45.0),
             DemoScene::Pool => look(Vec3::new(0.0, 14.0, 26.0), Vec3::new(0.0, 1.0, 0.0), 50.0),
             DemoScene::TetGyroid => look(Vec3::new(3.0, 2.2, 5.2), Vec3::ZERO, 40.0),
+            DemoScene::Glass => demo_effects::glass_camera(),
+            DemoScene::Clouds => demo_effects::clouds_camera(),
+            DemoScene::Shells => demo_effects::shells_camera(),
         }
     }
 
@@ -147,7 +178,9 @@ impl DemoScene {
 
     pub fn isovalue_slider(self) -> (f32, f32) {
         match self {
-            DemoScene::Blobs => (0.05, 1.5),
+            DemoScene::Blobs | DemoScene::Glass | DemoScene::Clouds | DemoScene::Shells => {
+                (0.05, 1.5)
+            }
             DemoScene::TetGyroid => (-1.5, 1.0),
             _ => (MIN_ISOVALUE, 1.5),
         }
@@ -166,13 +199,26 @@ impl DemoScene {
             DemoScene::TetGyroid => {
                 return Scene {
                     geometry: Geometry::Tets(crate::tet::generate::demo_state(time)),
-                    lighting: Lighting::default(),
+                    lighting: self.lighting(),
                 }
             }
+            DemoScene::Glass => demo_effects::glass(time),
+            DemoScene::Clouds => demo_effects::clouds(time),
+            DemoScene::Shells => demo_effects::shells(time),
         };
         Scene {
             geometry: Geometry::Metaballs(metaballs),
-            lighting: Lighting::default(),
+            lighting: self.lighting(),
+        }
+    }
+
+    /// How the scene is lit and shaded: the default look, or an effects demo's.
+    pub fn lighting(self) -> Lighting {
+        match self {
+            DemoScene::Glass => demo_effects::glass_lighting(),
+            DemoScene::Clouds => demo_effects::clouds_lighting(),
+            DemoScene::Shells => demo_effects::shells_lighting(),
+            _ => Lighting::default(),
         }
     }
 }

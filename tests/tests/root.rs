@@ -3,3 +3,5 @@
 
 mod api;
 mod e2e;
+mod golden;
+mod scene_json;

@@ -4,6 +4,7 @@ mod bad_input;
 mod lifecycle;
 mod metrics;
 mod paper_scenes;
+mod refine;
 mod slow_client;
 mod stream;
 pub mod support;
