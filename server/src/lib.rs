@@ -70,12 +70,18 @@ async fn metrics_text() -> impl axum::response::IntoResponse {
 async fn stream(
     State(state): State<AppState>,
     Path(id): Path<String>,
+    headers: axum::http::HeaderMap,
+    axum::extract::RawQuery(query): axum::extract::RawQuery,
     ws: Result<WebSocketUpgrade, WebSocketUpgradeRejection>,
 ) -> Result<Response, AppError> {
     let entry = state
         .scenes()
         .get(&id)
         .ok_or_else(|| AppError::not_found(format!("no scene with id `{id}`")))?;
+    // With --view-token, watching needs it (header or `?token=`).
+    if let Err(e) = api::check_stream_view(&state, &headers, query.as_deref(), &entry) {
+        return Ok(axum::response::IntoResponse::into_response(e));
+    }
     let ws = ws.map_err(|e| AppError {
         status: e.status(),
         code: "not_websocket",

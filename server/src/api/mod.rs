@@ -148,10 +148,15 @@ impl<S: Send + Sync> FromRequestParts<S> for ClientAddr {
     get,
     path = "/api/v1/scenes/{id}/stream",
     tag = "scenes",
-    params(("id" = String, Path, description = "Scene id")),
+    params(
+        ("id" = String, Path, description = "Scene id"),
+        ("token" = Option<String>, Query, description = "View token, when the server needs one")
+    ),
     responses(
         (status = 101, description = "Switching to the websocket protocol"),
         (status = 400, description = "Not a websocket request", body = ApiErrorBody),
+        (status = 401, description = "View token missing (header or `?token=`)", body = ApiErrorBody),
+        (status = 403, description = "View token wrong", body = ApiErrorBody),
         (status = 404, description = "No such scene", body = ApiErrorBody)
     )
 )]
@@ -243,6 +248,26 @@ fn check_view(
     headers: &HeaderMap,
     entry: Option<&SceneEntry>,
 ) -> Result<(), ApiError> {
+    check_view_token(app, bearer(headers), entry)
+}
+
+/// [`check_view`] for the websocket stream, whose token may also come as `?token=...`
+/// (a browser cannot set headers on a websocket).
+pub fn check_stream_view(
+    app: &AppState,
+    headers: &HeaderMap,
+    query: Option<&str>,
+    entry: &SceneEntry,
+) -> Result<(), ApiError> {
+    let from_query = query.and_then(|q| q.split('&').find_map(|p| p.strip_prefix("token=")));
+    check_view_token(app, bearer(headers).or(from_query), Some(entry))
+}
+
+fn check_view_token(
+    app: &AppState,
+    presented: Option<&str>,
+    entry: Option<&SceneEntry>,
+) -> Result<(), ApiError> {
     let Some(view) = &app.config().view_token else {
         return Ok(());
     };
@@ -254,7 +279,7 @@ fn check_view(
         accepted.push(scene.meta.write_token_sha256.clone());
     }
     let refs: Vec<&str> = accepted.iter().map(String::as_str).collect();
-    require(bearer(headers), &refs, "viewing")
+    require(presented, &refs, "viewing")
 }
 
 fn check_write(app: &AppState, headers: &HeaderMap, scene: &StoredScene) -> Result<(), ApiError> {

@@ -1,6 +1,7 @@
 //! The REST API and the scene store over real sockets: wrong pushes, crash safety under
 //! SIGKILL, the Python example watched live over a websocket, limits, and the OpenAPI document.
 
+mod auth;
 mod bad_balls;
 mod cli;
 mod crash;
