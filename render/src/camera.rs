@@ -21,12 +21,16 @@ impl Camera {
         let up = right.cross(forward);
         let half_h = (self.fov_y_deg.to_radians() * 0.5).tan();
         let half_w = half_h * width as f32 / height.max(1) as f32;
+        let right_step = right * (2.0 * half_w / width.max(1) as f32);
+        let down_step = -up * (2.0 * half_h / height.max(1) as f32);
         PrimaryRays {
             eye: self.eye,
             forward,
-            right_step: right * (2.0 * half_w / width.max(1) as f32),
-            down_step: -up * (2.0 * half_h / height.max(1) as f32),
+            right_step,
+            down_step,
             top_left: forward - right * half_w + up * half_h,
+            right_dual: right_step / right_step.length_squared(),
+            down_dual: down_step / down_step.length_squared(),
         }
     }
 }
@@ -39,6 +43,10 @@ pub struct PrimaryRays {
     right_step: Vec3,
     down_step: Vec3,
     top_left: Vec3,
+    /// `right_step / |right_step|²` and likewise: dotted with an offset in the image plane
+    /// they give it in pixels (the steps are orthogonal).
+    right_dual: Vec3,
+    down_dual: Vec3,
 }
 
 impl PrimaryRays {
@@ -55,14 +63,15 @@ impl PrimaryRays {
     pub fn pixel_of(&self, point: Vec3) -> Option<(f32, f32)> {
         let v = point - self.eye;
         let depth = v.dot(self.forward);
-        if !(depth > 1e-6 * v.length()) {
+        if !(depth > 0.0 && depth * depth > 1e-12 * v.length_squared()) {
             return None;
         }
         // Scaled so its component along `forward` is 1, like every unnormalised pixel ray.
-        let rel = v / depth - self.top_left;
-        let x = rel.dot(self.right_step) / self.right_step.length_squared() - 0.5;
-        let y = rel.dot(self.down_step) / self.down_step.length_squared() - 0.5;
-        Some((x, y))
+        let rel = v * (1.0 / depth) - self.top_left;
+        Some((
+            rel.dot(self.right_dual) - 0.5,
+            rel.dot(self.down_dual) - 0.5,
+        ))
     }
 
     /// Unit vector along the view axis, for depth along the view direction.

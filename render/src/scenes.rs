@@ -116,7 +116,7 @@ impl DemoScene {
                 "5,440-atom synthetic molecule, CPK colours (Fitted BVH paper, Table 1)"
             }
             DemoScene::Pool => "10,000 metaballs of a fluid pool (Fitted BVH paper, Table 1)",
-            DemoScene::TetGyroid => "time-varying gyroid field on a ball of 43,000 tets",
+            DemoScene::TetGyroid => "time-varying gyroid field on a ball of 103,000 tets",
             DemoScene::Glass => {
                 "diffuse, glass and mirror blobs over a floor, lit by a sphere area light"
             }
@@ -218,6 +218,7 @@ impl DemoScene {
             DemoScene::Glass => demo_effects::glass_lighting(),
             DemoScene::Clouds => demo_effects::clouds_lighting(),
             DemoScene::Shells => demo_effects::shells_lighting(),
+            DemoScene::TetGyroid => crate::tet::generate::demo_lighting(),
             _ => Lighting::default(),
         }
     }

@@ -11,6 +11,7 @@
 
 use super::{TetMesh, TetScene};
 use crate::scenes::SplitMix64;
+use crate::shade::{ClipBox, Isosurface, Light, Lighting, Material};
 use glam::{Quat, Vec3};
 use rayon::prelude::*;
 use std::sync::{Arc, OnceLock};
@@ -257,7 +258,7 @@ pub fn gyroid(p: Vec3, time: f64) -> f32 {
 }
 
 /// Cube cells across the demo ball's diameter.
-pub const DEMO_CELLS: usize = 24;
+pub const DEMO_CELLS: usize = 32;
 
 /// The demo mesh: a ball of radius 2 cut from a jittered Kuhn grid (built once).
 pub fn demo_mesh() -> Arc<TetMesh> {
@@ -274,6 +275,39 @@ pub fn demo_mesh() -> Arc<TetMesh> {
     })
     .clone()
 }
+
+/// The demo's lighting, with what tetrahedral-isosurface-ray-tracing.txt §7 shows (Fig. 7):
+/// a point light for shadows, a second, transparent isosurface around the first, and a clip
+/// box that cuts one octant away. A viewer starts with these effects off and switches them
+/// on.
+pub fn demo_lighting() -> Lighting {
+    Lighting {
+        lights: vec![Light::Point {
+            position: Vec3::new(4.0, 6.0, 5.0),
+            color: Vec3::splat(70.0),
+        }],
+        materials: vec![
+            Material::default(),
+            Material {
+                diffuse: Vec3::new(0.75, 0.85, 1.0),
+                opacity: 0.35,
+                ..Material::default()
+            },
+        ],
+        isosurfaces: vec![Isosurface {
+            isovalue: DEMO_OUTER_ISOVALUE,
+            material: 1,
+        }],
+        clip_box: Some(ClipBox {
+            min: Vec3::ZERO,
+            max: Vec3::splat(3.0),
+        }),
+        ..Lighting::default()
+    }
+}
+
+/// The demo's second isosurface (the viewer's slider starts at 0).
+pub const DEMO_OUTER_ISOVALUE: f32 = -0.9;
 
 /// The demo at `time`: the gyroid sampled on [`demo_mesh`], coloured over a fixed range.
 pub fn demo_state(time: f64) -> TetScene {

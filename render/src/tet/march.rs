@@ -179,6 +179,41 @@ impl PolygonFromOrigin {
     }
 }
 
+/// One ray against an isopolygon: the distance if the ray passes inside within
+/// `[t_min, t_max]`. The same arithmetic as [`PolygonFromOrigin`] (so the same answers, bit
+/// for bit), ordered for one ray: the plane distance first, which rejects most polygons
+/// (behind the origin or beyond the best hit so far) before any edge test, then the edges,
+/// stopping at the first that fails.
+#[inline]
+pub fn intersect_one(
+    poly: &Isopolygon,
+    origin: Vec3,
+    dir: Vec3,
+    t_min: f32,
+    t_max: f32,
+) -> Option<f32> {
+    let n = poly.count;
+    let rel = poly.points.map(|p| p - origin);
+    let normal = if n == 3 {
+        (rel[1] - rel[0]).cross(rel[2] - rel[0])
+    } else {
+        (rel[2] - rel[0]).cross(rel[3] - rel[1])
+    };
+    let numerator = normal.dot(rel[0]);
+    let t = numerator / normal.dot(dir);
+    if !(t >= t_min && t <= t_max && t.is_finite()) {
+        return None;
+    }
+    let sign = if numerator < 0.0 { -1.0 } else { 1.0 };
+    for i in 0..n {
+        let j = if i + 1 == n { 0 } else { i + 1 };
+        if (rel[i].cross(rel[j]) * sign).dot(dir) < 0.0 {
+            return None;
+        }
+    }
+    Some(t)
+}
+
 /// The (constant) gradient of the linear field over a tet, and six times its signed volume.
 #[inline]
 pub fn gradient(corners: [Vec4; 4]) -> (Vec3, f32) {
@@ -357,6 +392,27 @@ mod tests {
             }
         }
         assert!(hits > 200, "{hits} hits tested");
+    }
+
+    #[test]
+    fn the_single_ray_test_is_the_packet_test() {
+        let mut rng = SplitMix64(21);
+        let mut hits = 0;
+        for _ in 0..4000 {
+            let corners = random_tet(&mut rng);
+            let Some(poly) = extract([0, 1, 2, 3], corners, 0.0) else {
+                continue;
+            };
+            let origin = 3.0 * rng.in_unit_ball();
+            let dir = (0.6 * rng.in_unit_ball() - origin).normalize();
+            let (t_min, t_max) = (rng.range(0.0, 1.0), rng.range(1.0, 6.0));
+            let packet = PolygonFromOrigin::new(&poly, origin)
+                .intersect(dir)
+                .filter(|&t| t >= t_min && t <= t_max);
+            assert_eq!(intersect_one(&poly, origin, dir, t_min, t_max), packet);
+            hits += packet.is_some() as usize;
+        }
+        assert!(hits > 200, "{hits}");
     }
 
     #[test]

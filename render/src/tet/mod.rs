@@ -97,6 +97,16 @@ pub struct TetMesh {
     /// Schema II (§6.2): one BVH per build kind, built on first use from the rest positions
     /// and refitted for each step.
     shared: [OnceLock<Arc<Bvh>>; 2],
+    /// The tets around each vertex (for smoothed normals), built on first use.
+    vertex_tets: OnceLock<VertexTets>,
+}
+
+/// The tets around each vertex, in increasing tet order: those of vertex `v` are
+/// `tets[offsets[v]..offsets[v + 1]]`.
+#[derive(Debug)]
+pub struct VertexTets {
+    pub offsets: Vec<usize>,
+    pub tets: Vec<u32>,
 }
 
 impl std::fmt::Debug for TetMesh {
@@ -131,6 +141,7 @@ impl TetMesh {
             vertices,
             tets,
             shared: [OnceLock::new(), OnceLock::new()],
+            vertex_tets: OnceLock::new(),
         })
     }
 
@@ -170,6 +181,30 @@ impl TetMesh {
         };
         slot.get_or_init(|| Arc::new(Bvh::build(&self.tets, &self.vertices, kind)))
             .clone()
+    }
+
+    /// The tets around each vertex (built on first call; the connectivity never changes).
+    pub fn vertex_tets(&self) -> &VertexTets {
+        self.vertex_tets.get_or_init(|| {
+            let mut offsets = vec![0usize; self.vertices.len() + 1];
+            for t in &self.tets {
+                for &v in t {
+                    offsets[v as usize + 1] += 1;
+                }
+            }
+            for v in 0..self.vertices.len() {
+                offsets[v + 1] += offsets[v];
+            }
+            let mut fill = offsets.clone();
+            let mut tets = vec![0u32; offsets[self.vertices.len()]];
+            for (i, t) in self.tets.iter().enumerate() {
+                for &v in t {
+                    tets[fill[v as usize]] = i as u32;
+                    fill[v as usize] += 1;
+                }
+            }
+            VertexTets { offsets, tets }
+        })
     }
 
     /// Bytes of the raw input: positions, connectivity (what §8.7's "raw" column counts,

@@ -14,7 +14,7 @@ use super::bvh::{BuildKind, Bvh};
 use super::march::{barycentric, gradient};
 use super::packet::{self, PacketScratch, RayPacket};
 use super::traverse::{self, TetCounters, TetHit, TetQuery};
-use super::TetScene;
+use super::{TetMesh, TetScene};
 use crate::ray::{Hit, Ray};
 use glam::{Vec3, Vec4};
 use rayon::prelude::*;
@@ -88,7 +88,7 @@ impl PreparedTets {
         let started = Instant::now();
         let vertex_gradients = match options.normals {
             Normals::Faceted => None,
-            Normals::Smooth => Some(vertex_gradients(scene.mesh().tets(), &verts)),
+            Normals::Smooth => Some(vertex_gradients(scene.mesh(), &verts)),
         };
         PreparedTets {
             scene,
@@ -224,30 +224,38 @@ impl PreparedTets {
     }
 }
 
-/// Per vertex, the volume-weighted mean gradient of the tets around it.
-fn vertex_gradients(tets: &[[u32; 4]], verts: &[Vec4]) -> Vec<Vec3> {
-    let per_tet: Vec<(Vec3, f32)> = tets
+/// Per vertex, the volume-weighted mean gradient of the tets around it: the tets' gradients
+/// in parallel, then each vertex gathers its own (in a fixed order: deterministic).
+fn vertex_gradients(mesh: &TetMesh, verts: &[Vec4]) -> Vec<Vec3> {
+    let per_tet: Vec<(Vec3, f32)> = mesh
+        .tets()
         .par_iter()
         .with_min_len(4096)
         .map(|ids| {
             let (g, det) = gradient(ids.map(|v| verts[v as usize]));
-            (g, det.abs())
+            if g.is_finite() {
+                (g * det.abs(), det.abs())
+            } else {
+                (Vec3::ZERO, 0.0)
+            }
         })
         .collect();
-    let mut sum = vec![Vec3::ZERO; verts.len()];
-    let mut weight = vec![0.0f32; verts.len()];
-    for (ids, (g, w)) in tets.iter().zip(&per_tet) {
-        if g.is_finite() {
-            for &v in ids {
-                sum[v as usize] += *g * *w;
-                weight[v as usize] += *w;
+    let around = mesh.vertex_tets();
+    (0..verts.len())
+        .into_par_iter()
+        .with_min_len(4096)
+        .map(|v| {
+            let (sum, weight) = around.tets[around.offsets[v]..around.offsets[v + 1]]
+                .iter()
+                .fold((Vec3::ZERO, 0.0f32), |(s, w), &t| {
+                    let (g, tw) = per_tet[t as usize];
+                    (s + g, w + tw)
+                });
+            if weight > 0.0 {
+                sum / weight
+            } else {
+                sum
             }
-        }
-    }
-    for (s, w) in sum.iter_mut().zip(&weight) {
-        if *w > 0.0 {
-            *s /= *w;
-        }
-    }
-    sum
+        })
+        .collect()
 }

@@ -498,3 +498,56 @@ fn the_server_path_traces_tiles_as_packets_with_the_same_image() {
     }
     assert!(fb.hit_count() > 200);
 }
+
+#[test]
+fn the_effects_layer_covers_tets() {
+    // §7 on the demo: shadows (any-hit rays through the tet BVH), a second transparent
+    // isosurface peeled front to back, and the clip box, each changing the image and the
+    // rays traced, deterministically.
+    use crate::effects::{Effects, RayKind};
+    use crate::scenes::DemoScene;
+    use crate::{CpuBackend, View};
+    let demo = DemoScene::TetGyroid;
+    let scene = Arc::new(demo.state_at(1.0)).prepare();
+    let view = View {
+        width: 48,
+        height: 36,
+        camera: demo.default_camera(),
+        isovalue: demo.default_isovalue(),
+    };
+    let one = CpuBackend::new(1).expect("pool");
+    let two = CpuBackend::new(2).expect("pool");
+    let (plain, plain_rays) = one.render_effects(&scene, &view, &Effects::OFF);
+    let with = |effects: Effects| {
+        let (a, rays) = one.render_effects(&scene, &view, &effects);
+        let (b, _) = two.render_effects(&scene, &view, &effects);
+        assert_eq!(a, b, "{effects:?} is deterministic across threads");
+        assert_ne!(a, plain, "{effects:?} changes the image");
+        rays.rays
+    };
+    assert_eq!(plain_rays.rays.total(), 48 * 36);
+    let shadows = with(Effects {
+        shadows: true,
+        ..Effects::OFF
+    });
+    assert!(shadows.get(RayKind::Shadow) > 100, "{shadows:?}");
+    let layers = with(Effects {
+        isosurfaces: true,
+        transparency: true,
+        ..Effects::OFF
+    });
+    assert!(layers.get(RayKind::Transparency) > 100, "{layers:?}");
+    let clipped = with(Effects {
+        clip_box: true,
+        ..Effects::OFF
+    });
+    assert_eq!(clipped.get(RayKind::Shadow), 0);
+    let all = with(Effects {
+        shadows: true,
+        isosurfaces: true,
+        transparency: true,
+        clip_box: true,
+        ..Effects::OFF
+    });
+    assert!(all.get(RayKind::Shadow) > 0 && all.get(RayKind::Transparency) > 0);
+}

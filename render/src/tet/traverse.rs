@@ -11,7 +11,7 @@
 //! traversal order returns the same hit.
 
 use super::bvh::{Bvh, Node};
-use super::march::{extract, PolygonFromOrigin};
+use super::march::{extract, intersect_one};
 use super::{TetError, MAX_ISOSURFACES};
 use crate::ray::Ray;
 use glam::{Vec3, Vec4, Vec4Swizzles};
@@ -279,13 +279,9 @@ pub(crate) fn trace<const ANY: bool>(
                     };
                     c.extractions += 1;
                     c.polygon_tests += 1;
-                    let Some(t) = PolygonFromOrigin::new(&poly, ray.origin).intersect(ray.dir)
-                    else {
+                    let Some(t) = intersect_one(&poly, ray.origin, ray.dir, t_min, best.t) else {
                         continue;
                     };
-                    if !(t >= t_min) {
-                        continue;
-                    }
                     let tet = bvh.leaf_ids[k];
                     if best.beaten_by(t, tet) && !q.clipped(ray.at(t)) {
                         best = TetHit {
