@@ -106,9 +106,39 @@ const surfaces = new Surfaces(settings, {
 });
 
 const timeline = new Timeline(settings, {
-  sendTime: (time) => send({ type: 'time', time }),
+  sendTime: (time) => {
+    refreshHistogram();
+    return send({ type: 'time', time });
+  },
   saved,
+  online: () => connection.isOpen,
 });
+
+// The field's histogram behind the isovalue slider, for the time on screen: fetched when the
+// session starts, when the pinned time changes (at most every 300 ms while scrubbing), and
+// every few seconds while following a live scene.
+let histogramTimer = null;
+function refreshHistogram(delayMs = 300) {
+  clearTimeout(histogramTimer);
+  histogramTimer = setTimeout(async () => {
+    if (!info || !connection.isOpen) return;
+    const scene = info.scene.id;
+    const query = new URLSearchParams({ bins: '128' });
+    if (settings.time !== null) query.set('time', String(settings.time));
+    try {
+      const response = await fetch(`/api/v1/scenes/${encodeURIComponent(scene)}/histogram?${query}`);
+      if (!response.ok) throw new Error(`HTTP ${response.status}`);
+      const histogram = await response.json();
+      if (info && info.scene.id === scene) surfaces.setHistogram(histogram);
+    } catch (err) {
+      surfaces.setHistogram(null);
+      if (connection.isOpen) showError(`The field histogram is not available: ${err.message}`);
+    }
+  }, delayMs);
+}
+setInterval(() => {
+  if (settings.time === null && !document.hidden) refreshHistogram(0);
+}, 5000);
 
 let lastSize = '';
 function sendSize(force = false) {
@@ -143,6 +173,7 @@ function onInfo(message) {
   const fx = effects.restoreChanges();
   if (fx) send({ type: 'effects', effects: fx });
   timeline.restore();
+  refreshHistogram(0);
   saved();
 }
 
@@ -260,5 +291,5 @@ async function start() {
 }
 
 // For tests and debugging: the live objects behind the page.
-window.isoray = { settings, stats, view, connection, timeline, quality, effects };
+window.isoray = { settings, stats, view, connection, timeline, quality, effects, surfaces };
 start();

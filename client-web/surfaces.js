@@ -12,6 +12,9 @@ export class Surfaces {
     this.info = null;
     this.histogram = null; // { lo, hi, counts } over the slider's range
     this.container = $('surfaces');
+    new ResizeObserver(() => {
+      for (const canvas of this.container.querySelectorAll('canvas.histogram')) this.#drawHistogram(canvas);
+    }).observe(this.container);
   }
 
   /** Builds the controls for the session described by `info` (the server's `info` message). */
@@ -97,6 +100,7 @@ export class Surfaces {
     const g = canvas.getContext('2d');
     g.clearRect(0, 0, canvas.width, canvas.height);
     canvas.dataset.bins = h ? String(h.counts.length) : '0';
+    canvas.dataset.samples = h ? String(h.samples) : '0';
     if (!h || !h.counts.length) return;
     // Log scale: field values pile up near zero far from the surface.
     const max = Math.log1p(Math.max(...h.counts));

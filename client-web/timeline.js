@@ -17,10 +17,11 @@ export class Timeline {
   /**
    * `settings` is the viewer's settings object (reads and writes `time`, `speed`, `loop`);
    * `sendTime(time | null)` sends a time input and returns its input id (null when offline);
-   * `saved()` persists the settings.
+   * `saved()` persists the settings; `online()` says whether the server is reachable now.
    */
-  constructor(settings, { sendTime, saved }) {
+  constructor(settings, { sendTime, saved, online }) {
     this.settings = settings;
+    this.online = online;
     this.sendTime = sendTime;
     this.saved = saved;
     this.steps = null; // stored scenes: [{ index, time }], oldest first; null for demos
@@ -146,7 +147,7 @@ export class Timeline {
   }
 
   async #pollSteps() {
-    if (!this.scene || !this.steps || document.hidden) return;
+    if (!this.scene || !this.steps || document.hidden || !this.online()) return;
     try {
       const response = await fetch(`/api/v1/scenes/${encodeURIComponent(this.scene.id)}/steps`);
       if (!response.ok) return;

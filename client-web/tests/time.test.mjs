@@ -17,6 +17,8 @@ test('scrubbing time changes the picture, and play advances it', async () => {
     const at9 = await settledPixels(page, { from: before });
     assert.ok(meanAbsDiff(at3, at9) > CHANGED, `scrubbing from 3 s to 9 s changes the picture (diff ${meanAbsDiff(at3, at9).toFixed(2)})`);
     await page.waitForURL(/t=9(&|$)/);
+    // The histogram behind the isovalue slider follows the time on screen.
+    await page.waitForFunction(() => window.isoray.surfaces.histogram && window.isoray.surfaces.histogram.time === 9);
 
     // Play pins successive times; pause stops there.
     before = await frameCount(page);

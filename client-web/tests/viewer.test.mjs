@@ -20,6 +20,13 @@ test('the page shows a non-blank frame; a drag and the isovalue slider change it
     const first = await settledPixels(page);
     assert.ok(stddev(first) > 10, `the canvas shows a picture (grey-level stddev ${stddev(first).toFixed(1)})`);
 
+    // The field's histogram is drawn behind the isovalue slider.
+    await page.waitForFunction(() => Number(document.querySelector('canvas.histogram').dataset.samples) > 0);
+    const histogram = await page.evaluate(() => window.isoray.surfaces.histogram);
+    assert.equal(histogram.counts.length, 128);
+    assert.equal(histogram.time, 3, 'for the time on screen');
+    assert.ok(histogram.counts.some((c) => c > 0), 'with field values in the slider range');
+
     let before = await frameCount(page);
     await drag(page, 120, 30);
     const dragged = await settledPixels(page, { from: before });

@@ -364,6 +364,27 @@ pub struct ApiErrorBody {
     pub offset: Option<u64>,
 }
 
+/// Body of `GET /api/v1/scenes/{id}/histogram`: how the scalar field's values are spread,
+/// sampled on a regular grid over the scene's bounds at the points inside at least one
+/// primitive's support, in `counts.len()` equal bins over `[lo, hi)`. A viewer draws it
+/// behind the isovalue slider.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
+pub struct FieldHistogram {
+    pub lo: f64,
+    pub hi: f64,
+    pub counts: Vec<u64>,
+    /// Samples inside a support whose value lies below `lo` or at or above `hi`.
+    pub below: u64,
+    pub above: u64,
+    /// Grid points inside at least one support (`below + above + Σ counts`).
+    pub samples: u64,
+    /// Grid points along x, y and z.
+    pub grid: [u32; 3],
+    /// The state sampled: scene time in seconds (the step's time for a pushed scene).
+    pub time: f64,
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -14,6 +14,7 @@ pub mod auth;
 pub mod client;
 pub mod convert;
 pub mod error;
+mod histogram;
 
 use crate::kind::{SceneSetup, StepLayout};
 use crate::scenes::SceneEntry;
@@ -105,6 +106,7 @@ fn openapi_router() -> OpenApiRouter<AppState> {
         .routes(routes!(get_step, push_step, delete_step))
         .routes(routes!(get_step_data))
         .routes(routes!(render))
+        .routes(routes!(histogram::histogram))
         .routes(routes!(openapi_json))
 }
 
