@@ -229,7 +229,8 @@ panelButton.addEventListener('click', () => {
 // --- scenes ----------------------------------------------------------------------------------
 const sceneSelect = $('scene');
 function describe(s) {
-  const size = `${s.primitives.toLocaleString('en')} ${s.kind === 'metaballs' ? 'balls' : 'primitives'}`;
+  const noun = { metaballs: 'balls', tets: 'tetrahedra', surfels: 'surfels' }[s.kind] ?? 'primitives';
+  const size = `${s.primitives.toLocaleString('en')} ${noun}`;
   const time = s.source === 'stored' ? `${s.steps} time step${s.steps === 1 ? '' : 's'}` : 'animated demo';
   return `${s.kind} · ${size} · ${time}`;
 }

@@ -2,11 +2,12 @@
 //! the browser draws behind the isovalue slider (as ParaView and VisIt do beside their
 //! contour values), so a user sees where the field has mass before moving the surface there.
 //!
-//! How it works: a regular grid over the scene's bounds, at most [`MAX_GRID`] points per axis;
+//! How it works, for metaballs: a regular grid over the scene's bounds, at most [`MAX_GRID`] points per axis;
 //! every metaball adds `q · f(s)` to the grid points inside its support (a splat, so the cost
 //! is the balls' support volume in cells, not balls × points). Points that no support reaches
 //! are left out: they are empty space, not field. The grid shrinks when the splat would cost
-//! more than [`MAX_SPLAT_CELLS`]. Runs on the render pool.
+//! more than [`MAX_SPLAT_CELLS`]. For a tetrahedral mesh, whose field is given at its
+//! vertices: those values. Runs on the render pool.
 
 use super::error::ApiError;
 use super::{check_view, scene_of};
@@ -90,8 +91,34 @@ pub fn field_histogram(scene: &MetaballScene, lo: f32, hi: f32, bins: usize) -> 
             }
         }
     }
+    let values = field
+        .iter()
+        .zip(&inside)
+        .filter(|(_, &i)| i)
+        .map(|(&v, _)| v);
+    bin_values(&mut out, values, lo, hi);
+    out
+}
+
+/// A tetrahedral mesh's scalar field: its values at the mesh's vertices, binned (the point
+/// data histogram ParaView shows); `grid` is `[vertices, 1, 1]`.
+pub fn vertex_histogram(scalars: &[f32], lo: f32, hi: f32, bins: usize) -> Histogram {
+    let mut out = Histogram {
+        counts: vec![0; bins],
+        below: 0,
+        above: 0,
+        samples: 0,
+        grid: [u32::try_from(scalars.len()).unwrap_or(u32::MAX), 1, 1],
+        evaluations: scalars.len() as u64,
+    };
+    bin_values(&mut out, scalars.iter().copied(), lo, hi);
+    out
+}
+
+fn bin_values(out: &mut Histogram, values: impl Iterator<Item = f32>, lo: f32, hi: f32) {
+    let bins = out.counts.len();
     let width = (hi - lo) / bins as f32;
-    for (&v, _) in field.iter().zip(&inside).filter(|(_, &i)| i) {
+    for v in values {
         out.samples += 1;
         if v < lo {
             out.below += 1;
@@ -102,7 +129,6 @@ pub fn field_histogram(scene: &MetaballScene, lo: f32, hi: f32, bins: usize) -> 
             out.counts[bin] += 1;
         }
     }
-    out
 }
 
 /// What [`field_histogram`] counted.
@@ -113,7 +139,7 @@ pub struct Histogram {
     pub above: u64,
     pub samples: u64,
     pub grid: [u32; 3],
-    /// (ball, grid point) pairs evaluated: the work done, at most [`MAX_SPLAT_CELLS`].
+    /// Values computed: (ball, grid point) pairs for metaballs, at most [`MAX_SPLAT_CELLS`].
     pub evaluations: u64,
 }
 
@@ -249,6 +275,7 @@ pub(super) async fn histogram(
         };
         let histogram = match &state.prepared.scene().geometry {
             Geometry::Metaballs(m) => field_histogram(m, lo as f32, hi as f32, q.bins),
+            Geometry::Tets(t) => vertex_histogram(t.scalars(), lo as f32, hi as f32, q.bins),
         };
         let _ = tx.send((histogram, time));
     });
@@ -335,6 +362,13 @@ mod tests {
             h.evaluations,
             h.grid
         );
+    }
+
+    #[test]
+    fn vertex_values_are_binned_with_the_outliers_counted() {
+        let h = vertex_histogram(&[0.0, 0.1, 0.26, 0.5, 0.99, 1.0, -3.0], 0.0, 1.0, 4);
+        assert_eq!(h.counts, vec![2, 1, 1, 1]);
+        assert_eq!((h.below, h.above, h.samples), (1, 1, 7));
     }
 
     #[test]
