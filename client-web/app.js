@@ -11,6 +11,7 @@ import { Timeline } from './timeline.js';
 import { Surfaces } from './surfaces.js';
 import { Quality } from './quality.js';
 import { EffectsPanel } from './effects.js';
+import { apiFetch, describeFailure } from './api.js';
 
 const settings = parseSettings(location.search);
 const canvas = $('view');
@@ -126,8 +127,8 @@ function refreshHistogram(delayMs = 300) {
     const query = new URLSearchParams({ bins: '128' });
     if (settings.time !== null) query.set('time', String(settings.time));
     try {
-      const response = await fetch(`/api/v1/scenes/${encodeURIComponent(scene)}/histogram?${query}`);
-      if (!response.ok) throw new Error(`HTTP ${response.status}`);
+      const response = await apiFetch(`/api/v1/scenes/${encodeURIComponent(scene)}/histogram?${query}`);
+      if (!response.ok) throw new Error(describeFailure(response));
       const histogram = await response.json();
       if (info && info.scene.id === scene) surfaces.setHistogram(histogram);
     } catch (err) {
@@ -237,8 +238,8 @@ function describe(s) {
 
 async function loadSteps(scene) {
   if (scene.source !== 'stored') return null;
-  const response = await fetch(`/api/v1/scenes/${encodeURIComponent(scene.id)}/steps`);
-  if (!response.ok) throw new Error(`listing the steps of ${scene.id}: HTTP ${response.status}`);
+  const response = await apiFetch(`/api/v1/scenes/${encodeURIComponent(scene.id)}/steps`);
+  if (!response.ok) throw new Error(`listing the steps of ${scene.id}: ${describeFailure(response)}`);
   return (await response.json()).steps.map((s) => ({ index: s.index, time: s.time }));
 }
 
@@ -272,8 +273,13 @@ sceneSelect.addEventListener('change', () => {
 let startDelayMs = 500;
 async function start() {
   try {
-    const response = await fetch('/api/v1/scenes');
-    if (!response.ok) throw new Error(`HTTP ${response.status}`);
+    const response = await apiFetch('/api/v1/scenes');
+    if (response.status === 401 || response.status === 403) {
+      // Retrying cannot help; the user has to open the page with a token.
+      setStatus(`Cannot list the scenes: ${describeFailure(response)}.`, { busy: false });
+      return;
+    }
+    if (!response.ok) throw new Error(describeFailure(response));
     scenes = (await response.json()).scenes;
   } catch (err) {
     setStatus(`Cannot list the scenes (${err.message}); retrying…`);

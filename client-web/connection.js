@@ -1,3 +1,5 @@
+import { streamUrl } from './api.js';
+
 // The websocket to one scene: numbered inputs, frames handed over in order and acknowledged
 // once shown, and automatic reconnection with exponential back-off (and a little jitter, so a
 // restarted server is not hit by every viewer at the same instant).
@@ -63,9 +65,7 @@ export class Connection {
   }
 
   #connect() {
-    const proto = location.protocol === 'https:' ? 'wss' : 'ws';
-    const url = `${proto}://${location.host}/api/v1/scenes/${encodeURIComponent(this.scene)}/stream`;
-    const socket = new WebSocket(url);
+    const socket = new WebSocket(streamUrl(this.scene));
     socket.binaryType = 'arraybuffer';
     this.socket = socket;
     this.sentAt.clear();

@@ -21,8 +21,12 @@ export function defaults() {
     scale: 1, // resolution scale on top of canvas size × devicePixelRatio
     fps: null, // target frame rate, null for the server's default
     stats: false,
+    token: null, // view token (servers with --view-token); kept so a reload still works
+    extra: [], // query parameters this module does not know (other modules' switches), kept as they are
   };
 }
+
+const KNOWN = ['scene', 'cam', 'up', 'iso', 't', 'speed', 'loop', 'fx', 'codec', 'q', 'scale', 'fps', 'stats', 'token'];
 
 const finite = (s) => (s !== null && s.trim() !== '' && Number.isFinite(Number(s)) ? Number(s) : null);
 
@@ -57,6 +61,8 @@ export function parseSettings(search) {
   const fps = finite(p.get('fps'));
   if (fps !== null && fps >= 1 && fps <= 240) s.fps = fps;
   if (p.get('stats') === '1') s.stats = true;
+  if (p.get('token')) s.token = p.get('token');
+  s.extra = [...p].filter(([k]) => !KNOWN.includes(k));
   return s;
 }
 
@@ -83,6 +89,8 @@ export function serializeSettings(s) {
   if (s.scale !== d.scale) p.set('scale', round(s.scale));
   if (s.fps !== null) p.set('fps', round(s.fps));
   if (s.stats) p.set('stats', '1');
+  if (s.token) p.set('token', s.token);
+  for (const [k, v] of s.extra) p.append(k, v);
   const text = p.toString();
   return text ? `?${text}` : location.pathname;
 }

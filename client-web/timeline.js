@@ -5,6 +5,7 @@
 // only once a frame has shown the previous one, so it runs as fast as frames come and never
 // queues inputs in front of a slow server.
 import { $, fillSelect } from './ui.js';
+import { apiFetch } from './api.js';
 
 /** Span of the scrubber for demo scenes, seconds (a demo is defined for every time). */
 export const DEMO_SPAN_SECS = 60;
@@ -149,7 +150,7 @@ export class Timeline {
   async #pollSteps() {
     if (!this.scene || !this.steps || document.hidden || !this.online()) return;
     try {
-      const response = await fetch(`/api/v1/scenes/${encodeURIComponent(this.scene.id)}/steps`);
+      const response = await apiFetch(`/api/v1/scenes/${encodeURIComponent(this.scene.id)}/steps`);
       if (!response.ok) return;
       const { steps } = await response.json();
       if (Array.isArray(steps)) {

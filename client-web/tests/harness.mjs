@@ -62,11 +62,16 @@ export async function openBrowser() {
   const problems = [];
   // Network errors the test provokes on purpose (a stopped server) are allowed only while
   // `expectNetworkErrors` is set, and only the browser's own connection-refused messages.
-  const state = { expectNetworkErrors: false, expected: [] };
+  // A test that provokes another browser-logged HTTP failure names it in `expectStatus`.
+  const state = { expectNetworkErrors: false, expectStatus: null, expected: [] };
   page.on('console', (msg) => {
     if (msg.type() !== 'error') return;
     const text = msg.text();
     if (state.expectNetworkErrors && /ERR_CONNECTION_REFUSED|WebSocket connection to .* failed/.test(text)) {
+      state.expected.push(text);
+      return;
+    }
+    if (state.expectStatus !== null && text.includes(`the server responded with a status of ${state.expectStatus}`)) {
       state.expected.push(text);
       return;
     }

@@ -133,3 +133,21 @@ test('the render size is capped by the server limit', async () => {
     assert.ok(still.width === 200 || still.height === 200, 'as large as the limit allows');
   }, { serverArgs: ['--max-size', '200', '--default-width', '160', '--default-height', '90'] });
 });
+
+test('with --view-token the page says it needs the token, and with ?token= it streams', async () => {
+  await withPage('view-token', async ({ server, page, network }) => {
+    // Without the token: the scene list is refused (the browser logs the 401 itself).
+    network.expectStatus = 401;
+    await page.goto(`${server.url}?scene=blobs&t=3`);
+    await page.waitForFunction(() => /needs a view token/.test(document.getElementById('status-text').textContent));
+    assert.equal(await frameCount(page), 0);
+    assert.ok(network.expected.length >= 1, 'the 401 happened');
+    network.expectStatus = null;
+
+    // With it: the list, the stream (token in the websocket's query), the histogram.
+    await page.goto(`${server.url}?scene=blobs&t=3&token=peek-0123456789abcdef`);
+    await settledPixels(page);
+    await page.waitForFunction(() => window.isoray.surfaces.histogram !== null);
+    await page.waitForURL(/token=peek-0123456789abcdef/);
+  }, { serverArgs: ['--view-token', 'peek-0123456789abcdef'] });
+});

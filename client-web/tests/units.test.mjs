@@ -1,0 +1,70 @@
+// The client's pure modules in Node, without a browser: camera maths and the URL settings.
+import { test } from 'node:test';
+import assert from 'node:assert/strict';
+
+globalThis.location = { pathname: '/', search: '' };
+const { basis, orbitFromPose, poseFromOrbit, pan, rotate, zoom } = await import('../camera.js');
+const { parseSettings, serializeSettings, UP_AXES } = await import('../settings.js');
+const { renderSize } = await import('../quality.js');
+
+const close = (a, b, eps = 1e-9) => a.every((v, i) => Math.abs(v - b[i]) < eps);
+
+test('every view-up axis gives a right-handed basis with that axis up', () => {
+  for (const up of UP_AXES) {
+    const { a, u, b } = basis(up);
+    const cross = [a[1] * u[2] - a[2] * u[1], a[2] * u[0] - a[0] * u[2], a[0] * u[1] - a[1] * u[0]];
+    assert.ok(close(cross, b), `${up}: a × u = b`);
+    const axis = { x: 0, y: 1, z: 2 }[up[1]];
+    assert.equal(u[axis], up[0] === '-' ? -1 : 1, `${up}: u is the axis`);
+  }
+});
+
+test('orbit and pose convert both ways, around every up axis', () => {
+  for (const up of UP_AXES) {
+    const orbit = { yaw: 0.7, pitch: -0.4, distance: 5.5, target: [1, -2, 0.5], fov: 40 };
+    const pose = poseFromOrbit(orbit, up);
+    assert.ok(Math.abs(Math.hypot(...pose.eye.map((e, i) => e - pose.target[i])) - 5.5) < 1e-9, 'eye at the distance');
+    const back = orbitFromPose(pose, up);
+    assert.ok(close([back.yaw, back.pitch, back.distance, ...back.target], [0.7, -0.4, 5.5, 1, -2, 0.5]), `${up}: ${JSON.stringify(back)}`);
+  }
+});
+
+test('pan moves the target across the view, zoom and rotate keep it', () => {
+  const o = { yaw: 0.3, pitch: 0.2, distance: 4, target: [0, 0, 0], fov: 45 };
+  const pose0 = poseFromOrbit(o, '+y');
+  pan(o, '+y', 0.1, 0);
+  const forward = pose0.target.map((t, i) => t - pose0.eye[i]);
+  const moved = o.target;
+  assert.ok(Math.abs(moved.reduce((s, v, i) => s + v * forward[i], 0)) < 1e-9, 'pan is perpendicular to the view direction');
+  assert.ok(Math.hypot(...moved) > 0.1, 'and moves the target');
+  assert.equal(o.distance, 4);
+  const target = [...o.target];
+  zoom(o, 0.5);
+  rotate(o, 1, 10);
+  assert.deepEqual(o.target, target);
+  assert.equal(o.distance, 2);
+  assert.ok(o.pitch < Math.PI / 2, 'pitch stays short of the up axis');
+});
+
+test('settings survive the URL, and malformed values fall back to defaults', () => {
+  const s = parseSettings('?scene=blobs&cam=1,0.2,3,0,1,0,45&up=-z&iso=0.5&t=3&speed=2&loop=0&fx=shadows,-ambient_occlusion,depth:3&scale=0.5&fps=20&stats=1&token=abc&reproject=off');
+  assert.deepEqual(parseSettings(serializeSettings(s)), s);
+  assert.deepEqual(s.fx, { shadows: true, ambient_occlusion: false, depth: 3 });
+  assert.deepEqual(s.extra, [['reproject', 'off']], 'other modules\' switches are kept');
+  const bad = parseSettings('?cam=1,2,-3,0,0,0,45&up=sideways&iso=x&t=-1&speed=0&scale=9&fps=1e9&fx=rm%20-rf');
+  assert.equal(bad.cam, null, 'a negative distance is refused');
+  assert.equal(bad.up, '+y');
+  assert.equal(bad.iso, null);
+  assert.equal(bad.time, null);
+  assert.equal(bad.speed, 1);
+  assert.equal(bad.scale, 1);
+  assert.equal(bad.fps, null);
+  assert.deepEqual(bad.fx, {});
+});
+
+test('render size follows CSS size × devicePixelRatio × scale, capped keeping the aspect ratio', () => {
+  assert.deepEqual(renderSize(400, 300, 2, 1, 4096, 4096), [800, 600]);
+  assert.deepEqual(renderSize(400, 300, 2, 0.5, 4096, 4096), [400, 300]);
+  assert.deepEqual(renderSize(1000, 500, 2, 1, 1000, 1000), [1000, 500]);
+  assert.deepEqual(renderSize(0, 0, 1, 1, 100, 100), [1, 1]);
+});
