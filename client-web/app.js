@@ -260,6 +260,22 @@ async function selectScene(id) {
   connection.open(id);
 }
 
+// Scenes pushed since the page loaded appear when the picker is opened.
+let listing = null;
+async function refreshScenes() {
+  if (listing || !connection.isOpen) return;
+  listing = apiFetch('/api/v1/scenes')
+    .then(async (response) => {
+      if (!response.ok) return;
+      scenes = (await response.json()).scenes;
+      fillSelect(sceneSelect, scenes.map((s) => [s.id, `${s.name} (${describe(s)})`]), settings.scene);
+    })
+    .catch(() => {})
+    .finally(() => { listing = null; });
+}
+sceneSelect.addEventListener('focus', refreshScenes);
+sceneSelect.addEventListener('pointerdown', refreshScenes);
+
 sceneSelect.addEventListener('change', () => {
   // A new scene starts from its own default view.
   settings.cam = null;

@@ -75,6 +75,14 @@ test('the scene picker lists every scene with kind and size, and switches scenes
       assert.ok(options.some((o) => o.includes(s.name) && o.includes(s.kind) && o.includes(s.primitives.toLocaleString('en'))),
         `${s.id} is listed with kind and size: ${options}`);
     }
+    // A scene pushed after the page loaded shows up when the picker gets focus.
+    const created = await (await fetch(`${server.url}api/v1/scenes`, {
+      method: 'POST', headers: { 'content-type': 'application/json' }, body: JSON.stringify({ kind: 'metaballs', name: 'Late arrival' }),
+    })).json();
+    await page.locator('#scene').focus();
+    await page.waitForFunction((id) => !!document.querySelector(`#scene option[value="${id}"]`), created.scene.id);
+    assert.match(await page.locator(`#scene option[value="${created.scene.id}"]`).textContent(), /Late arrival \(metaballs · 0 balls · 0 time steps\)/);
+
     const before = await frameCount(page);
     await page.selectOption('#scene', 'molecule');
     await page.waitForURL(/scene=molecule/);
@@ -122,6 +130,18 @@ test('controls are labelled and reachable by keyboard; render size follows canva
     const s2 = await size();
     const bigger = await page.evaluate(() => [document.getElementById('view').width, document.getElementById('view').height]);
     assert.deepEqual(bigger, s2.css.map((v) => Math.round(v * s2.dpr * 0.5)), 'a resized window gets frames of its new size');
+
+    // A phone-sized window: the panel goes below the view and nothing scrolls sideways.
+    await page.setViewportSize({ width: 390, height: 800 });
+    await page.waitForTimeout(200);
+    const layout = await page.evaluate(() => ({
+      scrollWidth: document.documentElement.scrollWidth,
+      width: innerWidth,
+      panelTop: document.getElementById('panel').getBoundingClientRect().top,
+      viewBottom: document.getElementById('view').getBoundingClientRect().bottom,
+    }));
+    assert.ok(layout.scrollWidth <= layout.width, `no sideways scrolling (${layout.scrollWidth} > ${layout.width})`);
+    assert.ok(layout.panelTop >= layout.viewBottom - 1, 'the controls sit below the view');
   });
 });
 
