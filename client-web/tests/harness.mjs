@@ -169,6 +169,7 @@ export function stddev(img) {
 
 /** Drags the mouse across the canvas from its centre by (dx, dy) pixels. */
 export async function drag(page, dx, dy, { button = 'left', shift = false } = {}) {
+  await page.locator('#view').scrollIntoViewIfNeeded();
   const box = await page.locator('#view').boundingBox();
   const x = box.x + box.width / 2, y = box.y + box.height / 2;
   if (shift) await page.keyboard.down('Shift');

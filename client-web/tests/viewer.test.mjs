@@ -70,6 +70,8 @@ test('keyboard, pan, touch pinch, view up and reset move the camera', async () =
 
     // Two-finger pinch outwards zooms in (touch events through the DevTools protocol).
     await page.click('#reset');
+    // (At this window width the panel is below the view, and clicking Reset scrolled to it.)
+    await page.locator('#view').scrollIntoViewIfNeeded();
     const box = await page.locator('#view').boundingBox();
     const cx = box.x + box.width / 2, cy = box.y + box.height / 2;
     const cdp = await page.context().newCDPSession(page);
