@@ -22,8 +22,9 @@ async fn wait_for_sessions(server: &TestServer, n: usize, within: Duration) {
 
 /// Reads until the close frame and returns its code and reason.
 async fn close_reason(ws: &mut Ws) -> (u16, String) {
+    let deadline = tokio::time::Instant::now() + WAIT;
     loop {
-        match tokio::time::timeout(WAIT, ws.next())
+        match tokio::time::timeout_at(deadline, ws.next())
             .await
             .expect("close within the wait")
         {

@@ -92,8 +92,9 @@ pub async fn send_text(ws: &mut Ws, text: &str) {
 
 /// The next text message, skipping frames.
 pub async fn next_text(ws: &mut Ws) -> ServerMessage {
+    let deadline = tokio::time::Instant::now() + WAIT;
     loop {
-        let msg = tokio::time::timeout(WAIT, ws.next())
+        let msg = tokio::time::timeout_at(deadline, ws.next())
             .await
             .expect("a message within the wait")
             .expect("stream open")
@@ -131,8 +132,9 @@ pub async fn next_frame(ws: &mut Ws) -> Frame {
 
 /// The next binary frame, without acknowledging it.
 pub async fn next_frame_unacked(ws: &mut Ws) -> Frame {
+    let deadline = tokio::time::Instant::now() + WAIT;
     loop {
-        let msg = tokio::time::timeout(WAIT, ws.next())
+        let msg = tokio::time::timeout_at(deadline, ws.next())
             .await
             .expect("a frame within the wait")
             .expect("stream open")
