@@ -19,8 +19,8 @@
 //!   `r_max = R_K · sqrt(s*)`, `f(s*) = T / (n q_max)` (the paper's `(1-(T/n)^{1/α})^{1/2}`
 //!   for its kernel, generalised to any kernel and strength).
 //! - §5.3.2: a positive split ball is discarded when its `r_max` sphere misses the node's box
-//!   and it lies at least `R_i + r_max` from every other ball of the node (run on nodes of
-//!   up to `DISCARD_MAX_BALLS` balls; what it drops stays dropped below).
+//!   and it lies at least `R_i + r_max` from every other ball of the node (run on the leaves,
+//!   whose lists the rays read; running it on every small node cost more than it saved).
 //!
 //! The build: a node's owned balls are a contiguous slice of `Prim`s partitioned in place,
 //! so the passes over them read memory in order; nodes with more than `PARALLEL_BALLS`
@@ -381,12 +381,14 @@ impl Default for Bins {
 
 /// Node sizes whose `r_max` comes from a table rather than a bisection.
 const S_TABLE: usize = 4096;
-/// Split-metaball discarding (§5.3.2) costs `split × (owned + split)` per node; it runs on
-/// nodes up to this size, near the leaves, where it pays. A ball it drops is dropped from the
-/// whole subtree, whose boxes lie inside the node's.
+/// Split-metaball discarding (§5.3.2) costs `split × (owned + split)` per leaf; larger
+/// leaves (rare: the SAH splits them) keep their lists.
 const DISCARD_MAX_BALLS: usize = 96;
 
 const MAX_DEPTH: usize = 64;
+/// Nodes owning this many balls or fewer stay leaves: splitting them changed render work by
+/// about 2% (Pool, counted instructions) and cost a seventh of the build.
+const MIN_SPLIT_OWNED: usize = 2;
 /// Most SAH bins per axis.
 const MAX_BINS: usize = 16;
 /// Nodes with more owned balls than this build their children in parallel; smaller ones are
@@ -772,6 +774,25 @@ impl Ctx {
         (i, sides)
     }
 
+    /// A leaf's split list after §5.3.2 (Fitted BVH with discarding on).
+    fn finish_leaf(
+        &self,
+        owned: &[Prim],
+        split: &mut Vec<u32>,
+        from: usize,
+        geom: &Geom,
+        keep: &mut Vec<bool>,
+    ) {
+        let n_split = split.len() - from;
+        if self.opts.kind == TreeKind::Fitted
+            && self.opts.discard_split
+            && n_split > 0
+            && owned.len() + n_split <= DISCARD_MAX_BALLS
+        {
+            self.discard(owned, split, from, &geom.bounds, geom.r_max, keep);
+        }
+    }
+
     /// §5.3.2 on the split list `split` (in place, in `keep`'s order): drops the positive
     /// split balls whose `r_max` sphere misses `bounds` and whose centre lies at least
     /// `R_i + r_max` from every other ball of the node. Any surface point in the box lies
@@ -814,29 +835,22 @@ impl Ctx {
     }
 
     /// Decides whether the node with these owned balls and split list `split[from..]` is
-    /// split, after discarding (§5.3.2) on small nodes.
-    #[allow(clippy::too_many_arguments)]
+    /// split.
     fn choose(
         &self,
         owned: &[Prim],
-        split: &mut Vec<u32>,
+        split: &[u32],
         from: usize,
         geom: &Geom,
         depth: usize,
-        keep: &mut Vec<bool>,
         bins: &mut Bins,
     ) -> Option<Choice> {
         let fitted = self.opts.kind == TreeKind::Fitted;
-        let n_split = split.len() - from;
-        if fitted
-            && self.opts.discard_split
-            && n_split > 0
-            && owned.len() + n_split <= DISCARD_MAX_BALLS
-        {
-            self.discard(owned, split, from, &geom.bounds, geom.r_max, keep);
-        }
         let n = (owned.len() + split.len() - from) as f32;
-        if owned.len() <= 1 || depth >= MAX_DEPTH || (fitted && geom.bounds.is_empty()) {
+        if owned.len() <= MIN_SPLIT_OWNED
+            || depth >= MAX_DEPTH
+            || (fitted && geom.bounds.is_empty())
+        {
             return None;
         }
         let choice = self.best_split(
@@ -951,15 +965,7 @@ impl Ctx {
             return Built::Chunk(chunk);
         }
         let mut split = node.split;
-        let choice = self.choose(
-            owned,
-            &mut split,
-            0,
-            &geom,
-            depth,
-            &mut scratch.keep,
-            &mut scratch.bins,
-        );
+        let choice = self.choose(owned, &split, 0, &geom, depth, &mut scratch.bins);
         let parts = choice.map(|c| (c, Ctx::partition(owned, c.axis, c.plane)));
         let Some((choice, (mid, centroids))) =
             parts.filter(|(_, (m, _))| *m > 0 && *m < owned.len())
@@ -968,6 +974,7 @@ impl Ctx {
                 nodes: vec![BLANK],
                 balls: Vec::new(),
             };
+            self.finish_leaf(owned, &mut split, 0, &geom, &mut scratch.keep);
             chunk.nodes[0] = leaf(&mut chunk.balls, geom.bounds, owned, &split);
             return Built::Chunk(chunk);
         };
@@ -1014,19 +1021,12 @@ impl Ctx {
         geom: &Geom,
         depth: usize,
     ) {
-        let choice = self.choose(
-            owned,
-            &mut scratch.arena,
-            from,
-            geom,
-            depth,
-            &mut scratch.keep,
-            &mut scratch.bins,
-        );
+        let choice = self.choose(owned, &scratch.arena, from, geom, depth, &mut scratch.bins);
         let parts = choice.map(|c| (c, Ctx::partition(owned, c.axis, c.plane)));
         let Some((choice, (mid, centroids))) =
             parts.filter(|(_, (m, _))| *m > 0 && *m < owned.len())
         else {
+            self.finish_leaf(owned, &mut scratch.arena, from, geom, &mut scratch.keep);
             chunk.nodes[at] = leaf(&mut chunk.balls, geom.bounds, owned, &scratch.arena[from..]);
             scratch.arena.truncate(from);
             return;
