@@ -322,6 +322,8 @@ struct Ctx {
     q_max: f32,
     /// `sqrt(s*)` for `n = 0..S_TABLE` positive balls of strength `q_max`.
     root_s_star: Vec<f32>,
+    /// Whether the build may fork on rayon.
+    parallel: bool,
 }
 
 /// Per-thread buffers of the sequential build.
@@ -398,6 +400,17 @@ const PARALLEL_BALLS: usize = 3072;
 impl Tree {
     /// Builds the structure over `balls`.
     pub fn build(balls: &[TreeBall], kernel: Kernel, opts: BuildOptions) -> Tree {
+        Tree::build_with(balls, kernel, opts, true)
+    }
+
+    /// [`Tree::build`] without forking: for a build inside a wait that other threads of the
+    /// same pool may block on (a lazily built fallback), where a fork could make this thread
+    /// run one of theirs, and so wait on itself.
+    pub fn build_on_this_thread(balls: &[TreeBall], kernel: Kernel, opts: BuildOptions) -> Tree {
+        Tree::build_with(balls, kernel, opts, false)
+    }
+
+    fn build_with(balls: &[TreeBall], kernel: Kernel, opts: BuildOptions, parallel: bool) -> Tree {
         let q_max = balls.iter().fold(0.0f32, |m, b| m.max(b.strength));
         let root_s_star = if opts.depends_on_isovalue() && opts.isovalue > 0.0 && q_max > 0.0 {
             (0..S_TABLE)
@@ -420,9 +433,10 @@ impl Tree {
             neighbours: Vec::new(),
             q_max,
             root_s_star,
+            parallel,
         };
         if opts.kind == TreeKind::Bvh {
-            (ctx.neighbour_start, ctx.neighbours) = neighbour_lists(balls);
+            (ctx.neighbour_start, ctx.neighbours) = neighbour_lists(balls, parallel);
         }
         let mut prims: Vec<Prim> = balls
             .iter()
@@ -955,7 +969,7 @@ impl Ctx {
     fn build_par(&self, owned: &mut [Prim], node: NodeInput, depth: usize) -> Built {
         let mut scratch = Scratch::default();
         let geom = node.geom;
-        if owned.len() <= PARALLEL_BALLS {
+        if !self.parallel || owned.len() <= PARALLEL_BALLS {
             let mut chunk = Chunk {
                 nodes: vec![BLANK],
                 balls: Vec::with_capacity(owned.len() * 4),
@@ -1135,7 +1149,7 @@ fn split_box(b: &Aabb, axis: usize, plane: f32) -> (Aabb, Aabb) {
 
 /// For every ball, the balls whose sphere overlaps its sphere, from a uniform grid of cell
 /// size `2 R_max` (compressed rows, each sorted).
-fn neighbour_lists(balls: &[TreeBall]) -> (Vec<u32>, Vec<u32>) {
+fn neighbour_lists(balls: &[TreeBall], parallel: bool) -> (Vec<u32>, Vec<u32>) {
     let n = balls.len();
     if n == 0 {
         return (vec![0], Vec::new());
@@ -1154,42 +1168,46 @@ fn neighbour_lists(balls: &[TreeBall]) -> (Vec<u32>, Vec<u32>) {
             | ((k[1] as u64 & 0x1F_FFFF) << 21)
             | ((k[2] as u64 & 0x1F_FFFF) << 42)
     };
-    let mut keyed: Vec<(u64, u32)> = balls
-        .par_iter()
-        .enumerate()
-        .map(|(i, b)| (hash(key(b.center)), i as u32))
-        .collect();
-    keyed.par_sort_unstable();
-    let lists: Vec<Vec<u32>> = balls
-        .par_iter()
-        .enumerate()
-        .map(|(i, b)| {
-            let k = key(b.center);
-            let mut out = Vec::new();
-            for dx in -1..=1 {
-                for dy in -1..=1 {
-                    for dz in -1..=1 {
-                        let h = hash([k[0] + dx, k[1] + dy, k[2] + dz]);
-                        let start = keyed.partition_point(|e| e.0 < h);
-                        for &(kh, j) in &keyed[start..] {
-                            if kh != h {
-                                break;
-                            }
-                            let o = &balls[j as usize];
-                            let reach = b.radius + o.radius;
-                            if j as usize != i
-                                && (b.center - o.center).length_squared() < reach * reach
-                            {
-                                out.push(j);
-                            }
+    let keyed_of = |(i, b): (usize, &TreeBall)| (hash(key(b.center)), i as u32);
+    let keyed: Vec<(u64, u32)> = if parallel {
+        let mut k: Vec<(u64, u32)> = balls.par_iter().enumerate().map(keyed_of).collect();
+        k.par_sort_unstable();
+        k
+    } else {
+        let mut k: Vec<(u64, u32)> = balls.iter().enumerate().map(keyed_of).collect();
+        k.sort_unstable();
+        k
+    };
+    let list_of = |(i, b): (usize, &TreeBall)| {
+        let k = key(b.center);
+        let mut out = Vec::new();
+        for dx in -1..=1 {
+            for dy in -1..=1 {
+                for dz in -1..=1 {
+                    let h = hash([k[0] + dx, k[1] + dy, k[2] + dz]);
+                    let start = keyed.partition_point(|e| e.0 < h);
+                    for &(kh, j) in &keyed[start..] {
+                        if kh != h {
+                            break;
+                        }
+                        let o = &balls[j as usize];
+                        let reach = b.radius + o.radius;
+                        if j as usize != i && (b.center - o.center).length_squared() < reach * reach
+                        {
+                            out.push(j);
                         }
                     }
                 }
             }
-            out.sort_unstable();
-            out
-        })
-        .collect();
+        }
+        out.sort_unstable();
+        out
+    };
+    let lists: Vec<Vec<u32>> = if parallel {
+        balls.par_iter().enumerate().map(list_of).collect()
+    } else {
+        balls.iter().enumerate().map(list_of).collect()
+    };
     let mut start = Vec::with_capacity(n + 1);
     start.push(0u32);
     let mut flat = Vec::with_capacity(lists.iter().map(Vec::len).sum());
