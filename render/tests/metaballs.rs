@@ -586,3 +586,27 @@ fn real_molecules_from_pymol_data_load_and_render_like_brute_force() {
         );
     }
 }
+
+#[test]
+fn a_frame_below_the_isovalue_floor_builds_the_fallback_tree_while_tiles_wait() {
+    // The first query under the FBVH's floor builds the relaxed tree inside a `OnceLock` the
+    // other tile threads wait on; the build must not fork onto those threads (a forked thread
+    // could pick up a waiting tile and wait on itself). Tornado 4k is big enough that a
+    // forking build would fork.
+    use isoray_render::scenes::DemoScene;
+    use isoray_render::{CpuBackend, View};
+    use std::sync::Arc;
+    let demo = DemoScene::Tornado4k;
+    let view = View {
+        width: 64,
+        height: 48,
+        camera: demo.default_camera(),
+        isovalue: 0.6 * demo.isovalue_slider().0,
+    };
+    let backend = CpuBackend::new(2).expect("pool");
+    for time in [1.0, 2.0, 3.0] {
+        let prepared = Arc::new(demo.state_at(time)).prepare();
+        let frame = backend.render(&prepared, &view);
+        assert!(frame.hit_count() > 0, "the surface below the floor is seen");
+    }
+}

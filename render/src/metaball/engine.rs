@@ -213,14 +213,8 @@ impl PreparedMetaballs {
             (AccelKind::Tree(opts), Accel::Tree(_))
                 if opts.depends_on_isovalue() && isovalue < opts.isovalue =>
             {
-                self.fallback.get_or_init(|| {
-                    let relaxed = BuildOptions {
-                        tight_boxes: false,
-                        discard_split: false,
-                        ..*opts
-                    };
-                    build_accel(&self.scene, AccelKind::Tree(relaxed))
-                })
+                self.fallback
+                    .get_or_init(|| build_fallback(&self.scene, opts))
             }
             (_, accel) => accel,
         };
@@ -500,6 +494,28 @@ fn build_accel(scene: &MetaballScene, kind: AccelKind) -> Accel {
             Accel::Tree(Tree::build(&balls, scene.kernel, opts))
         }
     }
+}
+
+/// The tree for isovalues below the one the §5.3 optimisations were built for: the same
+/// structure without them. Built lazily inside a `OnceLock` that other render threads may
+/// wait on, so it never forks (a forking thread may run one of those waiting frames and wait
+/// on itself).
+fn build_fallback(scene: &MetaballScene, opts: &BuildOptions) -> Accel {
+    let relaxed = BuildOptions {
+        tight_boxes: false,
+        discard_split: false,
+        ..*opts
+    };
+    let balls: Vec<TreeBall> = scene
+        .balls
+        .iter()
+        .map(|b| TreeBall {
+            center: b.center,
+            radius: b.radius,
+            strength: b.strength,
+        })
+        .collect();
+    Accel::Tree(Tree::build_on_this_thread(&balls, scene.kernel, relaxed))
 }
 
 /// Brute force and Bézier clipping on an unprepared scene.

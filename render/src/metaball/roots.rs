@@ -257,7 +257,14 @@ pub struct Scratch<R> {
     active: Vec<u32>,
     samples: Vec<R>,
     domains: Vec<(R, R)>,
+    halves: HalfStack<R>,
 }
+
+/// Bézier clipping's pending halves: (control points, lo, hi).
+pub type HalfStack<R> = Vec<([R; MAX_DEGREE + 1], R, R)>;
+
+/// Most halves Bézier clipping keeps pending; past it, it clips instead of splitting.
+const MAX_PENDING_HALVES: usize = 48;
 
 #[inline]
 fn field<R: Real>(k: &KernelPoly<R>, balls: &[RayBall<R>], active: &[u32], t: R) -> R {
@@ -297,7 +304,25 @@ pub fn find_first<R: Real>(
     }
 }
 
-type SectionFn<R> = fn(&FindParams<R>, &[RayBall<R>], &[u32], R, R, &mut u32) -> Option<R>;
+type SectionFn<R> =
+    fn(&FindParams<R>, &[RayBall<R>], &[u32], R, R, &mut u32, &mut HalfStack<R>) -> Option<R>;
+
+/// Whether the field can reach `T` on `[a, b]`. The kernels are monotone in `s` with one
+/// sign (a caller may negate them, as the exit query does), so a ball whose term is positive
+/// is largest at its smallest `s` on the stretch and one whose term is negative is at most 0:
+/// their sum is an upper bound. Sections below it are skipped without searching.
+#[inline]
+fn may_reach<R: Real>(p: &FindParams<R>, balls: &[RayBall<R>], active: &[u32], a: R, b: R) -> bool {
+    let peak = p.kernel.at_w(R::of(1.0));
+    let mut bound = R::default();
+    for &i in active {
+        let ball = &balls[i as usize];
+        if ball.q * peak > R::default() {
+            bound = bound + ball.term(&p.kernel, ball.tc.max(a).min(b));
+        }
+    }
+    !(bound < p.isovalue)
+}
 
 /// Sorts the entry/exit points in `[lo, hi]` and calls `section` on each stretch between
 /// consecutive ones with the balls active there (the tutorial's active list).
@@ -348,8 +373,11 @@ fn walk_sections<R: Real>(
             continue;
         }
         let next = events[e].0;
+        if !may_reach(p, balls, active, t, next) {
+            continue;
+        }
         let mut iters = 0;
-        let hit = section(p, balls, active, t, next, &mut iters);
+        let hit = section(p, balls, active, t, next, &mut iters, &mut scratch.halves);
         found.iterations += iters;
         if hit.is_some() {
             found.t = hit;
@@ -371,6 +399,7 @@ fn march_section<R: Real>(
     a: R,
     b: R,
     iters: &mut u32,
+    _: &mut HalfStack<R>,
 ) -> Option<R> {
     let mut step = R::of(f64::INFINITY);
     for &i in active {
@@ -407,6 +436,7 @@ fn trace_section<R: Real>(
     a: R,
     b: R,
     iters: &mut u32,
+    _: &mut HalfStack<R>,
 ) -> Option<R> {
     let mut lipschitz = R::default();
     for &i in active {
@@ -587,6 +617,7 @@ fn bezier_section<R: Real>(
     a: R,
     b: R,
     iters: &mut u32,
+    halves: &mut HalfStack<R>,
 ) -> Option<R> {
     let h = b - a;
     let degree = 2 * p.kernel.degree;
@@ -598,33 +629,43 @@ fn bezier_section<R: Real>(
         let s0 = ball.a * d * d + ball.s_min;
         let s1 = R::of(2.0) * ball.a * d * h;
         let s2 = ball.a * h * h;
-        let w = [R::of(1.0) - s0, -s1, -s2];
+        // w = 1 - s as a quadratic in v, and its powers up to the kernel's degree.
+        let (w0, w1, w2) = (R::of(1.0) - s0, -s1, -s2);
         let mut wk = [R::default(); MAX_DEGREE + 1];
-        wk[0] = R::of(1.0);
-        let mut len = 1;
-        for k in 1..=p.kernel.degree {
-            // wk ← wk · w
-            let mut next = [R::default(); MAX_DEGREE + 1];
-            for (j, &x) in wk.iter().enumerate().take(len) {
-                for (l, &y) in w.iter().enumerate() {
-                    next[j + l] = next[j + l] + x * y;
-                }
-            }
-            wk = next;
-            len += 2;
+        wk[0] = w0;
+        wk[1] = w1;
+        wk[2] = w2;
+        let mut len = 3;
+        let mut k = 1;
+        loop {
             let ck = p.kernel.c[k] * ball.q;
             if ck != R::default() {
                 for j in 0..len {
                     poly[j] = poly[j] + ck * wk[j];
                 }
             }
+            if k == p.kernel.degree {
+                break;
+            }
+            // wk ← wk · (w0 + w1 v + w2 v²), from the top down so it works in place.
+            wk[len + 1] = wk[len - 1] * w2;
+            wk[len] = wk[len - 1] * w1 + wk[len - 2] * w2;
+            let mut j = len - 1;
+            while j >= 2 {
+                wk[j] = wk[j] * w0 + wk[j - 1] * w1 + wk[j - 2] * w2;
+                j -= 1;
+            }
+            wk[1] = wk[1] * w0 + wk[0] * w1;
+            wk[0] = wk[0] * w0;
+            len += 2;
+            k += 1;
         }
     }
     poly[0] = poly[0] - p.isovalue;
     let mut bern = [R::default(); MAX_DEGREE + 1];
     power_to_bernstein(&poly, degree, &mut bern);
     let tol_v = p.tolerance / h;
-    bezier_first_root(&bern, degree, tol_v, iters).map(|v| a + h * v)
+    bezier_first_root(&bern, degree, tol_v, iters, halves).map(|v| a + h * v)
 }
 
 const BINOMIAL: [[f64; MAX_DEGREE + 1]; MAX_DEGREE + 1] = {
@@ -642,12 +683,32 @@ const BINOMIAL: [[f64; MAX_DEGREE + 1]; MAX_DEGREE + 1] = {
     c
 };
 
+/// `TO_BERNSTEIN[n][j][i] = C(j, i) / C(n, i)`: power to Bernstein coefficients of degree `n`.
+const TO_BERNSTEIN: [[[f64; MAX_DEGREE + 1]; MAX_DEGREE + 1]; MAX_DEGREE + 1] = {
+    let mut m = [[[0.0; MAX_DEGREE + 1]; MAX_DEGREE + 1]; MAX_DEGREE + 1];
+    let mut n = 0;
+    while n <= MAX_DEGREE {
+        let mut j = 0;
+        while j <= n {
+            let mut i = 0;
+            while i <= j {
+                m[n][j][i] = BINOMIAL[j][i] / BINOMIAL[n][i];
+                i += 1;
+            }
+            j += 1;
+        }
+        n += 1;
+    }
+    m
+};
+
 /// `b_j = Σ_{i ≤ j} C(j, i) / C(n, i) · p_i` for `p(v) = Σ p_i v^i` on `[0, 1]`.
 fn power_to_bernstein<R: Real>(poly: &[R], n: usize, out: &mut [R]) {
+    let m = &TO_BERNSTEIN[n];
     for j in 0..=n {
         let mut acc = R::default();
         for (i, &pi) in poly.iter().enumerate().take(j + 1) {
-            acc = acc + R::of(BINOMIAL[j][i] / BINOMIAL[n][i]) * pi;
+            acc = acc + R::of(m[j][i]) * pi;
         }
         out[j] = acc;
     }
@@ -674,12 +735,12 @@ pub fn bezier_first_root<R: Real>(
     n: usize,
     tol_v: R,
     iters: &mut u32,
+    halves: &mut HalfStack<R>,
 ) -> Option<R> {
     let zero = R::default();
-    let nf = R::of(n as f64);
-    // Pending halves, nearest last popped first: (coefficients, lo, hi).
-    let mut stack: [([R; MAX_DEGREE + 1], R, R); 48] = [([zero; MAX_DEGREE + 1], zero, zero); 48];
-    let mut depth = 0usize;
+    let inv_n = R::of(1.0 / n.max(1) as f64);
+    // Pending halves, nearest last popped first.
+    halves.clear();
     let mut cur = (*b, zero, R::of(1.0));
     loop {
         let (ref mut c, ref mut lo, ref mut hi) = cur;
@@ -703,7 +764,7 @@ pub fn bezier_first_root<R: Real>(
                     if c[j] < zero {
                         continue;
                     }
-                    let (xi, xj) = (R::of(i as f64) / nf, R::of(j as f64) / nf);
+                    let (xi, xj) = (R::of(i as f64) * inv_n, R::of(j as f64) * inv_n);
                     let x = xi + (xj - xi) * (-c[i]) / (c[j] - c[i]);
                     xl = xl.min(x);
                     xr = xr.max(x);
@@ -716,12 +777,11 @@ pub fn bezier_first_root<R: Real>(
             }
             let mut left = [zero; MAX_DEGREE + 1];
             let mut right = [zero; MAX_DEGREE + 1];
-            if xr - xl > R::of(0.8) && depth < stack.len() {
+            if xr - xl > R::of(0.8) && halves.len() < MAX_PENDING_HALVES {
                 // Clipping stalls (several roots or a flat stretch): split in half.
                 de_casteljau(c, n, R::of(0.5), &mut left, &mut right);
                 let mid = *lo + width * R::of(0.5);
-                stack[depth] = (right, mid, *hi);
-                depth += 1;
+                halves.push((right, mid, *hi));
                 *c = left;
                 *hi = mid;
             } else {
@@ -736,11 +796,13 @@ pub fn bezier_first_root<R: Real>(
             }
             continue;
         }
-        if depth == 0 || *iters > ITERATION_CAP {
+        if *iters > ITERATION_CAP {
             return None;
         }
-        depth -= 1;
-        cur = stack[depth];
+        match halves.pop() {
+            Some(half) => cur = half,
+            None => return None,
+        }
     }
 }
 
@@ -760,6 +822,7 @@ mod tests {
             3,
             1e-12,
             &mut iters,
+            &mut Vec::new(),
         )
         .expect("a root");
         assert!((v - 0.2).abs() < 1e-9, "v = {v}");

@@ -19,8 +19,8 @@
 //!   `r_max = R_K · sqrt(s*)`, `f(s*) = T / (n q_max)` (the paper's `(1-(T/n)^{1/α})^{1/2}`
 //!   for its kernel, generalised to any kernel and strength).
 //! - §5.3.2: a positive split ball is discarded when its `r_max` sphere misses the node's box
-//!   and it lies at least `R_i + r_max` from every other ball of the node (run on nodes of
-//!   up to `DISCARD_MAX_BALLS` balls; what it drops stays dropped below).
+//!   and it lies at least `R_i + r_max` from every other ball of the node (run on the leaves,
+//!   whose lists the rays read; running it on every small node cost more than it saved).
 //!
 //! The build: a node's owned balls are a contiguous slice of `Prim`s partitioned in place,
 //! so the passes over them read memory in order; nodes with more than `PARALLEL_BALLS`
@@ -322,6 +322,8 @@ struct Ctx {
     q_max: f32,
     /// `sqrt(s*)` for `n = 0..S_TABLE` positive balls of strength `q_max`.
     root_s_star: Vec<f32>,
+    /// Whether the build may fork on rayon.
+    parallel: bool,
 }
 
 /// Per-thread buffers of the sequential build.
@@ -381,12 +383,14 @@ impl Default for Bins {
 
 /// Node sizes whose `r_max` comes from a table rather than a bisection.
 const S_TABLE: usize = 4096;
-/// Split-metaball discarding (§5.3.2) costs `split × (owned + split)` per node; it runs on
-/// nodes up to this size, near the leaves, where it pays. A ball it drops is dropped from the
-/// whole subtree, whose boxes lie inside the node's.
+/// Split-metaball discarding (§5.3.2) costs `split × (owned + split)` per leaf; larger
+/// leaves (rare: the SAH splits them) keep their lists.
 const DISCARD_MAX_BALLS: usize = 96;
 
 const MAX_DEPTH: usize = 64;
+/// Nodes owning this many balls or fewer stay leaves: splitting them changed render work by
+/// about 2% (Pool, counted instructions) and cost a seventh of the build.
+const MIN_SPLIT_OWNED: usize = 2;
 /// Most SAH bins per axis.
 const MAX_BINS: usize = 16;
 /// Nodes with more owned balls than this build their children in parallel; smaller ones are
@@ -396,6 +400,17 @@ const PARALLEL_BALLS: usize = 3072;
 impl Tree {
     /// Builds the structure over `balls`.
     pub fn build(balls: &[TreeBall], kernel: Kernel, opts: BuildOptions) -> Tree {
+        Tree::build_with(balls, kernel, opts, true)
+    }
+
+    /// [`Tree::build`] without forking: for a build inside a wait that other threads of the
+    /// same pool may block on (a lazily built fallback), where a fork could make this thread
+    /// run one of theirs, and so wait on itself.
+    pub fn build_on_this_thread(balls: &[TreeBall], kernel: Kernel, opts: BuildOptions) -> Tree {
+        Tree::build_with(balls, kernel, opts, false)
+    }
+
+    fn build_with(balls: &[TreeBall], kernel: Kernel, opts: BuildOptions, parallel: bool) -> Tree {
         let q_max = balls.iter().fold(0.0f32, |m, b| m.max(b.strength));
         let root_s_star = if opts.depends_on_isovalue() && opts.isovalue > 0.0 && q_max > 0.0 {
             (0..S_TABLE)
@@ -418,9 +433,10 @@ impl Tree {
             neighbours: Vec::new(),
             q_max,
             root_s_star,
+            parallel,
         };
         if opts.kind == TreeKind::Bvh {
-            (ctx.neighbour_start, ctx.neighbours) = neighbour_lists(balls);
+            (ctx.neighbour_start, ctx.neighbours) = neighbour_lists(balls, parallel);
         }
         let mut prims: Vec<Prim> = balls
             .iter()
@@ -772,6 +788,25 @@ impl Ctx {
         (i, sides)
     }
 
+    /// A leaf's split list after §5.3.2 (Fitted BVH with discarding on).
+    fn finish_leaf(
+        &self,
+        owned: &[Prim],
+        split: &mut Vec<u32>,
+        from: usize,
+        geom: &Geom,
+        keep: &mut Vec<bool>,
+    ) {
+        let n_split = split.len() - from;
+        if self.opts.kind == TreeKind::Fitted
+            && self.opts.discard_split
+            && n_split > 0
+            && owned.len() + n_split <= DISCARD_MAX_BALLS
+        {
+            self.discard(owned, split, from, &geom.bounds, geom.r_max, keep);
+        }
+    }
+
     /// §5.3.2 on the split list `split` (in place, in `keep`'s order): drops the positive
     /// split balls whose `r_max` sphere misses `bounds` and whose centre lies at least
     /// `R_i + r_max` from every other ball of the node. Any surface point in the box lies
@@ -814,29 +849,22 @@ impl Ctx {
     }
 
     /// Decides whether the node with these owned balls and split list `split[from..]` is
-    /// split, after discarding (§5.3.2) on small nodes.
-    #[allow(clippy::too_many_arguments)]
+    /// split.
     fn choose(
         &self,
         owned: &[Prim],
-        split: &mut Vec<u32>,
+        split: &[u32],
         from: usize,
         geom: &Geom,
         depth: usize,
-        keep: &mut Vec<bool>,
         bins: &mut Bins,
     ) -> Option<Choice> {
         let fitted = self.opts.kind == TreeKind::Fitted;
-        let n_split = split.len() - from;
-        if fitted
-            && self.opts.discard_split
-            && n_split > 0
-            && owned.len() + n_split <= DISCARD_MAX_BALLS
-        {
-            self.discard(owned, split, from, &geom.bounds, geom.r_max, keep);
-        }
         let n = (owned.len() + split.len() - from) as f32;
-        if owned.len() <= 1 || depth >= MAX_DEPTH || (fitted && geom.bounds.is_empty()) {
+        if owned.len() <= MIN_SPLIT_OWNED
+            || depth >= MAX_DEPTH
+            || (fitted && geom.bounds.is_empty())
+        {
             return None;
         }
         let choice = self.best_split(
@@ -941,7 +969,7 @@ impl Ctx {
     fn build_par(&self, owned: &mut [Prim], node: NodeInput, depth: usize) -> Built {
         let mut scratch = Scratch::default();
         let geom = node.geom;
-        if owned.len() <= PARALLEL_BALLS {
+        if !self.parallel || owned.len() <= PARALLEL_BALLS {
             let mut chunk = Chunk {
                 nodes: vec![BLANK],
                 balls: Vec::with_capacity(owned.len() * 4),
@@ -951,15 +979,7 @@ impl Ctx {
             return Built::Chunk(chunk);
         }
         let mut split = node.split;
-        let choice = self.choose(
-            owned,
-            &mut split,
-            0,
-            &geom,
-            depth,
-            &mut scratch.keep,
-            &mut scratch.bins,
-        );
+        let choice = self.choose(owned, &split, 0, &geom, depth, &mut scratch.bins);
         let parts = choice.map(|c| (c, Ctx::partition(owned, c.axis, c.plane)));
         let Some((choice, (mid, centroids))) =
             parts.filter(|(_, (m, _))| *m > 0 && *m < owned.len())
@@ -968,6 +988,7 @@ impl Ctx {
                 nodes: vec![BLANK],
                 balls: Vec::new(),
             };
+            self.finish_leaf(owned, &mut split, 0, &geom, &mut scratch.keep);
             chunk.nodes[0] = leaf(&mut chunk.balls, geom.bounds, owned, &split);
             return Built::Chunk(chunk);
         };
@@ -1014,19 +1035,12 @@ impl Ctx {
         geom: &Geom,
         depth: usize,
     ) {
-        let choice = self.choose(
-            owned,
-            &mut scratch.arena,
-            from,
-            geom,
-            depth,
-            &mut scratch.keep,
-            &mut scratch.bins,
-        );
+        let choice = self.choose(owned, &scratch.arena, from, geom, depth, &mut scratch.bins);
         let parts = choice.map(|c| (c, Ctx::partition(owned, c.axis, c.plane)));
         let Some((choice, (mid, centroids))) =
             parts.filter(|(_, (m, _))| *m > 0 && *m < owned.len())
         else {
+            self.finish_leaf(owned, &mut scratch.arena, from, geom, &mut scratch.keep);
             chunk.nodes[at] = leaf(&mut chunk.balls, geom.bounds, owned, &scratch.arena[from..]);
             scratch.arena.truncate(from);
             return;
@@ -1135,7 +1149,7 @@ fn split_box(b: &Aabb, axis: usize, plane: f32) -> (Aabb, Aabb) {
 
 /// For every ball, the balls whose sphere overlaps its sphere, from a uniform grid of cell
 /// size `2 R_max` (compressed rows, each sorted).
-fn neighbour_lists(balls: &[TreeBall]) -> (Vec<u32>, Vec<u32>) {
+fn neighbour_lists(balls: &[TreeBall], parallel: bool) -> (Vec<u32>, Vec<u32>) {
     let n = balls.len();
     if n == 0 {
         return (vec![0], Vec::new());
@@ -1154,42 +1168,46 @@ fn neighbour_lists(balls: &[TreeBall]) -> (Vec<u32>, Vec<u32>) {
             | ((k[1] as u64 & 0x1F_FFFF) << 21)
             | ((k[2] as u64 & 0x1F_FFFF) << 42)
     };
-    let mut keyed: Vec<(u64, u32)> = balls
-        .par_iter()
-        .enumerate()
-        .map(|(i, b)| (hash(key(b.center)), i as u32))
-        .collect();
-    keyed.par_sort_unstable();
-    let lists: Vec<Vec<u32>> = balls
-        .par_iter()
-        .enumerate()
-        .map(|(i, b)| {
-            let k = key(b.center);
-            let mut out = Vec::new();
-            for dx in -1..=1 {
-                for dy in -1..=1 {
-                    for dz in -1..=1 {
-                        let h = hash([k[0] + dx, k[1] + dy, k[2] + dz]);
-                        let start = keyed.partition_point(|e| e.0 < h);
-                        for &(kh, j) in &keyed[start..] {
-                            if kh != h {
-                                break;
-                            }
-                            let o = &balls[j as usize];
-                            let reach = b.radius + o.radius;
-                            if j as usize != i
-                                && (b.center - o.center).length_squared() < reach * reach
-                            {
-                                out.push(j);
-                            }
+    let keyed_of = |(i, b): (usize, &TreeBall)| (hash(key(b.center)), i as u32);
+    let keyed: Vec<(u64, u32)> = if parallel {
+        let mut k: Vec<(u64, u32)> = balls.par_iter().enumerate().map(keyed_of).collect();
+        k.par_sort_unstable();
+        k
+    } else {
+        let mut k: Vec<(u64, u32)> = balls.iter().enumerate().map(keyed_of).collect();
+        k.sort_unstable();
+        k
+    };
+    let list_of = |(i, b): (usize, &TreeBall)| {
+        let k = key(b.center);
+        let mut out = Vec::new();
+        for dx in -1..=1 {
+            for dy in -1..=1 {
+                for dz in -1..=1 {
+                    let h = hash([k[0] + dx, k[1] + dy, k[2] + dz]);
+                    let start = keyed.partition_point(|e| e.0 < h);
+                    for &(kh, j) in &keyed[start..] {
+                        if kh != h {
+                            break;
+                        }
+                        let o = &balls[j as usize];
+                        let reach = b.radius + o.radius;
+                        if j as usize != i && (b.center - o.center).length_squared() < reach * reach
+                        {
+                            out.push(j);
                         }
                     }
                 }
             }
-            out.sort_unstable();
-            out
-        })
-        .collect();
+        }
+        out.sort_unstable();
+        out
+    };
+    let lists: Vec<Vec<u32>> = if parallel {
+        balls.par_iter().enumerate().map(list_of).collect()
+    } else {
+        balls.iter().enumerate().map(list_of).collect()
+    };
     let mut start = Vec::with_capacity(n + 1);
     start.push(0u32);
     let mut flat = Vec::with_capacity(lists.iter().map(Vec::len).sum());

@@ -16,7 +16,7 @@
 //!   Fitted BVH built without the §5.3 optimisations (the same fallback structure low
 //!   isovalues use), whose disjoint leaves together hold the complete field.
 
-use super::{build_accel, Accel, AccelKind, PreparedMetaballs, RayCounters, SCRATCH};
+use super::{build_fallback, Accel, AccelKind, PreparedMetaballs, RayCounters, SCRATCH};
 use crate::metaball::roots::{self, FindParams, KernelPoly, RayBall, RootFinder, Scratch};
 use crate::metaball::tree::{BuildOptions, Tree, TreeKind};
 use crate::ray::{Hit, Ray};
@@ -35,14 +35,8 @@ impl PreparedMetaballs {
     }
 
     fn relaxed_accel(&self, opts: &BuildOptions) -> &Accel {
-        self.fallback.get_or_init(|| {
-            let relaxed = BuildOptions {
-                tight_boxes: false,
-                discard_split: false,
-                ..*opts
-            };
-            build_accel(&self.scene, AccelKind::Tree(relaxed))
-        })
+        self.fallback
+            .get_or_init(|| build_fallback(&self.scene, opts))
     }
 
     fn params(&self, isovalue: f32) -> FindParams<f32> {
