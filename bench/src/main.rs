@@ -3,6 +3,7 @@
 //! measures and at what size.
 
 mod common;
+mod effects;
 mod ingest;
 mod metaballs;
 mod tets;
@@ -27,6 +28,9 @@ enum Command {
     Tets(tets::TetsArgs),
     /// Store ingest: MB/s of `.npy` steps pushed over loopback HTTP into the scene store.
     Ingest(ingest::IngestArgs),
+    /// fps per secondary effect (the Fitted BVH paper's Table 2), rays per kind, and what
+    /// an effect no material can use costs.
+    Effects(effects::EffectsArgs),
 }
 
 fn main() {
@@ -36,6 +40,7 @@ fn main() {
         Command::Build(args) => metaballs::build_ablation(args),
         Command::Tets(args) => tets::run(args),
         Command::Ingest(args) => ingest::run(args),
+        Command::Effects(args) => effects::run(args),
     };
     if let Err(e) = result {
         eprintln!("isoray-bench: {e}");

@@ -142,6 +142,16 @@ impl CpuBackend {
         }
         if !accumulator.converged {
             let plan = plan_for(scene, effects);
+            if plan.is_primary_only() {
+                // Ray casting has nothing to refine: one frame by the fast path is final.
+                let fb = self.render(scene, view);
+                accumulator.passes = 1;
+                accumulator.converged = true;
+                accumulator.last_delta = f32::INFINITY;
+                accumulator.sum.clear();
+                accumulator.fixed = Some(fb.clone());
+                return fb;
+            }
             let pass_index = accumulator.passes;
             let pass = self
                 .pool
@@ -234,6 +244,8 @@ pub struct Accumulator {
     height: u32,
     sum: Vec<Vec3>,
     depth: Vec<f32>,
+    /// The final image of a plan with nothing to accumulate.
+    fixed: Option<Framebuffer>,
     passes: u32,
     converged: bool,
     /// Mean absolute change of the linear mean from the previous pass (`INFINITY` before 2).
@@ -261,6 +273,7 @@ impl Accumulator {
             height: 0,
             sum: Vec::new(),
             depth: Vec::new(),
+            fixed: None,
             passes: 0,
             converged: false,
             last_delta: f32::INFINITY,
@@ -275,6 +288,7 @@ impl Accumulator {
         self.height = height;
         self.sum.clear();
         self.depth.clear();
+        self.fixed = None;
         self.passes = 0;
         self.converged = false;
         self.last_delta = f32::INFINITY;
@@ -316,6 +330,9 @@ impl Accumulator {
 
     /// The mean of the passes so far, as an sRGB frame.
     pub fn image(&self) -> Framebuffer {
+        if let Some(fb) = &self.fixed {
+            return fb.clone();
+        }
         let mut fb = Framebuffer::new(self.width, self.height);
         if self.passes == 0 {
             return fb;

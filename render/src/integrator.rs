@@ -160,8 +160,30 @@ impl<'a> Tracer<'a> {
     /// The first crossing of the isosurface at `isovalue` on `[a, b]`, entering the solid or,
     /// when the ray starts inside it, leaving it.
     fn crossing(&mut self, ray: &Ray, a: f32, b: f32, isovalue: f32) -> Option<Hit> {
+        self.crossing_from(ray, a, b, isovalue, false)
+    }
+
+    /// [`Tracer::crossing`]; `inside`: the ray is known to start inside the solid (it just
+    /// entered it), so the way out is asked for at once.
+    fn crossing_from(
+        &mut self,
+        ray: &Ray,
+        a: f32,
+        b: f32,
+        isovalue: f32,
+        inside: bool,
+    ) -> Option<Hit> {
         let (segments, n) = self.segments(ray, a, b);
-        for &(lo, hi) in &segments[..n] {
+        for (k, &(lo, hi)) in segments[..n].iter().enumerate() {
+            if inside && k == 0 && lo == a {
+                if let Some(exit) =
+                    self.scene
+                        .exit_hit_counted(ray, lo, hi, isovalue, &mut self.counters)
+                {
+                    return Some(exit);
+                }
+                continue;
+            }
             let Some(hit) = self
                 .scene
                 .first_hit_counted(ray, lo, hi, isovalue, &mut self.counters)
@@ -407,7 +429,10 @@ impl<'a> Tracer<'a> {
             // Walk the crossings, each letting `1 - α` through.
             let mut t = 0.0;
             let mut crossings = 0;
-            while let Some(hit) = self.crossing(ray, t, t_max, isovalue) {
+            let mut inside = false;
+            while let Some(hit) = self.crossing_from(ray, t, t_max, isovalue, inside) {
+                // A crossing against the outward normal enters the solid.
+                inside = hit.normal.dot(ray.dir) < 0.0;
                 let material =
                     fixed_material.unwrap_or_else(|| self.lighting.material_of(hit.primitive));
                 transmitted *= 1.0 - self.lighting.material(material).opacity.clamp(0.0, 1.0);

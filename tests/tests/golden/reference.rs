@@ -1,6 +1,8 @@
-//! The analytic `f64` reference renderer of the golden scenes: one Wyvill metaball, whose
-//! isosurface at `T` is exactly the sphere of radius `R·sqrt(s_T)` with `f(s_T) = T` (at
-//! `T = 1/2`, `R/2`), over a floor plane. Every ray–sphere and ray–plane intersection is solved
+//! The analytic `f64` reference renderer of the golden scenes, over a floor plane: for
+//! metaballs one Wyvill ball, whose isosurface at `T` is exactly the sphere of radius
+//! `R·sqrt(s_T)` with `f(s_T) = T` (at `T = 1/2`, `R/2`); for tets the linear field `f = y`,
+//! which linear interpolation over any tet mesh reproduces exactly, so its isosurfaces are
+//! horizontal squares. Every ray–sphere and ray–plane intersection is solved
 //! in closed form; soft shadows and ambient occlusion are integrated by a deterministic
 //! stratified quadrature over the light's cap and the hemisphere; a volume's optical depth by
 //! composite Simpson over the field. Nothing here calls the engine's tracer: the only thing
@@ -46,15 +48,28 @@ impl Default for RefMaterial {
     }
 }
 
-/// A scene of concentric isosurface spheres of one ball, a floor, lights and effects.
+/// The field whose isosurfaces the scene shows.
+#[derive(Clone, Copy, Debug)]
+pub enum RefShape {
+    /// One Wyvill ball of support radius `support`: its isosurfaces are concentric spheres,
+    /// with normals pointing out (down the field).
+    Ball {
+        center: DVec3,
+        support: f64,
+        color: DVec3,
+    },
+    /// The linear field `f = y` on the box `[lo, hi]` (a tet mesh interpolates it exactly):
+    /// the isosurface at `v` is the square `y = v` inside the box, its normal `-y` (out of
+    /// the solid `f > v`).
+    Slab { lo: DVec3, hi: DVec3 },
+}
+
+/// A scene of isosurfaces of one field, a floor, lights and effects.
 #[derive(Clone, Debug)]
 pub struct RefScene {
-    pub center: DVec3,
-    /// Support radius of the ball.
-    pub support: f64,
-    pub ball_color: DVec3,
-    /// Isosurfaces: (isovalue, material); the first is the session's.
-    pub surfaces: Vec<(f64, RefMaterial)>,
+    pub shape: RefShape,
+    /// Isosurfaces: (isovalue, material, albedo for a slab); the first is the session's.
+    pub surfaces: Vec<(f64, RefMaterial, DVec3)>,
     /// Their radii (filled by [`RefScene::solve`]).
     pub radii: Vec<f64>,
     pub floor_height: f64,
@@ -112,11 +127,14 @@ const EPS: f64 = 1e-7;
 impl RefScene {
     /// Solves every isosurface's radius once.
     pub fn solve(&mut self) {
-        self.radii = self
-            .surfaces
-            .iter()
-            .map(|&(isovalue, _)| iso_radius(self.support, isovalue))
-            .collect();
+        self.radii = match self.shape {
+            RefShape::Ball { support, .. } => self
+                .surfaces
+                .iter()
+                .map(|&(isovalue, _, _)| iso_radius(support, isovalue))
+                .collect(),
+            RefShape::Slab { .. } => Vec::new(),
+        };
     }
 
     fn inside_clip(&self, p: DVec3) -> bool {
@@ -124,9 +142,9 @@ impl RefScene {
             .is_some_and(|(lo, hi)| p.cmpgt(lo).all() && p.cmplt(hi).all())
     }
 
-    /// Both roots of the ray with the sphere of radius `r`, ascending.
-    fn roots(&self, o: DVec3, d: DVec3, r: f64) -> Option<(f64, f64)> {
-        let oc = o - self.center;
+    /// Both roots of the ray with the sphere of radius `r` about `center`, ascending.
+    fn roots(center: DVec3, o: DVec3, d: DVec3, r: f64) -> Option<(f64, f64)> {
+        let oc = o - center;
         let b = oc.dot(d);
         let c = oc.length_squared() - r * r;
         let disc = b * b - c;
@@ -139,14 +157,34 @@ impl RefScene {
 
     /// Crossings of isosurface `k` on `(t0, t1)` outside the clip box, ascending.
     fn crossings(&self, o: DVec3, d: DVec3, k: usize, t0: f64, t1: f64) -> Vec<f64> {
-        let r = self.radii[k];
-        let Some((a, b)) = self.roots(o, d, r) else {
-            return Vec::new();
+        let candidates: Vec<f64> = match self.shape {
+            RefShape::Ball { center, .. } => match Self::roots(center, o, d, self.radii[k]) {
+                Some((a, b)) => vec![a, b],
+                None => Vec::new(),
+            },
+            RefShape::Slab { lo, hi } => {
+                let v = self.surfaces[k].0;
+                let t = (v - o.y) / d.y;
+                let p = o + t * d;
+                if p.x > lo.x && p.x < hi.x && p.z > lo.z && p.z < hi.z && v > lo.y && v < hi.y {
+                    vec![t]
+                } else {
+                    Vec::new()
+                }
+            }
         };
-        [a, b]
+        candidates
             .into_iter()
             .filter(|&t| t > t0 + EPS && t < t1 && !self.inside_clip(o + t * d))
             .collect()
+    }
+
+    /// Outward normal and albedo of isosurface `k` at `p`.
+    fn surface_at(&self, k: usize, p: DVec3) -> (DVec3, DVec3) {
+        match self.shape {
+            RefShape::Ball { center, color, .. } => ((p - center).normalize(), color),
+            RefShape::Slab { .. } => (DVec3::NEG_Y, self.surfaces[k].2),
+        }
     }
 
     fn closest(&self, o: DVec3, d: DVec3, t0: f64) -> Option<Hit> {
@@ -157,11 +195,12 @@ impl RefScene {
                 if let Some(&t) = self.crossings(o, d, k, t0, limit).first() {
                     limit = t;
                     let p = o + t * d;
+                    let (n, albedo) = self.surface_at(k, p);
                     best = Some(Hit {
                         t,
                         p,
-                        n: (p - self.center).normalize(),
-                        albedo: self.ball_color,
+                        n,
+                        albedo,
                         material: self.surfaces[k].1,
                     });
                 }
@@ -190,7 +229,13 @@ impl RefScene {
 
     /// `∫ F dt` over `(t0, t1)` outside the clip box, by composite Simpson.
     fn optical_depth(&self, o: DVec3, d: DVec3, t0: f64, t1: f64) -> f64 {
-        let Some((a, b)) = self.roots(o, d, self.support) else {
+        let RefShape::Ball {
+            center, support, ..
+        } = self.shape
+        else {
+            return 0.0;
+        };
+        let Some((a, b)) = Self::roots(center, o, d, support) else {
             return 0.0;
         };
         let (a, b) = (a.max(t0), b.min(t1));
@@ -204,7 +249,7 @@ impl RefScene {
             if self.inside_clip(p) {
                 0.0
             } else {
-                wyvill((p - self.center).length_squared() / (self.support * self.support))
+                wyvill((p - center).length_squared() / (support * support))
             }
         };
         let mut sum = f(a) + f(b);
