@@ -8,6 +8,7 @@
 //! Binary step payloads are described in the README's API section and on [`RAW_STEP_MAGIC`]:
 //! a NumPy `.npy` array or a raw little-endian array with a 16-byte header.
 
+pub use crate::api_tets::{JsonTetStep, MeshInfo, TetMeshData, TetSpec};
 pub use crate::effects::{
     ClipBoxSpec, EffectChanges, FloorSpec, GroupSpec, IsosurfaceSpec, LightKind, MaterialSpec,
     VolumeSpec,
@@ -70,6 +71,9 @@ pub struct CreateScene {
     /// Static data of a metaball scene: the defaults for columns a step leaves out.
     #[serde(default)]
     pub metaballs: Option<MetaballDefaults>,
+    /// Static data of a tet scene: its mesh (or send it later) and colour range.
+    #[serde(default)]
+    pub tets: Option<TetSpec>,
     #[serde(default)]
     pub lighting: Option<LightingSpec>,
     /// The camera viewers start with; one looking at the origin when absent.

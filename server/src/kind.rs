@@ -11,18 +11,23 @@
 
 use crate::api::convert::{camera, finite, lighting, vec3};
 use crate::api::error::ApiError;
+use crate::api::tets::{mesh_from_spec, MeshSlot, TetSetup};
 use crate::effects::EffectLimits;
 use glam::Vec3;
 use isoray_protocol::api::{CreateScene, SceneKind};
 use isoray_render::metaball::{Kernel, Metaball, MetaballScene};
 use isoray_render::scene::Geometry;
 use isoray_render::{Camera, Lighting, Scene};
+use std::sync::Arc;
 
 /// The columns of a step array for one kind, and the checks its values get beyond finiteness.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum StepLayout {
     /// Rows are balls: `x y z [radius [strength [r g b]]]`.
     Metaballs,
+    /// Rows are the mesh's vertices, one column: the scalar (`vertices`: how many, once the
+    /// mesh is there).
+    Tets { vertices: Option<u64> },
 }
 
 /// Metaball step column counts: positions, + radius, + strength, + linear RGB.
@@ -34,7 +39,8 @@ impl StepLayout {
     pub fn of(kind: SceneKind) -> Option<StepLayout> {
         match kind {
             SceneKind::Metaballs => Some(StepLayout::Metaballs),
-            SceneKind::Surfels | SceneKind::Tets => None,
+            SceneKind::Tets => Some(StepLayout::Tets { vertices: None }),
+            SceneKind::Surfels => None,
         }
     }
 
@@ -42,6 +48,7 @@ impl StepLayout {
     pub fn allowed_columns(self) -> &'static [u32] {
         match self {
             StepLayout::Metaballs => &METABALL_COLUMNS,
+            StepLayout::Tets { .. } => &[1],
         }
     }
 
@@ -51,6 +58,7 @@ impl StepLayout {
             StepLayout::Metaballs => {
                 "a metaball step has 3 (x y z), 4 (+ radius), 5 (+ strength) or 8 (+ r g b) columns"
             }
+            StepLayout::Tets { .. } => "a tet step has 1 column: the scalar at each mesh vertex",
         }
     }
 
@@ -58,6 +66,7 @@ impl StepLayout {
     pub fn column_name(self, col: usize) -> &'static str {
         match self {
             StepLayout::Metaballs => METABALL_COLUMN_NAMES.get(col).copied().unwrap_or("?"),
+            StepLayout::Tets { .. } => "scalar",
         }
     }
 
@@ -71,6 +80,24 @@ impl StepLayout {
                         .chunks_exact(columns)
                         .fold(true, |ok, row| ok & (row[3] > 0.0))
             }
+            // Any finite scalar will do.
+            StepLayout::Tets { .. } => true,
+        }
+    }
+
+    /// Why a step of `rows` rows does not fit, if it does not: a tet step has one row per
+    /// mesh vertex.
+    pub fn check_rows(self, rows: u64) -> Option<String> {
+        match self {
+            StepLayout::Metaballs => None,
+            StepLayout::Tets { vertices: None } => {
+                Some("the scene has no mesh yet; send it with PUT .../mesh first".into())
+            }
+            StepLayout::Tets {
+                vertices: Some(n),
+            } => (rows != n).then(|| {
+                format!("{rows} rows, but the mesh has {n} vertices: a tet step has one scalar per vertex")
+            }),
         }
     }
 
@@ -80,6 +107,7 @@ impl StepLayout {
             StepLayout::Metaballs => {
                 (col == 3 && v <= 0.0).then(|| format!("is {v}; a radius must be positive"))
             }
+            StepLayout::Tets { .. } => None,
         }
     }
 }
@@ -97,6 +125,7 @@ pub struct BallDefaults {
 #[derive(Clone, Debug, PartialEq)]
 pub enum KindSetup {
     Metaballs(BallDefaults),
+    Tets(TetSetup),
 }
 
 /// Everything a scene was created with, validated and converted to engine types.
@@ -160,7 +189,9 @@ impl SceneSetup {
             },
         };
         let isovalue = finite(spec.isovalue.unwrap_or(0.5), "isovalue")?;
-        if isovalue <= 0.0 {
+        // A metaball field is positive; a tet scene's scalar may take any sign.
+        let positive = layout == StepLayout::Metaballs;
+        if positive && isovalue <= 0.0 {
             return Err(
                 ApiError::bad_request("invalid_value", "isovalue must be positive")
                     .field("isovalue"),
@@ -172,10 +203,11 @@ impl SceneSetup {
                     finite(lo, "isovalue_slider[0]")?,
                     finite(hi, "isovalue_slider[1]")?,
                 );
-                if !(0.0 < lo && lo < hi) {
+                if !(lo < hi && (!positive || 0.0 < lo)) {
+                    let rule = if positive { "0 < lo < hi" } else { "lo < hi" };
                     return Err(ApiError::bad_request(
                         "invalid_value",
-                        "isovalue_slider must be [lo, hi] with 0 < lo < hi",
+                        format!("isovalue_slider must be [lo, hi] with {rule}"),
                     )
                     .field("isovalue_slider"));
                 }
@@ -202,6 +234,34 @@ impl SceneSetup {
                     color: vec3(d.color, "metaballs.color")?,
                 })
             }
+            StepLayout::Tets { .. } => {
+                let t = spec.tets.clone().unwrap_or_default();
+                let color_range = match t.color_range {
+                    Some([lo, hi]) => {
+                        let (lo, hi) = (
+                            finite(lo, "tets.color_range[0]")?,
+                            finite(hi, "tets.color_range[1]")?,
+                        );
+                        if lo == hi {
+                            return Err(ApiError::bad_request(
+                                "invalid_value",
+                                "tets.color_range must be two different values",
+                            )
+                            .field("tets.color_range"));
+                        }
+                        (lo, hi)
+                    }
+                    None => slider,
+                };
+                let mesh = MeshSlot::default();
+                if let Some(data) = &t.mesh {
+                    mesh.set(Arc::new(mesh_from_spec(data)?));
+                }
+                KindSetup::Tets(TetSetup {
+                    mesh: Arc::new(mesh),
+                    color_range,
+                })
+            }
         };
         Ok(SceneSetup {
             camera,
@@ -214,8 +274,29 @@ impl SceneSetup {
 
     /// The layout of this scene's steps.
     pub fn layout(&self) -> StepLayout {
-        match self.kind {
+        match &self.kind {
             KindSetup::Metaballs(_) => StepLayout::Metaballs,
+            KindSetup::Tets(t) => StepLayout::Tets {
+                vertices: t.mesh.get().map(|m| m.vertices().len() as u64),
+            },
+        }
+    }
+
+    /// Open interval of isovalues a viewer of a pushed scene may pick: the field's range
+    /// changes per step, so the bound is generous and the slider carries the useful range. A
+    /// metaball field is positive; a tet scalar may take any sign.
+    pub fn isovalue_range(&self) -> (f32, f32) {
+        match self.kind {
+            KindSetup::Metaballs(_) => (0.0, 1.0e6),
+            KindSetup::Tets(_) => (-1.0e6, 1.0e6),
+        }
+    }
+
+    /// Primitives of a step of `rows` rows: balls, or the mesh's tets.
+    pub fn primitives(&self, rows: u64) -> u64 {
+        match &self.kind {
+            KindSetup::Metaballs(_) => rows,
+            KindSetup::Tets(t) => t.mesh.get().map_or(0, |m| m.tets().len() as u64),
         }
     }
 
@@ -231,6 +312,7 @@ impl SceneSetup {
                 m.min_isovalue = self.slider.0.min(self.isovalue);
                 Geometry::Metaballs(m)
             }
+            KindSetup::Tets(t) => Geometry::Tets(t.scene(step)),
         };
         Scene {
             geometry,
@@ -240,9 +322,10 @@ impl SceneSetup {
 
     /// Memory a prepared step of `rows` rows takes, roughly, for the prepared-state cache.
     pub fn prepared_bytes(&self, rows: u64) -> u64 {
-        match self.kind {
+        match &self.kind {
             // The balls plus about as much again for the acceleration structure.
             KindSetup::Metaballs(_) => rows * 2 * std::mem::size_of::<Metaball>() as u64,
+            KindSetup::Tets(t) => t.prepared_bytes(),
         }
     }
 }
@@ -303,7 +386,21 @@ mod tests {
     #[test]
     fn setup_errors_name_the_field() {
         for (json, field) in [
-            (r#"{"kind":"tets"}"#, "kind"),
+            (r#"{"kind":"surfels"}"#, "kind"),
+            (
+                r#"{"kind":"tets","tets":{"mesh":{"vertices":[[0,0,0],[1,0,0],[0,1,0],[0,0,1]],"cells":[[0,1,2,7]]}}}"#,
+                "tets.mesh.cells[0][3]",
+            ),
+            (
+                r#"{"kind":"tets","tets":{"mesh":{"vertices":[[0,0,0],[1,0,0],[0,1,0],[0,0,1]],"cells":[[0,2,1,3]]}}}"#,
+                "tets.mesh.cells[0]",
+            ),
+            (
+                r#"{"kind":"tets","tets":{"mesh":{"vertices":[[0,0,0],[1,0,0],[0,1,0],[0,0,1e39]],"cells":[[0,1,2,3]]}}}"#,
+                "tets.mesh.vertices[3]",
+            ),
+            (r#"{"kind":"tets","tets":{"color_range":[1,1]}}"#, "tets.color_range"),
+            (r#"{"kind":"tets","isovalue_slider":[1,-1]}"#, "isovalue_slider"),
             (
                 r#"{"kind":"metaballs","metaballs":{"kernel":"gauss"}}"#,
                 "metaballs.kernel",
@@ -321,6 +418,49 @@ mod tests {
             let e = SceneSetup::from_spec(&spec(json), &EffectLimits::ENGINE).expect_err(json);
             assert_eq!(e.field.as_deref(), Some(field), "{json}");
         }
+    }
+
+    #[test]
+    fn tet_setup_takes_negative_isovalues_and_builds_steps_on_the_mesh() {
+        let setup = SceneSetup::from_spec(
+            &spec(
+                r#"{"kind":"tets","isovalue":-0.5,"isovalue_slider":[-1,1],
+                    "tets":{"mesh":{"vertices":[[0,0,0],[1,0,0],[0,1,0],[0,0,1],[1,1,1]],
+                                    "cells":[[0,1,2,3],[1,4,2,3]]}}}"#,
+            ),
+            &EffectLimits::ENGINE,
+        )
+        .expect("valid spec");
+        assert_eq!(setup.layout(), StepLayout::Tets { vertices: Some(5) });
+        assert_eq!(setup.primitives(5), 2);
+        assert!(setup.isovalue_range().0 < -0.5);
+        assert_eq!(setup.layout().check_rows(5), None);
+        assert!(setup.layout().check_rows(4).is_some());
+        let payload: Vec<u8> = [0.0f32, 1.0, -1.0, 0.5, 2.0]
+            .iter()
+            .flat_map(|v| v.to_le_bytes())
+            .collect();
+        let Geometry::Tets(t) = setup.scene(Some((1, &payload))).geometry else {
+            panic!("a tet scene gives tet geometry");
+        };
+        assert_eq!(t.tet_count(), 2);
+        assert_eq!(t.scalars(), &[0.0, 1.0, -1.0, 0.5, 2.0]);
+        // Before the first step (and for a payload that does not fit): nothing to draw.
+        let Geometry::Tets(empty) = setup.scene(None).geometry else {
+            panic!("tet geometry");
+        };
+        assert_eq!(empty.tet_count(), 0);
+        // Without a mesh, steps are refused until it comes.
+        let bare = SceneSetup::from_spec(&spec(r#"{"kind":"tets"}"#), &EffectLimits::ENGINE)
+            .expect("valid spec");
+        assert_eq!(bare.layout(), StepLayout::Tets { vertices: None });
+        assert!(bare.layout().check_rows(5).is_some());
+        assert_eq!(
+            crate::api::tets::check_ready(&bare)
+                .expect_err("no mesh")
+                .status,
+            axum::http::StatusCode::CONFLICT
+        );
     }
 
     #[test]

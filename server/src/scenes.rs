@@ -25,10 +25,6 @@ use std::time::Instant;
 /// Prepared states kept per demo scene: the live step plus a few pinned ones.
 const CACHED_STATES: usize = 4;
 
-/// Isovalues a viewer of a pushed scene may choose: the field's maximum changes per step, so
-/// the bound is generous and the slider carries the useful range.
-const STORED_ISOVALUE_RANGE: (f32, f32) = (0.0, 1.0e6);
-
 /// Every scene this server can stream.
 pub struct SceneRegistry {
     demos: Vec<Arc<SceneEntry>>,
@@ -296,7 +292,7 @@ impl SceneEntry {
     pub fn isovalue_range(&self) -> (f32, f32) {
         match &self.source {
             Source::Demo { isovalue_range, .. } => *isovalue_range,
-            Source::Stored { .. } => STORED_ISOVALUE_RANGE,
+            Source::Stored { setup, .. } => setup.isovalue_range(),
         }
     }
 
@@ -343,7 +339,9 @@ impl SceneEntry {
                     description: spec.description.clone().unwrap_or_default(),
                     animated: true,
                     source: "stored".into(),
-                    primitives: steps.last().map_or(0, |s| s.header.rows),
+                    primitives: scene
+                        .setup
+                        .primitives(steps.last().map_or(0, |s| s.header.rows)),
                     steps: steps.len() as u64,
                     first_step: steps.first().map(|s| s.header.index),
                     last_step: steps.last().map(|s| s.header.index),

@@ -15,6 +15,7 @@ pub mod client;
 pub mod convert;
 pub mod error;
 mod histogram;
+pub mod tets;
 
 use crate::kind::{SceneSetup, StepLayout};
 use crate::scenes::SceneEntry;
@@ -35,7 +36,8 @@ use axum::{Extension, Json, Router};
 use error::ApiError;
 use futures_util::StreamExt;
 use isoray_protocol::api::{
-    ApiCamera, ApiErrorBody, CreateScene, CreatedScene, ImageFormat, JsonStep, LightSpec,
+    ApiCamera, ApiErrorBody, CreateScene, CreatedScene, ImageFormat, JsonStep, JsonTetStep,
+    LightSpec, MeshInfo, TetMeshData, TetSpec,
     LightingSpec, MetaballDefaults, PushResult, RenderRequest, SceneInfo, SceneInfoList, SceneKind,
     StepInfo, StepList, NPY_MEDIA_TYPE, RAW_MEDIA_TYPE,
 };
@@ -61,14 +63,15 @@ const DEFAULT_RENDER_SIZE: (u32, u32) = (640, 480);
         description = "Push time steps of implicit-surface scenes, fetch them, and render \
             images. Binary steps are NumPy .npy arrays or raw little-endian arrays with a \
             16-byte header (magic `ISRA`, version 1, dtype 1=f32/2=f64, u16 columns, u64 rows); \
-            rows are `x y z [radius [strength [r g b]]]`. Errors are JSON `{code, message, \
-            field?, offset?}`."
+            rows are `x y z [radius [strength [r g b]]]` for metaballs, one scalar per mesh \
+            vertex for tets (whose mesh is sent once, inline or with PUT .../mesh). Errors are \
+            JSON `{code, message, field?, offset?}`."
     ),
     paths(stream_doc, index_doc, asset_doc, healthz_doc, metrics_doc),
     components(schemas(
         ApiErrorBody, CreateScene, CreatedScene, SceneInfo, SceneInfoList, StepInfo, StepList,
         PushResult, JsonStep, RenderRequest, ApiCamera, LightingSpec, LightSpec,
-        MetaballDefaults, SceneKind, ImageFormat
+        MetaballDefaults, SceneKind, ImageFormat, TetSpec, TetMeshData, JsonTetStep, MeshInfo
     )),
     modifiers(&BearerSecurity),
     tags(
@@ -107,6 +110,7 @@ fn openapi_router() -> OpenApiRouter<AppState> {
         .routes(routes!(get_step_data))
         .routes(routes!(render))
         .routes(routes!(histogram::histogram))
+        .routes(routes!(tets::put_mesh))
         .routes(routes!(openapi_json))
 }
 
@@ -736,6 +740,7 @@ async fn push_step(
     let entry = scene_of(&app, &id)?;
     let scene = stored_of(&entry)?;
     check_write(&app, &headers, &scene)?;
+    tets::check_ready(&scene.setup)?;
     let index = parse_index(&app, &index)?;
     let query: PushQuery = serde_urlencoded_lite(query.as_deref().unwrap_or(""))?;
     let time = query.time.unwrap_or(index as f64);
@@ -780,6 +785,10 @@ async fn push_step(
             StepLayout::Metaballs => {
                 let step: JsonStep = read_json(&app, body).await?;
                 blocking(move || ingest_json(&step, &limits, target)).await??
+            }
+            StepLayout::Tets { .. } => {
+                let step: JsonTetStep = read_json(&app, body).await?;
+                blocking(move || tets::ingest_json_tets(&step, &limits, target)).await??
             }
         },
         PushFormat::Npy | PushFormat::Raw => {

@@ -377,6 +377,9 @@ fn check_shape(rows: u64, columns: u64, limits: &IngestLimits) -> Result<u32, In
             )
             .at_field("shape")
         })?;
+    if let Some(why) = limits.layout.check_rows(rows) {
+        return Err(IngestError::invalid("bad_shape", why).at_field("shape"));
+    }
     if rows > limits.max_rows {
         return Err(IngestError::invalid(
             "too_many_primitives",

@@ -5,6 +5,7 @@
 //!
 //! ```text
 //! scenes/<id>/scene.json          what the scene was created with, and its token's SHA-256
+//! scenes/<id>/mesh.bin            a tet scene's mesh, when sent after creation (see `mesh`)
 //! scenes/<id>/steps/<index>.step  one file per step (see `format`), 20-digit index
 //! scenes/<id>/steps/.tmp-*        a push in progress (removed on start)
 //! trash/                          deleted scenes on their way out (emptied on start)
@@ -29,6 +30,7 @@
 
 pub mod format;
 pub mod ingest;
+pub mod mesh;
 
 use crate::kind::SceneSetup;
 use filebuffer::FileBuffer;
@@ -144,6 +146,11 @@ impl StoredScene {
 
     fn steps_dir(&self) -> PathBuf {
         self.dir.join("steps")
+    }
+
+    /// The scene's directory (static data such as a tet mesh lives beside `scene.json`).
+    pub fn dir(&self) -> &Path {
+        &self.dir
     }
 }
 
@@ -505,6 +512,7 @@ fn load_scene(dir: &Path) -> Result<(StoredScene, LoadedSteps), String> {
                 e.field.as_deref().unwrap_or("spec")
             )
         })?;
+    mesh::attach(dir, &setup);
     let steps_dir = dir.join("steps");
     let mut steps = Vec::new();
     let entries = std::fs::read_dir(&steps_dir).map_err(|e| format!("steps/: {e}"))?;
