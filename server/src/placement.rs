@@ -113,8 +113,16 @@ mod tests {
         assert_eq!(misrouted(Some("s0"), "s0_abc"), None);
         let m = misrouted(Some("s0"), "s1_abc").expect("misrouted");
         assert!(m.contains("shard `s1`") && m.contains("shard `s0`"), "{m}");
-        assert_eq!(misrouted(None, "s1_abc"), None, "a lone server has no shard");
-        assert_eq!(misrouted(Some("s0"), "blobs"), None, "demo ids name no shard");
+        assert_eq!(
+            misrouted(None, "s1_abc"),
+            None,
+            "a lone server has no shard"
+        );
+        assert_eq!(
+            misrouted(Some("s0"), "blobs"),
+            None,
+            "demo ids name no shard"
+        );
         assert_eq!(misrouted(Some("s0"), "S1_abc"), None, "not a shard name");
     }
 }

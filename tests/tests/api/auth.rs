@@ -54,7 +54,12 @@ async fn write_and_view_tokens_are_enforced_everywhere() {
         assert_eq!(r.status, 401, "create without a token: {}", r.text());
         assert_eq!(json(&r)["field"], "Authorization");
         let r = with_auth(&base, "POST", "/api/v1/scenes", Some(VIEW));
-        assert_eq!(r.status, 403, "the view token does not create: {}", r.text());
+        assert_eq!(
+            r.status,
+            403,
+            "the view token does not create: {}",
+            r.text()
+        );
         let listed = json(&with_auth(&base, "GET", "/api/v1/scenes", Some(VIEW)));
         let stored = listed["scenes"]
             .as_array()
