@@ -336,11 +336,13 @@ async fn nginx_routes_every_scene_to_the_process_that_holds_it() {
     // Close all but one viewer per shard, so their requests reach the access log.
     let mut kept: BTreeMap<usize, (String, Ws)> = BTreeMap::new();
     for (id, mut ws) in viewers {
-        let shard = shard_of(&id);
-        if kept.contains_key(&shard) {
-            let _ = ws.close(None).await;
-        } else {
-            kept.insert(shard, (id, ws));
+        match kept.entry(shard_of(&id)) {
+            std::collections::btree_map::Entry::Occupied(_) => {
+                let _ = ws.close(None).await;
+            }
+            std::collections::btree_map::Entry::Vacant(slot) => {
+                slot.insert((id, ws));
+            }
         }
     }
     tokio::time::sleep(Duration::from_millis(300)).await;
