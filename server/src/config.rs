@@ -140,6 +140,17 @@ pub struct Config {
     /// Refinement passes a resting view accumulates at most before it stops rendering.
     #[arg(long, env = "ISORAY_MAX_REFINE_PASSES", default_value_t = 64)]
     pub max_refine_passes: u32,
+
+    /// This server's name among several behind a load balancer (a DNS label such as a
+    /// Kubernetes pod name). New scene ids start with it (`NAME_<hex>`), so the balancer sends
+    /// every request for a scene to the server that stores it (see deploy/). Unset: one server.
+    #[arg(long, env = "ISORAY_SHARD")]
+    pub shard: Option<String>,
+
+    /// Seconds a client may take to send a request's headers, and that an idle keep-alive
+    /// connection stays open, before the connection is closed.
+    #[arg(long, env = "ISORAY_HEADER_TIMEOUT_SECS", default_value_t = 10)]
+    pub header_timeout_secs: u64,
 }
 
 /// `isoray` under the user's data directory: `$XDG_DATA_HOME/isoray`, else
@@ -221,6 +232,12 @@ impl Config {
         }
         if !(1..=4096).contains(&self.max_refine_passes) {
             return Err("--max-refine-passes must be in 1..=4096".into());
+        }
+        if let Some(shard) = &self.shard {
+            crate::placement::validate_shard(shard)?;
+        }
+        if !(1..=3600).contains(&self.header_timeout_secs) {
+            return Err("--header-timeout-secs must be in 1..=3600".into());
         }
         if self.max_steps_per_scene == 0 {
             return Err("--max-steps-per-scene must be at least 1".into());

@@ -16,6 +16,7 @@ pub mod error;
 pub mod input;
 pub mod kind;
 pub mod metrics;
+pub mod placement;
 pub mod refine;
 pub mod scenes;
 pub mod session;
@@ -74,10 +75,16 @@ async fn stream(
     axum::extract::RawQuery(query): axum::extract::RawQuery,
     ws: Result<WebSocketUpgrade, WebSocketUpgradeRejection>,
 ) -> Result<Response, AppError> {
-    let entry = state
-        .scenes()
-        .get(&id)
-        .ok_or_else(|| AppError::not_found(format!("no scene with id `{id}`")))?;
+    let entry = state.scenes().get(&id).ok_or_else(|| {
+        match placement::misrouted(state.config().shard.as_deref(), &id) {
+            Some(message) => AppError {
+                status: axum::http::StatusCode::MISDIRECTED_REQUEST,
+                code: "misrouted",
+                message,
+            },
+            None => AppError::not_found(format!("no scene with id `{id}`")),
+        }
+    })?;
     // With --view-token, watching needs it (header or `?token=`).
     if let Err(e) = api::check_stream_view(&state, &headers, query.as_deref(), &entry) {
         return Ok(axum::response::IntoResponse::into_response(e));
@@ -100,23 +107,80 @@ async fn stream(
 }
 
 /// Serves `state` on `listener` until `shutdown` completes, then closes sessions and drains.
+///
+/// The accept loop is ours rather than `axum::serve`'s so that hyper gets a timer: without
+/// one its header read timeout never fires and a client that sends its headers slowly (or
+/// never) holds a connection forever. A connection that has not sent a request's headers
+/// within `--header-timeout-secs` (also an idle keep-alive connection) is closed.
 pub async fn serve(
     listener: TcpListener,
     state: AppState,
     shutdown: impl Future<Output = ()> + Send + 'static,
 ) -> std::io::Result<()> {
-    let signal_state = state.clone();
+    use hyper_util::rt::{TokioIo, TokioTimer};
+    use tower::ServiceExt;
+
     let router = app(state.clone());
-    axum::serve(
-        listener,
-        router.into_make_service_with_connect_info::<std::net::SocketAddr>(),
-    )
-    .with_graceful_shutdown(async move {
-        shutdown.await;
-        tracing::info!("shutting down: closing sessions");
-        signal_state.begin_shutdown();
-    })
-    .await?;
+    let mut http = hyper::server::conn::http1::Builder::new();
+    http.timer(TokioTimer::new())
+        .header_read_timeout(Duration::from_secs(state.config().header_timeout_secs));
+    // Connections hold a receiver each: `closed()` on the sender resolves once all are done;
+    // the value turns true (once) when shutdown begins.
+    let (closing_tx, closing_rx) = tokio::sync::watch::channel(false);
+    let mut shutdown = std::pin::pin!(shutdown);
+    loop {
+        let (stream, remote) = tokio::select! {
+            accepted = listener.accept() => match accepted {
+                Ok(connection) => connection,
+                Err(e) => {
+                    // Per-connection failures (reset before accept) are nothing; running out
+                    // of file descriptors is worth a pause, as axum::serve does.
+                    if !matches!(
+                        e.kind(),
+                        std::io::ErrorKind::ConnectionAborted | std::io::ErrorKind::ConnectionReset
+                    ) {
+                        tracing::warn!(error = %e, "accept failed; pausing for a second");
+                        tokio::time::sleep(Duration::from_secs(1)).await;
+                    }
+                    continue;
+                }
+            },
+            () = &mut shutdown => break,
+        };
+        let router = router.clone();
+        let service = hyper::service::service_fn(move |req: axum::http::Request<_>| {
+            let mut req = req.map(axum::body::Body::new);
+            req.extensions_mut()
+                .insert(axum::extract::ConnectInfo::<std::net::SocketAddr>(remote));
+            router.clone().oneshot(req)
+        });
+        let connection = http
+            .serve_connection(TokioIo::new(stream), service)
+            .with_upgrades();
+        let mut closing = closing_rx.clone();
+        tokio::spawn(async move {
+            let mut connection = std::pin::pin!(connection);
+            tokio::select! {
+                result = connection.as_mut() => {
+                    if let Err(e) = result {
+                        tracing::debug!(error = %e, "connection ended with an error");
+                    }
+                }
+                _ = closing.changed() => {
+                    // Finish the request in flight, if any, then close.
+                    connection.as_mut().graceful_shutdown();
+                    let _ = connection.await;
+                }
+            }
+            drop(closing);
+        });
+    }
+    drop(listener);
+    tracing::info!("shutting down: closing sessions");
+    state.begin_shutdown();
+    closing_tx.send_replace(true);
+    drop(closing_rx);
+    closing_tx.closed().await;
     // Upgraded websockets outlive the HTTP server's own drain; wait for them here.
     let deadline = tokio::time::Instant::now() + DRAIN_TIMEOUT;
     while state.sessions().count() > 0 && tokio::time::Instant::now() < deadline {

@@ -2,6 +2,7 @@
 //! Each module is named after what it guards.
 
 mod api;
+mod deploy;
 mod e2e;
 mod golden;
 mod scene_json;

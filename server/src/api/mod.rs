@@ -163,7 +163,8 @@ impl<S: Send + Sync> FromRequestParts<S> for ClientAddr {
         (status = 400, description = "Not a websocket request", body = ApiErrorBody),
         (status = 401, description = "View token missing (header or `?token=`)", body = ApiErrorBody),
         (status = 403, description = "View token wrong", body = ApiErrorBody),
-        (status = 404, description = "No such scene", body = ApiErrorBody)
+        (status = 404, description = "No such scene", body = ApiErrorBody),
+        (status = 421, description = "The id names another shard: the load balancer misrouted the request", body = ApiErrorBody)
     )
 )]
 #[allow(dead_code)] // documentation only: `lib.rs` routes this path to `stream`
@@ -229,9 +230,13 @@ async fn openapi_json(Extension(shared): Extension<Arc<ApiShared>>) -> Response 
 }
 
 fn scene_of(app: &AppState, id: &str) -> Result<Arc<SceneEntry>, ApiError> {
-    app.scenes()
-        .get(id)
-        .ok_or_else(|| ApiError::not_found(format!("no scene with id `{id}`")).field("id"))
+    app.scenes().get(id).ok_or_else(|| {
+        match crate::placement::misrouted(app.config().shard.as_deref(), id) {
+            Some(why) => ApiError::new(StatusCode::MISDIRECTED_REQUEST, "misrouted", why),
+            None => ApiError::not_found(format!("no scene with id `{id}`")),
+        }
+        .field("id")
+    })
 }
 
 fn stored_of(entry: &SceneEntry) -> Result<Arc<StoredScene>, ApiError> {
@@ -295,6 +300,15 @@ fn check_write(app: &AppState, headers: &HeaderMap, scene: &StoredScene) -> Resu
         accepted.push(a);
     }
     require(bearer(headers), &accepted, "writing to this scene")
+}
+
+/// With `--admin-token`, only the admin may create scenes; without it anyone may (the write
+/// rate limit still applies).
+fn check_create(app: &AppState, headers: &HeaderMap) -> Result<(), ApiError> {
+    match app.config().admin_token.as_deref() {
+        Some(admin) => require(bearer(headers), &[&token_hash(admin)], "creating scenes"),
+        None => Ok(()),
+    }
 }
 
 fn path_error(e: PathRejection) -> ApiError {
@@ -409,15 +423,19 @@ async fn list_scenes(
     }))
 }
 
-/// Creates a scene. The answer carries its write token, shown only this once.
+/// Creates a scene. The answer carries its write token, shown only this once. With
+/// `--admin-token`, creating needs it; with `--shard`, the id starts with the shard's name.
 #[utoipa::path(
     post,
     path = "/api/v1/scenes",
     tag = "scenes",
     request_body = CreateScene,
+    security((), ("bearer" = [])),
     responses(
         (status = 201, description = "Created", body = CreatedScene),
         (status = 400, description = "Invalid field", body = ApiErrorBody),
+        (status = 401, description = "Admin token missing (server started with --admin-token)", body = ApiErrorBody),
+        (status = 403, description = "Not the admin token", body = ApiErrorBody),
         (status = 413, description = "Body too large", body = ApiErrorBody),
         (status = 422, description = "Kind not supported yet", body = ApiErrorBody),
         (status = 429, description = "Too many writes", body = ApiErrorBody),
@@ -428,9 +446,11 @@ async fn create_scene(
     State(app): State<AppState>,
     Extension(shared): Extension<Arc<ApiShared>>,
     ClientAddr(client): ClientAddr,
+    headers: HeaderMap,
     body: Body,
 ) -> Result<(StatusCode, Json<CreatedScene>), ApiError> {
     shared.writes.check(client)?;
+    check_create(&app, &headers)?;
     let spec: CreateScene = read_json(&app, body).await?;
     for (field, text, max) in [
         ("name", &spec.name, 200),
@@ -457,7 +477,7 @@ async fn create_scene(
     })?;
     let token = auth::random_hex(32);
     let meta = SceneMeta {
-        id: auth::random_hex(16),
+        id: crate::placement::new_scene_id(app.config().shard.as_deref()),
         kind: spec.kind,
         spec,
         write_token_sha256: token_hash(&token),
@@ -485,7 +505,11 @@ async fn create_scene(
     path = "/api/v1/scenes/{id}",
     tag = "scenes",
     params(("id" = String, Path, description = "Scene id")),
-    responses((status = 200, description = "OK", body = SceneInfo), (status = 404, description = "Not found", body = ApiErrorBody))
+    responses(
+        (status = 200, description = "OK", body = SceneInfo),
+        (status = 404, description = "Not found", body = ApiErrorBody),
+        (status = 421, description = "The id names another shard (every scene route may answer this)", body = ApiErrorBody)
+    )
 )]
 async fn get_scene(
     State(app): State<AppState>,

@@ -1,5 +1,6 @@
 //! Tokens: a scene's write token or the admin token may push and delete, nothing else may;
-//! with `--view-token`, viewing (listing, fetching, rendering, streaming) needs a token too.
+//! with `--admin-token`, only the admin creates scenes; with `--view-token`, viewing
+//! (listing, fetching, rendering, streaming) needs a token too.
 
 use super::*;
 
@@ -19,6 +20,27 @@ fn with_auth(base: &str, method: &str, path: &str, token: Option<&str>) -> Respo
         .expect("answer")
 }
 
+fn create_as_admin(base: &str) -> (String, String) {
+    let r = Client::new(base)
+        .expect("url")
+        .request(
+            "POST",
+            "/api/v1/scenes",
+            &[
+                ("Content-Type", "application/json"),
+                ("Authorization", &format!("Bearer {ADMIN}")),
+            ],
+            Body::Bytes(br#"{"kind":"metaballs"}"#),
+        )
+        .expect("create");
+    assert_eq!(r.status, 201, "the admin creates: {}", r.text());
+    let v = json(&r);
+    (
+        v["scene"]["id"].as_str().expect("id").into(),
+        v["write_token"].as_str().expect("token").into(),
+    )
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn write_and_view_tokens_are_enforced_everywhere() {
     let dir = tempfile::tempdir().expect("temp dir");
@@ -26,8 +48,28 @@ async fn write_and_view_tokens_are_enforced_everywhere() {
     let base = server.base.clone();
     let addr = server.addr;
     let id = call(move || {
-        let (id, token) = create(&base);
-        let (other_id, other_token) = create(&base);
+        // Creating needs the admin token: none is 401, any other token 403, and neither
+        // leaves a scene behind.
+        let r = with_auth(&base, "POST", "/api/v1/scenes", None);
+        assert_eq!(r.status, 401, "create without a token: {}", r.text());
+        assert_eq!(json(&r)["field"], "Authorization");
+        let r = with_auth(&base, "POST", "/api/v1/scenes", Some(VIEW));
+        assert_eq!(
+            r.status,
+            403,
+            "the view token does not create: {}",
+            r.text()
+        );
+        let listed = json(&with_auth(&base, "GET", "/api/v1/scenes", Some(VIEW)));
+        let stored = listed["scenes"]
+            .as_array()
+            .expect("scenes")
+            .iter()
+            .filter(|s| s["source"] == "stored")
+            .count();
+        assert_eq!(stored, 0, "refused creations stored nothing: {listed}");
+        let (id, token) = create_as_admin(&base);
+        let (other_id, other_token) = create_as_admin(&base);
         let step = npy(&[0.0, 0.0, 0.0], 3);
         assert_eq!(push(&base, &id, "0", &token, NPY, &step).status, 201);
         assert_eq!(

@@ -10,6 +10,7 @@ mod openapi;
 mod push_errors;
 mod python_example;
 mod restart;
+mod slow_headers;
 
 use isoray_server::api::client::{npy_header_f32, Body, Client, Response};
 use isoray_server::{AppState, Config};
