@@ -5,6 +5,7 @@
 mod common;
 mod ingest;
 mod metaballs;
+mod stream;
 mod tets;
 
 use clap::{Parser, Subcommand};
@@ -27,6 +28,8 @@ enum Command {
     Tets(tets::TetsArgs),
     /// Store ingest: MB/s of `.npy` steps pushed over loopback HTTP into the scene store.
     Ingest(ingest::IngestArgs),
+    /// Streaming: codecs along a camera path; sessions over loopback websockets.
+    Stream(stream::Args),
 }
 
 fn main() {
@@ -36,6 +39,7 @@ fn main() {
         Command::Build(args) => metaballs::build_ablation(args),
         Command::Tets(args) => tets::run(args),
         Command::Ingest(args) => ingest::run(args),
+        Command::Stream(args) => stream::run(args),
     };
     if let Err(e) = result {
         eprintln!("isoray-bench: {e}");

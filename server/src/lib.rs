@@ -18,6 +18,7 @@ pub mod kind;
 pub mod metrics;
 pub mod refine;
 pub mod scenes;
+pub mod schedule;
 pub mod session;
 pub mod state;
 pub mod store;
