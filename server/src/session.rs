@@ -706,8 +706,8 @@ async fn render_loop(
     let still_delay = Duration::from_millis(config.still_after_ms);
     let mut controller = Controller::new(config.jpeg_quality, config.min_scale);
     let mut video: VideoState = None;
-    // What the last frame showed: settings version, scene time, and whether it was the still.
-    let mut last: Option<(u64, f64, Quality)> = None;
+    // What the last frame showed: settings version, state key, and whether it was the still.
+    let mut last: Option<(u64, u128, Quality)> = None;
     let mut last_change = tokio::time::Instant::now();
     let mut next_tick = tokio::time::Instant::now();
     let mut sequence = 0u64;
@@ -728,12 +728,18 @@ async fn render_loop(
         }
         let fps = current.stream.fps;
         let frame_interval = Duration::from_secs_f64(1.0 / fps);
+        let live = current.pinned_time.is_none();
+        let clock = app.scenes().live_time();
         let time = current
             .pinned_time
-            .unwrap_or_else(|| (app.scenes().live_time() * time_step_fps).floor() / time_step_fps);
+            .unwrap_or_else(|| (clock * time_step_fps).floor() / time_step_fps);
+        // A demo followed live changes with the clock; any other view only when its state does
+        // (a pinned time, a stored scene's newest step).
+        let animating = live && entry.animates();
+        let state_key = entry.state_key(time, live);
         let now = tokio::time::Instant::now();
         let view_changed = last.map(|(v, _, _)| v) != Some(current.version);
-        let time_changed = last.map(|(_, t, _)| t) != Some(time);
+        let time_changed = last.map(|(_, k, _)| k) != Some(state_key);
         let refine_key = (
             current.version,
             time.to_bits(),
@@ -745,17 +751,26 @@ async fn render_loop(
         if view_changed {
             last_change = now;
         }
-        // New input renders at once; animation alone at most once per tick; once input stops
-        // on a still scene, one lossless still frame, then nothing until something changes.
+        // New input renders at once; a new state at most once per tick; once input stops on a
+        // view that does not animate, lossless still frames (refining), then nothing until
+        // something changes.
         let quality = if view_changed || (time_changed && now >= next_tick) {
             Quality::Interactive
-        } else if !time_changed && !shown_still && now >= last_change + still_delay {
+        } else if !animating && !time_changed && !shown_still && now >= last_change + still_delay {
             Quality::Still
         } else {
             let deadline = if time_changed {
                 next_tick
+            } else if animating {
+                // The next time step of the live clock.
+                let step = 1.0 / time_step_fps;
+                let next = ((clock / step).floor() + 1.0) * step;
+                now + Duration::from_secs_f64((next - clock).max(0.0))
             } else if !shown_still {
                 last_change + still_delay
+            } else if live {
+                // A live stored scene: look for a pushed step once per frame interval.
+                now + frame_interval
             } else {
                 shared.wake.notified().await;
                 continue;
@@ -770,7 +785,7 @@ async fn render_loop(
             next_tick = now + frame_interval;
         }
         sequence += 1;
-        last = Some((current.version, time, quality));
+        last = Some((current.version, state_key, quality));
 
         let input_at = if view_changed {
             current.last_input_at
