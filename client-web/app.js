@@ -12,10 +12,16 @@ import { Surfaces } from './surfaces.js';
 import { Quality } from './quality.js';
 import { EffectsPanel } from './effects.js';
 import { apiFetch, describeFailure } from './api.js';
+import { Reprojector } from './reproject.js';
+import { supportedCodecs } from './decode.js';
 
 const settings = parseSettings(location.search);
 const canvas = $('view');
-const view = new FrameView(canvas);
+// Latency hiding (reproject.js): on by default, `?reproject=off` turns it off.
+const reproject = new Reprojector({ enabled: new URLSearchParams(location.search).get('reproject') !== 'off' });
+let lastCameraInput = 0; // input_id of the newest camera sent
+const view = new FrameView(canvas, { onImage: reprojectFrame });
+let codecs = ['jpeg', 'png']; // what this browser decodes; H.264 once WebCodecs says so
 const stats = new Stats($('stats'), $('stats-text'), $('stats-plot'));
 let info = null; // the server's `info` for the current session
 let scenes = []; // GET /api/v1/scenes
@@ -71,9 +77,30 @@ function cameraChanged() {
   // At most one camera input per display frame, however fast the pointer moves.
   requestAnimationFrame(() => {
     cameraQueued = false;
-    if (settings.cam) send({ type: 'camera', ...poseFromOrbit(settings.cam, settings.up) });
+    if (!settings.cam) return;
+    const pose = poseFromOrbit(settings.cam, settings.up);
+    lastCameraInput = send({ type: 'camera', ...pose }) ?? lastCameraInput;
+    // The last frame, reprojected to the new camera, in this display frame.
+    const warped = reproject.render(pose, canvas.width, canvas.height);
+    if (warped) view.draw(warped, canvas);
   });
 }
+
+/** Gives each frame to the reprojector; a frame older than the camera is shown reprojected. */
+function reprojectFrame(frame) {
+  reproject.setFrame(frame);
+  if (frame.header.inputId < lastCameraInput && settings.cam && reproject.ready) {
+    const warped = reproject.render(poseFromOrbit(settings.cam, settings.up), frame.header.width, frame.header.height);
+    if (warped) view.draw(warped, frame.header);
+  }
+}
+
+function sendStream() {
+  send({ type: 'stream', codecs, depth: reproject.enabled, visible: !document.hidden });
+}
+supportedCodecs().then((found) => { codecs = found; sendStream(); });
+// A hidden page costs the server nothing: it renders no frames until the page shows again.
+document.addEventListener('visibilitychange', () => send({ type: 'stream', visible: !document.hidden }));
 
 function resetView() {
   if (!info) return;
@@ -168,6 +195,7 @@ function onInfo(message) {
   effects.setInfo(message);
   setStatus('Waiting for the first frame…');
   // Restore the whole view: the server starts every session from the scene's defaults.
+  sendStream();
   sendSize(true);
   send({ type: 'camera', ...poseFromOrbit(settings.cam, settings.up) });
   for (const m of surfaces.messages()) send(m);
@@ -314,5 +342,5 @@ async function start() {
 }
 
 // For tests and debugging: the live objects behind the page.
-window.isoray = { settings, stats, view, connection, timeline, quality, effects, surfaces };
+window.isoray = { settings, stats, view, connection, timeline, quality, effects, surfaces, reproject };
 start();

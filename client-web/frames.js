@@ -1,32 +1,35 @@
 // Showing frames: decode a frame's payload, draw it on the canvas, and keep the last lossless
 // still frame so the screenshot button can save exactly what the server rendered.
-import { parseFrameHeader, CODECS } from './protocol.js';
+import { FrameDecoder } from './decode.js';
+import { CODEC_PNG } from './protocol.js';
 
 export const FLAG_STILL = 1;
 
 export class FrameView {
-  constructor(canvas) {
+  /** `onImage(frame)` sees each decoded frame (`decode.js`) right after it is drawn. */
+  constructor(canvas, { onImage } = {}) {
     this.canvas = canvas;
     this.ctx = canvas.getContext('2d');
+    this.decoder = new FrameDecoder();
+    this.onImage = onImage;
     this.framesShown = 0;
     this.lastHeader = null;
     this.still = null; // { header, png: Uint8Array } of the last still PNG frame shown
   }
 
-  /** Parses, decodes and draws one frame; returns its header. */
+  /** Decodes (any codec of `decode.js`) and draws one frame; returns its header. */
   async show(buffer) {
-    const header = parseFrameHeader(buffer);
-    const payload = new Uint8Array(buffer, header.headerLen);
-    const mime = CODECS[header.codec];
-    if (!mime) throw new Error(`frame ${header.sequence} has unknown codec ${header.codec}`);
-    const bitmap = await createImageBitmap(new Blob([payload], { type: mime }));
+    const frame = await this.decoder.decode(buffer);
+    const { header, image, payload, depth } = frame;
     try {
-      this.draw(bitmap, header);
+      this.draw(image, header);
+      if (this.onImage) this.onImage(frame);
     } finally {
-      bitmap.close();
+      image.close();
+      if (depth) depth.bitmap.close();
     }
     this.lastHeader = header;
-    this.still = (header.flags & FLAG_STILL) && mime === 'image/png' ? { header, png: payload } : null;
+    this.still = (header.flags & FLAG_STILL) && header.codec === CODEC_PNG ? { header, png: payload } : null;
     this.framesShown += 1;
     this.canvas.dataset.frames = String(this.framesShown);
     return header;

@@ -6,6 +6,7 @@ mod common;
 mod effects;
 mod ingest;
 mod metaballs;
+mod stream;
 mod tets;
 
 use clap::{Parser, Subcommand};
@@ -31,6 +32,8 @@ enum Command {
     /// fps per secondary effect (the Fitted BVH paper's Table 2), rays per kind, and what
     /// an effect no material can use costs.
     Effects(effects::EffectsArgs),
+    /// Streaming: codecs along a camera path; sessions over loopback websockets.
+    Stream(stream::Args),
 }
 
 fn main() {
@@ -41,6 +44,7 @@ fn main() {
         Command::Tets(args) => tets::run(args),
         Command::Ingest(args) => ingest::run(args),
         Command::Effects(args) => effects::run(args),
+        Command::Stream(args) => stream::run(args),
     };
     if let Err(e) = result {
         eprintln!("isoray-bench: {e}");

@@ -9,14 +9,15 @@
 //! | 16 | 8 | last applied `input_id` (0 before any input) |
 //! | 24 | 4 | width in pixels |
 //! | 28 | 4 | height in pixels |
-//! | 32 | 1 | codec (1 JPEG, 2 PNG) |
-//! | 33 | 1 | flags (bit 0: still frame, the view has settled) |
-//! | 34 | 2 | reserved, zero |
+//! | 32 | 1 | codec (1 JPEG, 2 PNG, 3 H.264) |
+//! | 33 | 1 | flags (bit 0 still frame, bit 1 keyframe, bit 2 depth block follows the image) |
+//! | 34 | 1 | JPEG quality 1–100 (0 for other codecs) |
+//! | 35 | 1 | reserved, zero |
 //! | 36 | 4 | state update time, microseconds |
 //! | 40 | 4 | acceleration structure build time, microseconds |
 //! | 44 | 4 | trace time, microseconds |
 //! | 48 | 4 | encode time, microseconds |
-//! | 52 | 4 | reserved, zero |
+//! | 52 | 4 | image payload length in bytes (0: the rest of the message) |
 //! | 56 | 8 | scene time the frame shows, seconds (f64) |
 
 use thiserror::Error;
@@ -28,19 +29,29 @@ pub const FRAME_MAGIC: [u8; 4] = *b"ISRF";
 
 /// Flag bit: the frame is the settled, full-quality view.
 pub const FLAG_STILL: u8 = 1;
+/// Flag bit: an H.264 frame that decodes on its own (IDR picture with SPS and PPS).
+pub const FLAG_KEYFRAME: u8 = 2;
+/// Flag bit: a depth block follows the image payload (see `PROTOCOL.md`, "Depth block").
+pub const FLAG_DEPTH: u8 = 4;
 
 /// How the payload is encoded.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum Codec {
     Jpeg,
     Png,
+    /// One H.264 access unit, Annex B byte stream, constrained baseline profile.
+    H264,
 }
 
 impl Codec {
+    /// Every codec of the protocol, in the order of their numbers.
+    pub const ALL: [Codec; 3] = [Codec::Jpeg, Codec::Png, Codec::H264];
+
     pub fn to_u8(self) -> u8 {
         match self {
             Codec::Jpeg => 1,
             Codec::Png => 2,
+            Codec::H264 => 3,
         }
     }
 
@@ -48,8 +59,22 @@ impl Codec {
         match value {
             1 => Some(Codec::Jpeg),
             2 => Some(Codec::Png),
+            3 => Some(Codec::H264),
             _ => None,
         }
+    }
+
+    /// The name clients use for the codec in `stream` messages and `info.codecs`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Codec::Jpeg => "jpeg",
+            Codec::Png => "png",
+            Codec::H264 => "h264",
+        }
+    }
+
+    pub fn from_name(name: &str) -> Option<Codec> {
+        Codec::ALL.into_iter().find(|c| c.name() == name)
     }
 }
 
@@ -72,6 +97,11 @@ pub struct FrameHeader {
     pub height: u32,
     pub codec: Codec,
     pub flags: u8,
+    /// JPEG quality, 1–100; 0 for other codecs.
+    pub quality: u8,
+    /// Bytes of the image payload after the header; a depth block follows it when
+    /// [`FLAG_DEPTH`] is set. 0 means the image is the rest of the message.
+    pub payload_len: u32,
     pub timings: StageTimings,
     pub scene_time: f64,
 }
@@ -85,6 +115,10 @@ pub enum FrameHeaderError {
     BadMagic,
     #[error("unknown codec {0}")]
     UnknownCodec(u8),
+    #[error(
+        "image payload of {payload} bytes does not fit the {available} bytes after the header"
+    )]
+    PayloadLength { payload: u32, available: usize },
 }
 
 impl FrameHeader {
@@ -100,12 +134,35 @@ impl FrameHeader {
         out[28..32].copy_from_slice(&self.height.to_le_bytes());
         out[32] = self.codec.to_u8();
         out[33] = self.flags;
+        out[34] = self.quality;
         out[36..40].copy_from_slice(&self.timings.update_us.to_le_bytes());
         out[40..44].copy_from_slice(&self.timings.build_us.to_le_bytes());
         out[44..48].copy_from_slice(&self.timings.trace_us.to_le_bytes());
         out[48..52].copy_from_slice(&self.timings.encode_us.to_le_bytes());
+        out[52..56].copy_from_slice(&self.payload_len.to_le_bytes());
         out[56..64].copy_from_slice(&self.scene_time.to_le_bytes());
         out
+    }
+
+    /// The image payload of `frame` (the whole message, header included) and the depth block
+    /// after it, if the header announces one.
+    pub fn split_payload<'a>(
+        &self,
+        frame: &'a [u8],
+    ) -> Result<(&'a [u8], Option<&'a [u8]>), FrameHeaderError> {
+        let rest = frame.get(FRAME_HEADER_LEN..).unwrap_or_default();
+        if self.payload_len == 0 {
+            return Ok((rest, None));
+        }
+        let len = self.payload_len as usize;
+        if len > rest.len() {
+            return Err(FrameHeaderError::PayloadLength {
+                payload: self.payload_len,
+                available: rest.len(),
+            });
+        }
+        let (image, depth) = rest.split_at(len);
+        Ok((image, (self.flags & FLAG_DEPTH != 0).then_some(depth)))
     }
 
     /// Reads the header from the front of a frame; the payload is `&bytes[FRAME_HEADER_LEN..]`.
@@ -136,6 +193,8 @@ impl FrameHeader {
             height: u32_at(28),
             codec,
             flags: bytes[33],
+            quality: bytes[34],
+            payload_len: u32_at(52),
             timings: StageTimings {
                 update_us: u32_at(36),
                 build_us: u32_at(40),
@@ -160,7 +219,9 @@ mod tests {
             width: 640,
             height: 480,
             codec: Codec::Jpeg,
-            flags: FLAG_STILL,
+            flags: FLAG_STILL | FLAG_DEPTH,
+            quality: 85,
+            payload_len: 1234,
             timings: StageTimings {
                 update_us: 1,
                 build_us: 2,
@@ -177,6 +238,12 @@ mod tests {
             640
         );
         assert_eq!(bytes[32], 1);
+        assert_eq!(bytes[33], 5, "flags: still and depth");
+        assert_eq!(bytes[34], 85, "JPEG quality");
+        assert_eq!(
+            u32::from_le_bytes([bytes[52], bytes[53], bytes[54], bytes[55]]),
+            1234
+        );
         assert_eq!(FrameHeader::decode(&bytes), Ok(header));
         assert_eq!(
             FrameHeader::decode(&bytes[..10]),
@@ -188,5 +255,14 @@ mod tests {
             FrameHeader::decode(&bad),
             Err(FrameHeaderError::UnknownCodec(9))
         );
+    }
+
+    #[test]
+    fn codec_numbers_and_names_round_trip() {
+        for codec in Codec::ALL {
+            assert_eq!(Codec::from_u8(codec.to_u8()), Some(codec));
+            assert_eq!(Codec::from_name(codec.name()), Some(codec));
+        }
+        assert_eq!(Codec::from_name("vp9"), None);
     }
 }

@@ -12,7 +12,8 @@ pub mod effects;
 pub mod frame;
 
 pub use frame::{
-    Codec, FrameHeader, FrameHeaderError, StageTimings, FLAG_STILL, FRAME_HEADER_LEN, FRAME_MAGIC,
+    Codec, FrameHeader, FrameHeaderError, StageTimings, FLAG_DEPTH, FLAG_KEYFRAME, FLAG_STILL,
+    FRAME_HEADER_LEN, FRAME_MAGIC,
 };
 
 use serde::{Deserialize, Serialize};
@@ -38,11 +39,13 @@ pub enum ClientMessage {
     Ack(FrameAck),
     /// Switch effects and set their quality (see [`effects`]).
     Effects(effects::EffectsInput),
+    Stream(StreamInput),
 }
 
 /// The `type` of every client message, in the order of [`ClientMessage`].
-pub const CLIENT_MESSAGE_TYPES: [&str; 6] =
-    ["camera", "isovalue", "resize", "time", "ack", "effects"];
+pub const CLIENT_MESSAGE_TYPES: [&str; 7] = [
+    "camera", "isovalue", "resize", "time", "ack", "effects", "stream",
+];
 
 /// Place the camera. Positions are in world space.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -91,6 +94,29 @@ pub struct FrameAck {
     pub sequence: u64,
 }
 
+/// How the client wants its frames. Every field but `input_id` is optional; an absent field
+/// keeps its current value (at first: `jpeg` and `png`, no depth, visible, the server's frame
+/// rate).
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct StreamInput {
+    pub input_id: InputId,
+    /// The codecs the client decodes, by name (`jpeg`, `png`, `h264`), most preferred first.
+    /// Names the server does not know are ignored, so a client may list newer codecs.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub codecs: Option<Vec<String>>,
+    /// Attach the compact depth channel to interactive frames, for reprojection.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub depth: Option<bool>,
+    /// `false` while the page is hidden: the server renders nothing for the session.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub visible: Option<bool>,
+    /// The frame rate the client wants while the view moves or the scene animates (capped by
+    /// the server's maximum).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub fps: Option<f64>,
+}
+
 impl ClientMessage {
     /// The client's identifier for this input; acknowledgements carry none.
     pub fn input_id(&self) -> Option<InputId> {
@@ -99,6 +125,7 @@ impl ClientMessage {
             ClientMessage::Isovalue(m) => Some(m.input_id),
             ClientMessage::Resize(m) => Some(m.input_id),
             ClientMessage::Time(m) => Some(m.input_id),
+            ClientMessage::Stream(m) => Some(m.input_id),
             ClientMessage::Ack(_) => None,
             ClientMessage::Effects(m) => Some(m.input_id),
         }
@@ -139,6 +166,12 @@ pub struct SessionInfo {
     pub frame_window: u32,
     /// The effects the scene can use, the session's effects, and their limits.
     pub effects: effects::EffectsInfo,
+    /// The codecs this server can send, by name (see [`Codec::name`]).
+    #[serde(default)]
+    pub codecs: Vec<String>,
+    /// The frame rate cap of the server.
+    #[serde(default)]
+    pub max_fps: f64,
 }
 
 /// A camera as the server reports it.
@@ -208,6 +241,20 @@ mod tests {
         let ack: ClientMessage =
             serde_json::from_str(r#"{"type":"ack","sequence":3}"#).expect("parses");
         assert_eq!(ack, ClientMessage::Ack(FrameAck { sequence: 3 }));
+        let stream: ClientMessage = serde_json::from_str(
+            r#"{"type":"stream","input_id":2,"codecs":["h264","jpeg","png"],"depth":true}"#,
+        )
+        .expect("documented stream message parses");
+        assert_eq!(
+            stream,
+            ClientMessage::Stream(StreamInput {
+                input_id: 2,
+                codecs: Some(vec!["h264".into(), "jpeg".into(), "png".into()]),
+                depth: Some(true),
+                visible: None,
+                fps: None,
+            })
+        );
         assert!(serde_json::from_str::<ClientMessage>(r#"{"type":"zoom","input_id":1}"#).is_err());
         assert!(serde_json::from_str::<ClientMessage>(
             r#"{"type":"isovalue","input_id":1,"value":0.5,"extra":1}"#

@@ -25,6 +25,8 @@ pub enum DemoScene {
     Scattered30k,
     /// The same, 100,000 balls.
     Scattered100k,
+    /// The Scattered generator with 1,000 balls: the streaming benchmarks' interactive scene.
+    Scattered1k,
     /// fitted-bvh-metaballs.txt "Tornado", 4,000 balls.
     Tornado4k,
     /// The same, 128,000 balls.
@@ -45,8 +47,9 @@ pub enum DemoScene {
 }
 
 impl DemoScene {
-    pub const ALL: [DemoScene; 11] = [
+    pub const ALL: [DemoScene; 12] = [
         DemoScene::Blobs,
+        DemoScene::Scattered1k,
         DemoScene::Scattered30k,
         DemoScene::Scattered100k,
         DemoScene::Tornado4k,
@@ -78,6 +81,7 @@ impl DemoScene {
             DemoScene::Blobs => "blobs",
             DemoScene::Scattered30k => "scattered-30k",
             DemoScene::Scattered100k => "scattered-100k",
+            DemoScene::Scattered1k => "scattered-1k",
             DemoScene::Tornado4k => "tornado-4k",
             DemoScene::Tornado128k => "tornado-128k",
             DemoScene::Molecule => "molecule",
@@ -94,6 +98,7 @@ impl DemoScene {
             DemoScene::Blobs => "Blobs",
             DemoScene::Scattered30k => "Scattered 30k",
             DemoScene::Scattered100k => "Scattered 100k",
+            DemoScene::Scattered1k => "Scattered 1k",
             DemoScene::Tornado4k => "Tornado 4k",
             DemoScene::Tornado128k => "Tornado 128k",
             DemoScene::Molecule => "Molecule",
@@ -110,6 +115,9 @@ impl DemoScene {
             DemoScene::Blobs => "48 metaballs (Wyvill kernel) on Lissajous paths",
             DemoScene::Scattered30k => "30,000 scattered metaballs (Fitted BVH paper, Table 1)",
             DemoScene::Scattered100k => "100,000 scattered metaballs (Fitted BVH paper, Table 1)",
+            DemoScene::Scattered1k => {
+                "1,000 scattered, bobbing metaballs (streaming benchmark scene)"
+            }
             DemoScene::Tornado4k => "4,000 metaballs in a tornado (Fitted BVH paper, Table 1)",
             DemoScene::Tornado128k => "128,000 metaballs in a tornado (Fitted BVH paper, Table 1)",
             DemoScene::Molecule => {
@@ -131,6 +139,7 @@ impl DemoScene {
             DemoScene::Blobs => 48,
             DemoScene::Scattered30k => 30_000,
             DemoScene::Scattered100k => 100_000,
+            DemoScene::Scattered1k => 1_000,
             DemoScene::Tornado4k => 4_000,
             DemoScene::Tornado128k => 128_000,
             DemoScene::Molecule => 5_440,
@@ -152,7 +161,7 @@ impl DemoScene {
         };
         match self {
             DemoScene::Blobs => look(Vec3::new(0.0, 1.5, 7.5), Vec3::ZERO, 45.0),
-            DemoScene::Scattered30k | DemoScene::Scattered100k => {
+            DemoScene::Scattered30k | DemoScene::Scattered100k | DemoScene::Scattered1k => {
                 let half = 0.5 * scattered_side(self.ball_count());
                 look(Vec3::new(0.4, 0.5, 2.6) * half * 1.25, Vec3::ZERO, 45.0)
             }
@@ -190,7 +199,7 @@ impl DemoScene {
     pub fn state_at(self, time: f64) -> Scene {
         let metaballs = match self {
             DemoScene::Blobs => blobs(48, time),
-            DemoScene::Scattered30k | DemoScene::Scattered100k => {
+            DemoScene::Scattered30k | DemoScene::Scattered100k | DemoScene::Scattered1k => {
                 scattered(self.ball_count(), time)
             }
             DemoScene::Tornado4k | DemoScene::Tornado128k => tornado(self.ball_count(), time),

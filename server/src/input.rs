@@ -6,8 +6,8 @@
 use crate::effects::EffectLimits;
 use isoray_protocol::effects::EffectsInput;
 use isoray_protocol::{
-    CameraInput, ClientMessage, ErrorMessage, InputId, IsovalueInput, ResizeInput, TimeInput,
-    CLIENT_MESSAGE_TYPES, MAX_INPUT_ID,
+    CameraInput, ClientMessage, Codec, ErrorMessage, InputId, IsovalueInput, ResizeInput,
+    StreamInput, TimeInput, CLIENT_MESSAGE_TYPES, MAX_INPUT_ID,
 };
 use isoray_render::{Camera, Effects};
 
@@ -28,17 +28,61 @@ pub struct Settings {
     pub last_input_at: Option<std::time::Instant>,
     /// Effect switches and quality.
     pub effects: Effects,
+    /// How frames are sent (`stream` messages).
+    pub stream: StreamSettings,
+}
+
+/// How a session's frames are made and sent, as the client last set it.
+#[derive(Clone, Debug, PartialEq)]
+pub struct StreamSettings {
+    /// Codecs the client decodes that this server offers, most preferred first.
+    pub codecs: Vec<Codec>,
+    /// Attach the depth channel to interactive frames.
+    pub depth: bool,
+    /// `false` while the client's page is hidden: nothing is rendered.
+    pub visible: bool,
+    /// Frames per second wanted while the view moves or the scene animates.
+    pub fps: f64,
+}
+
+impl StreamSettings {
+    /// What a session starts with: the codecs of protocol v1's first clients (JPEG and PNG;
+    /// H.264 only for clients that ask for it), no depth, visible.
+    pub fn initial(fps: f64) -> StreamSettings {
+        StreamSettings::new(&[Codec::Jpeg, Codec::Png], fps)
+    }
+
+    /// Settings accepting `codecs`, no depth, visible.
+    pub fn new(codecs: &[Codec], fps: f64) -> StreamSettings {
+        StreamSettings {
+            codecs: codecs.to_vec(),
+            depth: false,
+            visible: true,
+            fps,
+        }
+    }
+
+    pub fn accepts(&self, codec: Codec) -> bool {
+        self.codecs.contains(&codec)
+    }
 }
 
 /// The limits inputs are checked against.
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Debug)]
 pub struct Limits {
     pub max_size: u32,
     /// Open interval of meaningful isovalues for the scene.
     pub isovalue_range: (f32, f32),
     /// Largest effect quality settings.
     pub effects: EffectLimits,
+    /// The codecs this server can send.
+    pub codecs: Vec<Codec>,
+    /// The server's frame rate cap.
+    pub max_fps: f64,
 }
+
+/// Most codec names a `stream` message may list.
+const MAX_CODEC_NAMES: usize = 16;
 
 /// Largest coordinate accepted for a camera: keeps every value exact enough in f32.
 const MAX_COORDINATE: f64 = 1.0e6;
@@ -108,6 +152,7 @@ pub fn parse(text: &str) -> Result<ClientMessage, ErrorMessage> {
         "time" => ClientMessage::Time(typed(&kind, body, input_id)?),
         "ack" => ClientMessage::Ack(typed(&kind, body, input_id)?),
         "effects" => ClientMessage::Effects(typed(&kind, body, input_id)?),
+        "stream" => ClientMessage::Stream(typed(&kind, body, input_id)?),
         _ => {
             return Err(error(
                 "unknown_type",
@@ -208,6 +253,9 @@ pub fn apply(
                 ))
             }
         },
+        ClientMessage::Stream(stream) => {
+            settings.stream = checked_stream(stream, settings, limits)?
+        }
         ClientMessage::Ack(_) => return Ok(()),
         ClientMessage::Effects(EffectsInput { effects, .. }) => {
             match crate::effects::apply(&settings.effects, effects, &limits.effects) {
@@ -219,6 +267,55 @@ pub fn apply(
     settings.last_input_id = input_id;
     settings.version += 1;
     Ok(())
+}
+
+/// The stream settings a `stream` message asks for, or the error naming what is wrong.
+fn checked_stream(
+    message: &StreamInput,
+    settings: &Settings,
+    limits: &Limits,
+) -> Result<StreamSettings, ErrorMessage> {
+    let fail = |text: String| Err(error("invalid_value", text, Some(message.input_id)));
+    let mut next = settings.stream.clone();
+    if let Some(names) = &message.codecs {
+        if names.len() > MAX_CODEC_NAMES {
+            return fail(format!(
+                "stream.codecs lists {} names; at most {MAX_CODEC_NAMES}",
+                names.len()
+            ));
+        }
+        let mut codecs = Vec::new();
+        for name in names {
+            // Unknown names are skipped: a client may list codecs of later versions.
+            if let Some(codec) = Codec::from_name(name) {
+                if limits.codecs.contains(&codec) && !codecs.contains(&codec) {
+                    codecs.push(codec);
+                }
+            }
+        }
+        if !codecs.iter().any(|c| matches!(c, Codec::Jpeg | Codec::Png)) {
+            let offered: Vec<&str> = limits.codecs.iter().map(|c| c.name()).collect();
+            return fail(format!(
+                "stream.codecs {names:?} has no image codec this server sends (it offers {}); \
+                 `jpeg` or `png` is needed for still frames",
+                offered.join(", ")
+            ));
+        }
+        next.codecs = codecs;
+    }
+    if let Some(depth) = message.depth {
+        next.depth = depth;
+    }
+    if let Some(visible) = message.visible {
+        next.visible = visible;
+    }
+    if let Some(fps) = message.fps {
+        if !(fps.is_finite() && (1.0..=1000.0).contains(&fps)) {
+            return fail(format!("stream.fps = {fps} must be in [1, 1000]"));
+        }
+        next.fps = fps.min(limits.max_fps);
+    }
+    Ok(next)
 }
 
 #[cfg(test)]
@@ -242,18 +339,23 @@ mod tests {
             version: 0,
             last_input_at: None,
             effects: Effects::OFF,
+            stream: StreamSettings::new(&Codec::ALL, 30.0),
         }
     }
 
-    const LIMITS: Limits = Limits {
-        max_size: 4096,
-        isovalue_range: (0.0, 2.0),
-        effects: EffectLimits {
-            max_depth: 8,
-            max_samples: 64,
-            max_passes: 64,
-        },
-    };
+    fn limits() -> Limits {
+        Limits {
+            max_size: 4096,
+            isovalue_range: (0.0, 2.0),
+            effects: EffectLimits {
+                max_depth: 8,
+                max_samples: 64,
+                max_passes: 64,
+            },
+            codecs: vec![Codec::Jpeg, Codec::Png],
+            max_fps: 30.0,
+        }
+    }
 
     #[test]
     fn errors_name_the_field() {
@@ -288,22 +390,47 @@ mod tests {
             r#"{"type":"time","input_id":1,"time":-1}"#,
             r#"{"type":"effects","input_id":1,"effects":{"shadows":true,"depth":9}}"#,
             r#"{"type":"effects","input_id":1,"effects":{"ao_samples":0}}"#,
+            r#"{"type":"stream","input_id":1,"codecs":["h264","vp9"]}"#,
+            r#"{"type":"stream","input_id":1,"codecs":[]}"#,
+            r#"{"type":"stream","input_id":1,"depth":true,"fps":0}"#,
         ] {
             let msg = parse(text).expect("well-formed");
-            let e = apply(&msg, &mut s, &LIMITS).expect_err(text);
+            let e = apply(&msg, &mut s, &limits()).expect_err(text);
             assert_eq!(e.code, "invalid_value", "{text}");
             assert_eq!(s, before, "{text} changed the settings");
         }
         let ok = parse(r#"{"type":"isovalue","input_id":9,"value":1.25}"#).expect("parses");
-        apply(&ok, &mut s, &LIMITS).expect("valid");
+        apply(&ok, &mut s, &limits()).expect("valid");
         assert_eq!((s.isovalue, s.last_input_id, s.version), (1.25, 9, 1));
         let ok =
             parse(r#"{"type":"effects","input_id":10,"effects":{"reflections":true,"depth":8}}"#)
                 .expect("parses");
-        apply(&ok, &mut s, &LIMITS).expect("valid");
+        apply(&ok, &mut s, &limits()).expect("valid");
         assert!(s.effects.reflections && s.effects.depth == 8 && s.version == 2);
         let e = parse(r#"{"type":"effects","input_id":11,"effects":{"reflection":true}}"#)
             .expect_err("unknown field");
         assert!(e.message.contains("reflection"), "{}", e.message);
+    }
+
+    #[test]
+    fn stream_settings_keep_offered_codecs_in_the_clients_order() {
+        let mut s = settings();
+        let msg = parse(
+            r#"{"type":"stream","input_id":2,"codecs":["av1","h264","png","jpeg"],"depth":true,"fps":144}"#,
+        )
+        .expect("parses");
+        apply(&msg, &mut s, &limits()).expect("valid");
+        // h264 is not offered by this (test) server and av1 is unknown: both are skipped.
+        assert_eq!(s.stream.codecs, vec![Codec::Png, Codec::Jpeg]);
+        assert!(s.stream.depth && s.stream.visible);
+        assert_eq!(s.stream.fps, 30.0, "capped at the server's maximum");
+        let hide = parse(r#"{"type":"stream","input_id":3,"visible":false}"#).expect("parses");
+        apply(&hide, &mut s, &limits()).expect("valid");
+        assert!(
+            !s.stream.visible && s.stream.depth,
+            "absent fields keep their value"
+        );
+        let e = parse(r#"{"type":"stream","input_id":4,"codecs":"jpeg"}"#).expect_err("string");
+        assert!(e.message.contains("codecs"), "{}", e.message);
     }
 }

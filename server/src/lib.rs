@@ -19,6 +19,7 @@ pub mod metrics;
 pub mod placement;
 pub mod refine;
 pub mod scenes;
+pub mod schedule;
 pub mod session;
 pub mod state;
 pub mod store;

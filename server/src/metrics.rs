@@ -1,5 +1,6 @@
-//! Prometheus metrics at `/metrics`: sessions, frames, bytes, per-stage times, input-to-frame
-//! latency, render queue depth, refusals and rejected inputs.
+//! Prometheus metrics at `/metrics`: sessions, frames and bytes by codec, dropped frames,
+//! per-stage times, input-to-frame latency, render queue depth and wait, jobs running, depth
+//! channel bytes, scene states built, refusals and rejected inputs.
 //!
 //! One process-wide recorder (the `metrics` facade is global); servers started in one process,
 //! as the tests do, share it.
@@ -14,7 +15,18 @@ pub const FRAMES_SENT: &str = "isoray_frames_sent_total";
 pub const FRAME_BYTES: &str = "isoray_frame_bytes_total";
 pub const STAGE_SECONDS: &str = "isoray_stage_seconds";
 pub const INPUT_TO_FRAME_SECONDS: &str = "isoray_input_to_frame_seconds";
+/// Frames waiting for the render pool (the fair scheduler's queue).
 pub const RENDER_QUEUE: &str = "isoray_render_queue_depth";
+/// Frames being rendered and encoded now.
+pub const RENDER_RUNNING: &str = "isoray_render_jobs_running";
+/// Time frames waited in the scheduler's queue.
+pub const QUEUE_WAIT_SECONDS: &str = "isoray_render_queue_wait_seconds";
+/// Frames rendered but never sent, by reason.
+pub const FRAMES_DROPPED: &str = "isoray_frames_dropped_total";
+/// Bytes of depth channels sent with interactive frames.
+pub const DEPTH_BYTES: &str = "isoray_depth_bytes_total";
+/// Scene states prepared (state update plus acceleration structure), by scene.
+pub const STATES_BUILT: &str = "isoray_scene_states_built_total";
 pub const INPUTS_REJECTED: &str = "isoray_inputs_rejected_total";
 
 /// Bucket bounds, seconds: 0.5 ms to 2.5 s, about ×2 apart.
@@ -31,7 +43,10 @@ pub fn handle() -> Option<&'static PrometheusHandle> {
             let builder = PrometheusBuilder::new()
                 .set_buckets_for_metric(Matcher::Suffix("_seconds".into()), &SECONDS_BUCKETS);
             match builder.and_then(|b| b.install_recorder()) {
-                Ok(handle) => Some(handle),
+                Ok(handle) => {
+                    register_zeroes();
+                    Some(handle)
+                }
                 Err(e) => {
                     tracing::warn!(error = %e, "metrics disabled: cannot install the recorder");
                     None
@@ -39,6 +54,17 @@ pub fn handle() -> Option<&'static PrometheusHandle> {
             }
         })
         .as_ref()
+}
+
+/// Counters and gauges that should read 0 before their first event, so that dashboards and
+/// alerts see them from the start.
+fn register_zeroes() {
+    for reason in ["replaced", "session_end", "error"] {
+        metrics::counter!(FRAMES_DROPPED, "reason" => reason).absolute(0);
+    }
+    metrics::gauge!(RENDER_QUEUE).set(0.0);
+    metrics::gauge!(RENDER_RUNNING).set(0.0);
+    metrics::counter!(DEPTH_BYTES).absolute(0);
 }
 
 /// The text exposition of every metric.
@@ -54,6 +80,10 @@ pub fn render() -> String {
 
 pub fn stage(stage: &'static str, micros: u32) {
     metrics::histogram!(STAGE_SECONDS, "stage" => stage).record(micros as f64 * 1e-6);
+}
+
+pub fn queue_wait(wait: Duration) {
+    metrics::histogram!(QUEUE_WAIT_SECONDS).record(wait.as_secs_f64());
 }
 
 pub fn input_to_frame(latency: Duration) {

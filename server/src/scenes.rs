@@ -201,6 +201,9 @@ impl SceneLook {
 pub struct SceneEntry {
     id: String,
     source: Source,
+    /// Stored steps prepared for this scene so far (cache misses); demos count in their
+    /// pipeline. A scene nobody watches builds nothing.
+    states_built: std::sync::atomic::AtomicU64,
 }
 
 enum Source {
@@ -222,6 +225,7 @@ impl SceneEntry {
     fn demo_entry(demo: DemoScene, pipeline: DemoPipeline) -> SceneEntry {
         let first = demo.state_at(0.0);
         SceneEntry {
+            states_built: Default::default(),
             id: demo.id().to_string(),
             source: Source::Demo {
                 demo,
@@ -235,6 +239,7 @@ impl SceneEntry {
 
     fn stored(scene: Arc<StoredScene>, cache: Arc<PreparedCache>) -> SceneEntry {
         SceneEntry {
+            states_built: Default::default(),
             id: scene.meta.id.clone(),
             source: Source::Stored {
                 setup: scene.setup.clone(),
@@ -351,6 +356,46 @@ impl SceneEntry {
         }
     }
 
+    /// Identifies the state a view at `time` shows (`live`: following the scene as it
+    /// changes): equal keys, same state. For a demo, a pure function of time, it is the time;
+    /// for a stored scene, the step (index and checksum), so a live view of a stored scene sees
+    /// a new state only when a step is pushed. Cheap: the session asks on the async side.
+    pub fn state_key(&self, time: f64, live: bool) -> u128 {
+        match &self.source {
+            Source::Demo { .. } => time.to_bits() as u128,
+            Source::Stored { scene, .. } => {
+                let step = if live {
+                    scene.latest()
+                } else {
+                    scene.at_time(time)
+                };
+                step.map_or(0, |s| {
+                    (s.header.index as u128) ^ s.header.checksum.rotate_left(64)
+                })
+            }
+        }
+    }
+
+    /// Whether a live view of this scene changes with the clock (the demos do; a stored
+    /// scene changes when a step is pushed).
+    pub fn animates(&self) -> bool {
+        matches!(self.source, Source::Demo { .. })
+    }
+
+    /// States prepared for this scene since the server started (cache misses).
+    pub fn states_built(&self) -> u64 {
+        match &self.source {
+            Source::Demo { pipeline, .. } => pipeline.built(),
+            Source::Stored { .. } => self.states_built.load(std::sync::atomic::Ordering::Relaxed),
+        }
+    }
+
+    fn count_build(&self) {
+        self.states_built
+            .fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        metrics::counter!(crate::metrics::STATES_BUILT, "scene" => self.id.clone()).increment(1);
+    }
+
     /// The state at `time`, prepared for tracing; built on first use and then shared. A live
     /// view of a stored scene sees its newest step. Blocking: call it on the render pool. A
     /// cache hit reports zero update and build time.
@@ -375,6 +420,7 @@ impl SceneEntry {
             return self.prepared_at(0.0, false);
         };
         let build = |step: Option<&StoredStep>| {
+            self.count_build();
             let t0 = Instant::now();
             let scene = setup.scene(step.map(|s| (s.header.columns, s.payload())));
             let t1 = Instant::now();
@@ -485,6 +531,8 @@ pub struct DemoPipeline {
     builder: Arc<Builder>,
     frame_interval_secs: f64,
     inner: Arc<Mutex<PipelineState>>,
+    /// States built (live and pinned), for [`SceneEntry::states_built`].
+    built: Arc<std::sync::atomic::AtomicU64>,
 }
 
 /// One prepared demo state in the cache.
@@ -508,6 +556,9 @@ struct PipelineState {
     /// The previous live request's time, and the smoothed spacing of live requests.
     last_request: Option<f64>,
     spacing_secs: f64,
+    /// Pinned builds in flight, by time: a second viewer of the same time waits for the
+    /// first one's build instead of building the same structure again.
+    pinned_in_flight: Vec<(f64, Arc<Pending>)>,
 }
 
 impl PipelineState {
@@ -543,6 +594,7 @@ impl DemoPipeline {
             builder,
             frame_interval_secs,
             inner: Arc::new(Mutex::new(PipelineState::default())),
+            built: Arc::default(),
         }
     }
 
@@ -611,19 +663,64 @@ impl DemoPipeline {
         state
     }
 
-    /// Exactly the state at `time`.
+    /// Exactly the state at `time`. Viewers asking for the same time at once share one build.
     pub fn pinned(&self, time: f64) -> PreparedState {
-        if let Some(state) = self.lock().take(time, false) {
-            return state;
+        let pending = {
+            let mut inner = self.lock();
+            if let Some(state) = inner.take(time, false) {
+                return state;
+            }
+            match inner.pinned_in_flight.iter().find(|(t, _)| *t == time) {
+                Some((_, pending)) => Err(Arc::clone(pending)),
+                None => {
+                    let pending = Arc::new(Pending {
+                        slot: Mutex::new(PendingSlot::Building),
+                        done: Condvar::new(),
+                    });
+                    inner.pinned_in_flight.push((time, Arc::clone(&pending)));
+                    Ok(pending)
+                }
+            }
+        };
+        match pending {
+            // Another render thread builds it (it is running, so this wait ends).
+            Err(pending) => match pending.wait() {
+                Some(state) => served(state, false),
+                None => self.build_pinned_here(time, None),
+            },
+            Ok(pending) => self.build_pinned_here(time, Some(pending)),
         }
+    }
+
+    /// Builds the pinned state at `time` on this thread, caches it and wakes its waiters.
+    fn build_pinned_here(&self, time: f64, pending: Option<Arc<Pending>>) -> PreparedState {
+        let mut guard = FailOnDrop(pending.clone());
+        self.built
+            .fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        metrics::counter!(crate::metrics::STATES_BUILT, "scene" => self.demo.id()).increment(1);
         let state = build_demo(self.demo, time);
-        self.lock().insert(Cached {
-            time,
-            state: state.clone(),
-            live: false,
-            served: true,
-        });
+        {
+            let mut inner = self.lock();
+            inner.insert(Cached {
+                time,
+                state: state.clone(),
+                live: false,
+                served: true,
+            });
+            if let Some(p) = &pending {
+                inner.pinned_in_flight.retain(|(_, q)| !Arc::ptr_eq(p, q));
+            }
+        }
+        guard.0 = None;
+        if let Some(p) = pending {
+            p.finish(PendingSlot::Ready(state.clone()));
+        }
         state
+    }
+
+    /// States this demo has built since the server started.
+    pub fn built(&self) -> u64 {
+        self.built.load(std::sync::atomic::Ordering::Relaxed)
     }
 
     /// Starts building the live state at `time` on the build pool.
@@ -633,8 +730,11 @@ impl DemoPipeline {
             done: Condvar::new(),
         });
         let (demo, inner, job_pending) = (self.demo, Arc::clone(&self.inner), Arc::clone(&pending));
+        let built = Arc::clone(&self.built);
         self.builder.spawn(move || {
             let mut guard = FailOnDrop(Some(Arc::clone(&job_pending)));
+            built.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+            metrics::counter!(crate::metrics::STATES_BUILT, "scene" => demo.id()).increment(1);
             let state = build_demo(demo, time);
             {
                 let mut inner = inner.lock().unwrap_or_else(|e| e.into_inner());

@@ -3,6 +3,7 @@
 
 use crate::config::Config;
 use crate::scenes::SceneRegistry;
+use crate::schedule::RenderScheduler;
 use crate::session::SessionStats;
 use isoray_render::CpuBackend;
 use std::collections::BTreeMap;
@@ -18,7 +19,8 @@ pub struct AppState {
 
 struct Inner {
     config: Config,
-    backend: CpuBackend,
+    backend: Arc<CpuBackend>,
+    scheduler: Arc<RenderScheduler>,
     scenes: SceneRegistry,
     sessions: SessionTable,
     shutdown: watch::Sender<bool>,
@@ -29,13 +31,15 @@ impl AppState {
     pub fn new(config: Config) -> Result<AppState, String> {
         config.validate()?;
         crate::metrics::handle();
-        let backend = CpuBackend::new(config.threads).map_err(|e| e.to_string())?;
+        let backend = Arc::new(CpuBackend::new(config.threads).map_err(|e| e.to_string())?);
+        let scheduler = RenderScheduler::new(Arc::clone(&backend));
         let scenes = SceneRegistry::from_config(&config);
         Ok(AppState {
             inner: Arc::new(Inner {
                 scenes,
                 config,
                 backend,
+                scheduler,
                 sessions: SessionTable::default(),
                 shutdown: watch::Sender::new(false),
             }),
@@ -48,6 +52,11 @@ impl AppState {
 
     pub fn backend(&self) -> &CpuBackend {
         &self.inner.backend
+    }
+
+    /// The fair gatekeeper of the render pool: sessions submit their frames here.
+    pub fn scheduler(&self) -> &Arc<RenderScheduler> {
+        &self.inner.scheduler
     }
 
     pub fn scenes(&self) -> &SceneRegistry {

@@ -7,19 +7,6 @@ use serde_json::json;
 use std::time::{Duration, Instant};
 use tokio_tungstenite::tungstenite::Message;
 
-/// Waits until the server has `n` open sessions.
-async fn wait_for_sessions(server: &TestServer, n: usize, within: Duration) {
-    let start = Instant::now();
-    while server.state.sessions().count() != n {
-        assert!(
-            start.elapsed() < within,
-            "expected {n} sessions within {within:?}, have {}",
-            server.state.sessions().count()
-        );
-        tokio::time::sleep(Duration::from_millis(20)).await;
-    }
-}
-
 /// Reads until the close frame and returns its code and reason.
 async fn close_reason(ws: &mut Ws) -> (u16, String) {
     let deadline = tokio::time::Instant::now() + WAIT;
@@ -61,11 +48,13 @@ async fn sessions_beyond_the_limit_get_a_clear_refusal() {
 
     drop(a);
     wait_for_sessions(&server, 1, WAIT).await;
-    let (_c, info) = server.connect("blobs").await;
+    let (c, info) = server.connect("blobs").await;
     assert_eq!(
         info.scene.id, "blobs",
         "a place freed by a leaving client is given to the next"
     );
+    drop((c, _b, refused));
+    assert_no_sessions_left(&server).await;
     server.stop().await;
 }
 
@@ -85,10 +74,33 @@ async fn clients_that_vanish_or_never_answer_are_dropped() {
     drop(gone);
     wait_for_sessions(&server, 0, WAIT).await;
 
-    // Never reads, never acknowledges, never answers a ping: silent, like a dead peer.
+    // Never reads, never acknowledges, never answers a ping: silent, like a dead peer. The
+    // live scene animates meanwhile, but without acknowledgements the server renders no more
+    // than its window of frames, and holds at most one of them.
     let (silent, _) = server.connect("blobs").await;
     let opened = Instant::now();
+    let (_, stats) = server
+        .state
+        .sessions()
+        .snapshot()
+        .pop()
+        .expect("the silent session");
     wait_for_sessions(&server, 0, Duration::from_secs(10)).await;
+    let rendered = stats
+        .frames_rendered
+        .load(std::sync::atomic::Ordering::SeqCst);
+    let pending = stats
+        .max_pending_frames
+        .load(std::sync::atomic::Ordering::SeqCst);
+    println!("silent client: {rendered} frames rendered, at most {pending} pending");
+    assert!(
+        rendered <= isoray_server::session::FRAME_WINDOW + 1,
+        "{rendered} frames rendered for a client that never read"
+    );
+    assert!(
+        pending <= 1,
+        "{pending} frames held for a client that never read"
+    );
     let after = opened.elapsed();
     assert!(
         after >= Duration::from_millis(1900),
@@ -109,6 +121,7 @@ async fn clients_that_vanish_or_never_answer_are_dropped() {
         "a responsive client is not idle"
     );
     drop(alive);
+    assert_no_sessions_left(&server).await;
     server.stop().await;
 }
 
@@ -139,4 +152,5 @@ async fn shutdown_while_streaming_closes_every_session_with_a_reason() {
         .expect("drains")
         .expect("no panic");
     assert_eq!(state.sessions().count(), 0);
+    assert_eq!(state.scheduler().tracked(), (0, 0), "no share or job left");
 }

@@ -48,6 +48,32 @@ async fn metrics_count_what_a_session_did() {
         sample(&text, "isoray_input_to_frame_seconds_count", &[]).expect("latency histogram");
     assert!(latency >= 5.0, "every answered input is timed: {latency}");
     assert!(sample(&text, "isoray_inputs_rejected_total", &[]).expect("rejections") >= 1.0);
+    for (name, labels) in [
+        (
+            "isoray_frames_dropped_total",
+            &["reason=\"session_end\""][..],
+        ),
+        ("isoray_render_queue_depth", &[]),
+        ("isoray_render_jobs_running", &[]),
+        ("isoray_depth_bytes_total", &[]),
+    ] {
+        assert!(
+            sample(&text, name, labels).is_some(),
+            "{name} missing:\n{text}"
+        );
+    }
+    let waits = sample(&text, "isoray_render_queue_wait_seconds_count", &[]).expect("queue wait");
+    assert!(
+        waits >= 5.0,
+        "every frame's wait in the render queue is timed: {waits}"
+    );
+    let built = sample(
+        &text,
+        "isoray_scene_states_built_total",
+        &["scene=\"blobs\""],
+    )
+    .expect("states built");
+    assert!(built >= 1.0);
     drop(ws);
     server.stop().await;
 }

@@ -1,6 +1,8 @@
 //! The server run in-process on an ephemeral loopback port, driven over real sockets.
 
+mod adaptive;
 mod bad_input;
+mod codecs;
 mod lifecycle;
 mod metrics;
 mod paper_scenes;

@@ -75,5 +75,6 @@ async fn stalled_reader_holds_one_pending_frame_and_then_sees_the_newest() {
     );
     assert!(stats.max_pending_frames.load(Ordering::SeqCst) <= 1);
     drop(ws);
+    assert_no_sessions_left(&server).await;
     server.stop().await;
 }

@@ -178,10 +178,38 @@ async fn still_view_gets_one_lossless_frame_then_silence() {
         "the still frame is bit-exact"
     );
 
-    // Nothing changes, so nothing more is sent.
+    // The PNG itself is lossless: decoded by the `png` crate (not the one the server encodes
+    // with) it gives the same bytes.
+    let (payload, depth) = frame.payload();
+    assert!(depth.is_none(), "no depth channel unless asked for");
+    let mut reader = png::Decoder::new(std::io::Cursor::new(payload))
+        .read_info()
+        .expect("a PNG");
+    let mut decoded = vec![0; reader.output_buffer_size().expect("size")];
+    let info = reader.next_frame(&mut decoded).expect("PNG decodes");
+    assert_eq!((info.width, info.height), (120, 90));
+    assert_eq!(&decoded[..info.buffer_size()], &reference.rgb[..]);
+
+    // Nothing changes, so nothing more is sent, and nothing is rendered either.
+    let (_, stats) = server
+        .state
+        .sessions()
+        .snapshot()
+        .pop()
+        .expect("the session");
+    let rendered = stats
+        .frames_rendered
+        .load(std::sync::atomic::Ordering::SeqCst);
     let quiet =
         tokio::time::timeout(std::time::Duration::from_millis(1500), next_frame(&mut ws)).await;
     assert!(quiet.is_err(), "a frame arrived although nothing changed");
+    assert_eq!(
+        stats
+            .frames_rendered
+            .load(std::sync::atomic::Ordering::SeqCst),
+        rendered,
+        "a still view costs no rendering"
+    );
     drop(ws);
     server.stop().await;
 }

@@ -1,7 +1,9 @@
 //! Helpers: start a server on 127.0.0.1:0, open a websocket, read frames and messages.
 
 use futures_util::{SinkExt, StreamExt};
-use isoray_protocol::{ErrorMessage, FrameHeader, ServerMessage, SessionInfo, FRAME_HEADER_LEN};
+use isoray_protocol::{
+    Codec, ErrorMessage, FrameHeader, ServerMessage, SessionInfo, FRAME_HEADER_LEN,
+};
 use isoray_server::{AppState, Config};
 use std::net::SocketAddr;
 use std::time::Duration;
@@ -116,7 +118,20 @@ pub async fn next_error(ws: &mut Ws) -> ErrorMessage {
 /// A decoded frame.
 pub struct Frame {
     pub header: FrameHeader,
+    /// The picture; empty (0×0) for H.264 frames, which need the stream's earlier frames
+    /// (see `raw`).
     pub image: image::RgbImage,
+    /// The whole message, header included.
+    pub raw: Vec<u8>,
+}
+
+impl Frame {
+    /// The image payload and the depth block, as the header splits them.
+    pub fn payload(&self) -> (&[u8], Option<&[u8]>) {
+        self.header
+            .split_payload(&self.raw)
+            .expect("payload length fits the message")
+    }
 }
 
 /// The next binary frame, decoded and acknowledged; text messages in between are skipped.
@@ -147,10 +162,22 @@ pub async fn next_frame_unacked(ws: &mut Ws) -> Frame {
 
 pub fn decode_frame(bytes: &[u8]) -> Frame {
     let header = FrameHeader::decode(bytes).expect("valid frame header");
-    let image = image::load_from_memory(&bytes[FRAME_HEADER_LEN..])
-        .expect("payload decodes")
-        .to_rgb8();
-    Frame { header, image }
+    let (payload, _) = header.split_payload(bytes).expect("payload length fits");
+    assert!(
+        bytes.len() > FRAME_HEADER_LEN,
+        "a frame has a payload after its header"
+    );
+    let image = match header.codec {
+        Codec::H264 => image::RgbImage::new(0, 0),
+        Codec::Jpeg | Codec::Png => image::load_from_memory(payload)
+            .expect("payload decodes")
+            .to_rgb8(),
+    };
+    Frame {
+        header,
+        image,
+        raw: bytes.to_vec(),
+    }
 }
 
 /// Reads frames until one answers `input_id` (or a later input).
@@ -160,6 +187,34 @@ pub async fn frame_for_input(ws: &mut Ws, input_id: u64) -> Frame {
         if frame.header.input_id >= input_id {
             return frame;
         }
+    }
+}
+
+/// Waits until the server has `n` open sessions.
+pub async fn wait_for_sessions(server: &TestServer, n: usize, within: Duration) {
+    let start = std::time::Instant::now();
+    while server.state.sessions().count() != n {
+        assert!(
+            start.elapsed() < within,
+            "expected {n} sessions within {within:?}, have {}",
+            server.state.sessions().count()
+        );
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    }
+}
+
+/// Asserts that no session is left anywhere: not in the session table, and not in the render
+/// scheduler (no share kept, no job waiting). Call once every client is gone.
+pub async fn assert_no_sessions_left(server: &TestServer) {
+    wait_for_sessions(server, 0, WAIT).await;
+    let start = std::time::Instant::now();
+    while server.state.scheduler().tracked() != (0, 0) {
+        assert!(
+            start.elapsed() < WAIT,
+            "the scheduler still tracks {:?} (sessions, waiting jobs)",
+            server.state.scheduler().tracked()
+        );
+        tokio::time::sleep(Duration::from_millis(20)).await;
     }
 }
 
