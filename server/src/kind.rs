@@ -399,8 +399,14 @@ mod tests {
                 r#"{"kind":"tets","tets":{"mesh":{"vertices":[[0,0,0],[1,0,0],[0,1,0],[0,0,1e39]],"cells":[[0,1,2,3]]}}}"#,
                 "tets.mesh.vertices[3]",
             ),
-            (r#"{"kind":"tets","tets":{"color_range":[1,1]}}"#, "tets.color_range"),
-            (r#"{"kind":"tets","isovalue_slider":[1,-1]}"#, "isovalue_slider"),
+            (
+                r#"{"kind":"tets","tets":{"color_range":[1,1]}}"#,
+                "tets.color_range",
+            ),
+            (
+                r#"{"kind":"tets","isovalue_slider":[1,-1]}"#,
+                "isovalue_slider",
+            ),
             (
                 r#"{"kind":"metaballs","metaballs":{"kernel":"gauss"}}"#,
                 "metaballs.kernel",

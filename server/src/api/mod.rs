@@ -37,9 +37,9 @@ use error::ApiError;
 use futures_util::StreamExt;
 use isoray_protocol::api::{
     ApiCamera, ApiErrorBody, CreateScene, CreatedScene, ImageFormat, JsonStep, JsonTetStep,
-    LightSpec, MeshInfo, TetMeshData, TetSpec,
-    LightingSpec, MetaballDefaults, PushResult, RenderRequest, SceneInfo, SceneInfoList, SceneKind,
-    StepInfo, StepList, NPY_MEDIA_TYPE, RAW_MEDIA_TYPE,
+    LightSpec, LightingSpec, MeshInfo, MetaballDefaults, PushResult, RenderRequest, SceneInfo,
+    SceneInfoList, SceneKind, StepInfo, StepList, TetMeshData, TetSpec, NPY_MEDIA_TYPE,
+    RAW_MEDIA_TYPE,
 };
 use isoray_render::View;
 use std::net::{IpAddr, SocketAddr};

@@ -18,7 +18,9 @@ use super::{
     ApiShared, ClientAddr, PushFormat, BODY_QUEUE,
 };
 use crate::kind::KindSetup;
-use crate::store::ingest::{ingest_raw, BodyReader, IngestError, IngestLimits, Target, WrittenStep};
+use crate::store::ingest::{
+    ingest_raw, BodyReader, IngestError, IngestLimits, Target, WrittenStep,
+};
 use crate::AppState;
 use axum::body::Body;
 use axum::extract::rejection::PathRejection;
@@ -198,7 +200,9 @@ pub fn ingest_json_tets(
 ) -> Result<WrittenStep, IngestError> {
     let rows = step.scalars.len() as u64;
     if let Some(why) = limits.layout.check_rows(rows) {
-        return Err(IngestError::invalid("bad_shape", format!("scalars: {why}")).at_field("scalars"));
+        return Err(
+            IngestError::invalid("bad_shape", format!("scalars: {why}")).at_field("scalars")
+        );
     }
     let mut raw = Vec::with_capacity(RAW_STEP_HEADER_LEN + step.scalars.len() * 4);
     raw.extend_from_slice(&RAW_STEP_MAGIC);
@@ -318,7 +322,11 @@ pub(super) async fn put_mesh(
         let _one = slot.upload.lock().unwrap_or_else(|e| e.into_inner());
         if let Some(existing) = slot.get() {
             return if **existing == mesh {
-                Ok(("unchanged", crate::store::mesh::checksum(existing), Arc::clone(existing)))
+                Ok((
+                    "unchanged",
+                    crate::store::mesh::checksum(existing),
+                    Arc::clone(existing),
+                ))
             } else {
                 Err(ApiError::new(
                     StatusCode::CONFLICT,
@@ -386,7 +394,10 @@ impl<R: Read> Counted<R> {
                 Err(e) => {
                     return Err(ApiError::bad_request(
                         "body_read_failed",
-                        format!("reading the body failed at byte offset {}: {e}", self.offset),
+                        format!(
+                            "reading the body failed at byte offset {}: {e}",
+                            self.offset
+                        ),
                     )
                     .offset(self.offset))
                 }
@@ -521,8 +532,12 @@ fn read_head<R: Read>(r: &mut Counted<R>, npy: bool, which: &str) -> Result<Arra
         r.fill(&mut text, &format!("the {which} .npy header"))?;
         let text = String::from_utf8_lossy(&text);
         let value = |key: &str| {
-            text.find(&format!("'{key}'"))
-                .map(|at| text[at + key.len() + 2..].trim_start().trim_start_matches(':').trim_start())
+            text.find(&format!("'{key}'")).map(|at| {
+                text[at + key.len() + 2..]
+                    .trim_start()
+                    .trim_start_matches(':')
+                    .trim_start()
+            })
         };
         let descr = value("descr").unwrap_or("");
         let element = [
@@ -641,7 +656,10 @@ fn read_binary_mesh<R: Read>(
     if head.rows > limits.max_vertices {
         return Err(ApiError::bad_request(
             "too_many_vertices",
-            format!("{} vertices exceed the limit of {}", head.rows, limits.max_vertices),
+            format!(
+                "{} vertices exceed the limit of {}",
+                head.rows, limits.max_vertices
+            ),
         )
         .field("vertices"));
     }
@@ -750,8 +768,16 @@ mod tests {
     }
 
     fn body(vertices: &[[f32; 3]], cells: &[[i64; 4]]) -> Vec<u8> {
-        let v: Vec<u8> = vertices.iter().flatten().flat_map(|x| x.to_le_bytes()).collect();
-        let c: Vec<u8> = cells.iter().flatten().flat_map(|x| x.to_le_bytes()).collect();
+        let v: Vec<u8> = vertices
+            .iter()
+            .flatten()
+            .flat_map(|x| x.to_le_bytes())
+            .collect();
+        let c: Vec<u8> = cells
+            .iter()
+            .flatten()
+            .flat_map(|x| x.to_le_bytes())
+            .collect();
         let mut out = npy("<f4", (vertices.len(), 3), &v);
         out.extend(npy("<i8", (cells.len(), 4), &c));
         out
@@ -781,7 +807,11 @@ mod tests {
         let bytes = body(&UNIT, &[[0, 1, 2, 3], [1, 2, 3, 7]]);
         let e = read(bytes.clone()).expect_err("index 7 of 5 vertices");
         assert_eq!(e.field.as_deref(), Some("cells[1][3]"));
-        assert!(e.message.contains("tet 1") && e.message.contains("vertex 7"), "{}", e.message);
+        assert!(
+            e.message.contains("tet 1") && e.message.contains("vertex 7"),
+            "{}",
+            e.message
+        );
         // The offset points at the bad value: 7 as a little-endian i64.
         let at = e.offset.expect("an offset") as usize;
         assert_eq!(&bytes[at..at + 8], &7i64.to_le_bytes());
@@ -801,7 +831,11 @@ mod tests {
         let mut extra = body(&UNIT, &[[0, 1, 2, 3]]);
         extra.push(0);
         assert_eq!(read(extra).expect_err("long").code, "trailing_bytes");
-        let v: Vec<u8> = UNIT.iter().flatten().flat_map(|x| x.to_le_bytes()).collect();
+        let v: Vec<u8> = UNIT
+            .iter()
+            .flatten()
+            .flat_map(|x| x.to_le_bytes())
+            .collect();
         let e = read(npy("<f4", (5, 3), &v)).expect_err("no cells");
         assert_eq!(e.code, "truncated");
         let many: Vec<[i64; 4]> = (0..101).map(|_| [0, 1, 2, 3]).collect();

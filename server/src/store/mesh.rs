@@ -103,7 +103,11 @@ pub fn read(dir: &Path) -> Result<Option<TetMesh>, String> {
         return Err(format!("{FILE}: not a mesh file"));
     }
     let u64_at = |at: usize| {
-        u64::from_le_bytes(bytes[at..at + 8].try_into().expect("8 bytes inside the header"))
+        u64::from_le_bytes(
+            bytes[at..at + 8]
+                .try_into()
+                .expect("8 bytes inside the header"),
+        )
     };
     if u32::from_le_bytes(bytes[8..12].try_into().expect("4 bytes")) != VERSION {
         return Err(format!("{FILE}: unknown version"));
