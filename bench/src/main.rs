@@ -5,6 +5,7 @@
 mod common;
 mod effects;
 mod ingest;
+mod load;
 mod metaballs;
 mod stream;
 mod tets;
@@ -34,6 +35,10 @@ enum Command {
     Effects(effects::EffectsArgs),
     /// Streaming: codecs along a camera path; sessions over loopback websockets.
     Stream(stream::Args),
+    /// Many websocket viewers driving their cameras against a running server or load
+    /// balancer: per-viewer fps, input-to-frame latency percentiles and the frame size the
+    /// server's adaptive controller settled on.
+    Load(load::LoadArgs),
 }
 
 fn main() {
@@ -45,6 +50,7 @@ fn main() {
         Command::Ingest(args) => ingest::run(args),
         Command::Effects(args) => effects::run(args),
         Command::Stream(args) => stream::run(args),
+        Command::Load(args) => load::run(args),
     };
     if let Err(e) = result {
         eprintln!("isoray-bench: {e}");
