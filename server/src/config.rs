@@ -11,7 +11,7 @@ use std::path::PathBuf;
     name = "isoray",
     version,
     about,
-    after_help = "Other commands: `isoray push --help` (push .npy steps to a server), \
+    after_help = "Other commands: `isoray push --help` (push .npy steps or a .vtu series to a server), \
                   `isoray render --help` (one image of a scene, offline)."
 )]
 pub struct Config {

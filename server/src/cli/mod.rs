@@ -2,4 +2,5 @@
 //! server) and `isoray render` (one image of a scene, offline).
 
 pub mod push;
+pub mod push_vtu;
 pub mod render;

@@ -1,6 +1,7 @@
 //! `isoray push`: pushes `.npy` files (or raw `ISRA` arrays) to a server as consecutive time
 //! steps of a scene, creating the scene first unless one is named. Each file is streamed from
-//! disk, never read whole into memory; the server validates it and answers per step.
+//! disk, never read whole into memory; the server validates it and answers per step. A VTK
+//! series (`.vtu` files, or a `.pvd` collection) is a tet scene: see `push_vtu`.
 
 use clap::Parser;
 use isoray_server::api::client::{Body, Client};
@@ -12,6 +13,8 @@ use std::time::Instant;
 /// Files are pushed in the order given, as steps `--start`, `--start + 1`, ... Without
 /// `--scene`, a metaball scene is created first (from `--spec`, a JSON file with the body of
 /// `POST /api/v1/scenes`, or `{"kind": "metaballs"}`), and its id and write token are printed.
+/// A VTK series (`.vtu` files of tetrahedra, or a `.pvd` collection of them) makes a tet
+/// scene: the first file's mesh, then one step per file from a point scalar array.
 #[derive(Debug, Parser)]
 #[command(name = "isoray push")]
 pub struct PushArgs {
@@ -36,8 +39,11 @@ pub struct PushArgs {
     /// Overwrite steps that exist with different content.
     #[arg(long)]
     pub replace: bool,
-    /// The step files: `.npy` (float32 or float64, shape (rows, columns)) or raw arrays with
-    /// the 16-byte `ISRA` header (any other extension).
+    /// The point array of a `.vtu` series to push (default: the first with one component).
+    #[arg(long)]
+    pub array: Option<String>,
+    /// The step files: `.npy` (float32 or float64, shape (rows, columns)), raw arrays with
+    /// the 16-byte `ISRA` header (any other extension), or a VTK series (`.vtu` or `.pvd`).
     #[arg(required = true)]
     pub files: Vec<PathBuf>,
 }
@@ -45,16 +51,6 @@ pub struct PushArgs {
 /// Runs the command; the error is what to print.
 pub fn run(args: PushArgs) -> Result<(), String> {
     for file in &args.files {
-        let ext = file
-            .extension()
-            .map(|e| e.to_string_lossy().to_ascii_lowercase());
-        if matches!(ext.as_deref(), Some("vtu" | "pvd" | "vtk")) {
-            return Err(format!(
-                "{}: VTK series are steps of tetrahedral scenes, which this server does not \
-                 trace yet; push metaball steps as .npy",
-                file.display()
-            ));
-        }
         if !file.is_file() {
             return Err(format!("{}: no such file", file.display()));
         }
@@ -63,6 +59,22 @@ pub fn run(args: PushArgs) -> Result<(), String> {
         if !(dt.is_finite() && dt > 0.0) {
             return Err(format!("--time-step {dt} must be a positive number"));
         }
+    }
+    let series = args
+        .files
+        .iter()
+        .filter(|f| super::push_vtu::is_vtk_series(f))
+        .count();
+    if series == args.files.len() {
+        return super::push_vtu::run(&args);
+    }
+    if series > 0 {
+        return Err(
+            "give either .npy/raw step files or a VTK series (.vtu, .pvd), not both".into(),
+        );
+    }
+    if args.array.is_some() {
+        return Err("--array picks a point array of a .vtu series".into());
     }
     let client = Client::new(&args.server).map_err(|e| e.to_string())?;
     let (scene, token) = match (&args.scene, &args.token) {
@@ -136,9 +148,19 @@ pub fn run(args: PushArgs) -> Result<(), String> {
 
 /// Creates the scene to push to; prints and returns its id and write token.
 fn create(client: &Client, args: &PushArgs) -> Result<(String, String), String> {
+    create_scene(client, args, br#"{"kind":"metaballs"}"#)
+}
+
+/// Creates a scene from `--spec`, or from `default` without one; prints and returns its id
+/// and write token.
+pub fn create_scene(
+    client: &Client,
+    args: &PushArgs,
+    default: &[u8],
+) -> Result<(String, String), String> {
     let spec = match &args.spec {
         Some(path) => std::fs::read(path).map_err(|e| format!("{}: {e}", path.display()))?,
-        None => br#"{"kind":"metaballs"}"#.to_vec(),
+        None => default.to_vec(),
     };
     let auth = args.token.as_ref().map(|t| format!("Bearer {t}"));
     let mut headers = vec![("Content-Type", "application/json")];

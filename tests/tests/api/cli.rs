@@ -115,12 +115,22 @@ async fn push_streams_npy_files_and_render_matches_the_server() {
         ]);
         assert!(!out.status.success());
         assert!(text(&out).contains("403"), "{}", text(&out));
-        // VTK series are for tetrahedral scenes, refused with a clear message.
+        // A .vtu that is not a VTK file is refused naming the file (good series: api::tets),
+        // and mixing it with .npy steps is refused before anything is sent.
         let vtu = files.join("mesh_000.vtu");
         std::fs::write(&vtu, "<VTKFile/>").expect("write");
         let out = isoray(&[os("push"), os("--server"), os(&base), vtu.as_os_str()]);
         assert!(!out.status.success());
-        assert!(text(&out).contains("tetrahedral"), "{}", text(&out));
+        assert!(text(&out).contains("mesh_000.vtu"), "{}", text(&out));
+        let out = isoray(&[
+            os("push"),
+            os("--server"),
+            os(&base),
+            vtu.as_os_str(),
+            paths[0].as_os_str(),
+        ]);
+        assert!(!out.status.success());
+        assert!(text(&out).contains("not both"), "{}", text(&out));
 
         // The offline render of step 1 is the server's render of step 1, byte for byte.
         let png = files.join("offline.png");
