@@ -11,6 +11,7 @@ mod push_errors;
 mod python_example;
 mod restart;
 mod slow_headers;
+mod tets;
 
 use isoray_server::api::client::{npy_header_f32, Body, Client, Response};
 use isoray_server::{AppState, Config};
