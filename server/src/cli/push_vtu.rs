@@ -402,3 +402,109 @@ pub fn run(args: &PushArgs) -> Result<(), String> {
     );
     Ok(())
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use vtkio::model::*;
+
+    /// Writes a one-piece `.vtu` of `cells` over the unit tet's four corners.
+    fn write(path: &Path, cells: &[[u64; 4]], types: Vec<CellType>, values: Vec<f32>) {
+        let points = vec![0., 0., 0., 1., 0., 0., 0., 1., 0., 0., 0., 1.];
+        let vtk = Vtk {
+            version: Version::new((1, 0)),
+            title: String::new(),
+            byte_order: ByteOrder::LittleEndian,
+            file_path: None,
+            data: DataSet::inline(UnstructuredGridPiece {
+                points: IOBuffer::F64(points),
+                cells: Cells {
+                    cell_verts: VertexNumbers::XML {
+                        connectivity: cells.iter().flatten().copied().collect(),
+                        offsets: (1..=cells.len() as u64).map(|i| 4 * i).collect(),
+                    },
+                    types,
+                },
+                data: Attributes {
+                    point: vec![Attribute::DataArray(DataArray {
+                        name: "p".into(),
+                        elem: ElementType::Scalars {
+                            num_comp: 1,
+                            lookup_table: None,
+                        },
+                        data: IOBuffer::F32(values),
+                    })],
+                    cell: vec![],
+                },
+            }),
+        };
+        vtk.export(path).expect("vtkio writes");
+    }
+
+    #[test]
+    fn reads_tets_and_refuses_missing_points_non_tets_and_short_arrays() {
+        let dir = tempfile::tempdir().expect("temp dir");
+        let path = dir.path().join("a.vtu");
+        let tet = vec![CellType::Tetra];
+        write(
+            &path,
+            &[[0, 1, 2, 3]],
+            tet.clone(),
+            vec![0.0, 1.0, 2.0, 3.0],
+        );
+        let step = read_vtu(&path, None).expect("a good file");
+        assert_eq!(step.cells, vec![[0, 1, 2, 3]]);
+        assert_eq!(step.scalars, vec![0.0, 1.0, 2.0, 3.0]);
+        assert_eq!(step.array, "p");
+        assert!(volume6(&step.points, &step.cells[0]) > 0.0);
+
+        let two = vec![CellType::Tetra; 2];
+        write(&path, &[[0, 1, 2, 3], [0, 1, 7, 3]], two, vec![0.0; 4]);
+        let e = read_vtu(&path, None).expect_err("point 7 of 4");
+        assert!(
+            e.contains("a.vtu") && e.contains("tet 1") && e.contains("corner 2"),
+            "{e}"
+        );
+        assert!(e.contains("point 7"), "{e}");
+
+        write(
+            &path,
+            &[[0, 1, 2, 3]],
+            vec![CellType::Pyramid],
+            vec![0.0; 4],
+        );
+        let e = read_vtu(&path, None).expect_err("not a tet");
+        assert!(e.contains("cell 0") && e.contains("tetrahedra"), "{e}");
+
+        write(&path, &[[0, 1, 2, 3]], tet, vec![0.0; 3]);
+        // vtkio drops an array of the wrong length; either way the file is refused.
+        let e = read_vtu(&path, None).expect_err("3 values for 4 points");
+        assert!(e.contains("a.vtu") && e.contains("point array"), "{e}");
+        let e = read_vtu(&path, Some("q")).expect_err("no such array");
+        assert!(e.contains("\"q\""), "{e}");
+    }
+
+    #[test]
+    fn pvd_collections_list_files_and_times_in_order() {
+        let dir = tempfile::tempdir().expect("temp dir");
+        let pvd = dir.path().join("s.pvd");
+        std::fs::write(
+            &pvd,
+            r#"<VTKFile type="Collection"><Collection>
+            <DataSet timestep="0.5" file="a.vtu"/><DataSet file="b.vtu" timestep="1"/>
+            </Collection></VTKFile>"#,
+        )
+        .expect("write");
+        let files = expand(std::slice::from_ref(&pvd)).expect("read");
+        assert_eq!(
+            files,
+            vec![
+                (dir.path().join("a.vtu"), Some(0.5)),
+                (dir.path().join("b.vtu"), Some(1.0))
+            ]
+        );
+        std::fs::write(&pvd, r#"<DataSet timestep="soon" file="a.vtu"/>"#).expect("write");
+        let e = expand(&[pvd]).expect_err("not a number");
+        assert!(e.contains("DataSet 0") && e.contains("soon"), "{e}");
+    }
+}
