@@ -2,6 +2,7 @@
 //! offset, and changes nothing stored: checked file by file on disk after each bad push.
 
 use super::*;
+use glam::Vec3;
 use std::io::{Read, Write};
 
 /// What the error must name.
@@ -58,6 +59,20 @@ async fn every_wrong_push_is_a_4xx_naming_where_and_changes_nothing() {
         let good = npy(&[0.0, 0.0, 0.0, 0.5, 0.5, 0.5], 3);
         let r = push(&base, &id, "0", &token, NPY, &good);
         assert_eq!(r.status, 201, "{}", r.text());
+        // Tet scenes: one with a mesh of one tet, one still waiting for its mesh.
+        let tet_scene = |mesh: &str| {
+            let r = super::tets::post_json(&base, "/api/v1/scenes", &format!(r#"{{"kind":"tets"{mesh}}}"#));
+            assert_eq!(r.status, 201, "{}", r.text());
+            let v = json(&r);
+            let id = v["scene"]["id"].as_str().expect("id").to_string();
+            (id, v["write_token"].as_str().expect("token").to_string())
+        };
+        let one_tet = r#"{"vertices":[[0,0,0],[1,0,0],[0,1,0],[0,0,1]],"cells":[[0,1,2,3]]}"#;
+        let (tet_id, tet_token) = tet_scene(&format!(r#","tets":{{"mesh":{one_tet}}}"#));
+        let (bare_id, bare_token) = tet_scene("");
+        let corners = [Vec3::ZERO, Vec3::X, Vec3::Y, Vec3::Z];
+        let missing_vertex = super::tets::mesh_npy(&corners, &[[0, 1, 2, 3], [0, 1, 2, 4]]);
+        let missing_at = missing_vertex.len() - 8; // tet 1, corner 3
         let before_api = steps(&base, &id);
         let before_disk = store_snapshot(&root);
         assert!(
@@ -192,6 +207,53 @@ async fn every_wrong_push_is_a_4xx_naming_where_and_changes_nothing() {
                 push(&base, &id, "1?replce=true", &token, NPY, &good),
                 400,
                 Where::Field("replce"),
+            ),
+            (
+                "a tet referencing a missing vertex (mesh inline at creation)",
+                super::tets::post_json(
+                    &base,
+                    "/api/v1/scenes",
+                    r#"{"kind":"tets","tets":{"mesh":{"vertices":[[0,0,0],[1,0,0],[0,1,0],[0,0,1]],
+                        "cells":[[0,1,2,3],[0,1,2,4]]}}}"#,
+                ),
+                400,
+                Where::Field("tets.mesh.cells[1][3]"),
+            ),
+            (
+                "a tet referencing a missing vertex (mesh upload, JSON)",
+                super::tets::put_mesh(
+                    &base,
+                    &bare_id,
+                    &bare_token,
+                    "application/json",
+                    br#"{"vertices":[[0,0,0],[1,0,0],[0,1,0],[0,0,1]],"cells":[[0,1,2,3],[4,1,2,3]]}"#,
+                ),
+                400,
+                Where::Field("cells[1][0]"),
+            ),
+            (
+                "a tet referencing a missing vertex (mesh upload, .npy)",
+                super::tets::put_mesh(&base, &bare_id, &bare_token, NPY, &missing_vertex),
+                400,
+                Where::Offset(missing_at as u64),
+            ),
+            (
+                "a step before the tet scene's mesh",
+                push(&base, &bare_id, "0", &bare_token, NPY, &npy(&[0.5; 4], 1)),
+                409,
+                Where::Field("mesh"),
+            ),
+            (
+                "tet scalars of the wrong count",
+                push(&base, &tet_id, "0", &tet_token, NPY, &npy(&[0.5; 5], 1)),
+                400,
+                Where::Field("shape"),
+            ),
+            (
+                "tet scalar not a number (JSON null)",
+                push(&base, &tet_id, "0", &tet_token, "application/json", br#"{"scalars":[0,1,null,2]}"#),
+                400,
+                Where::Field("scalars[2]"),
             ),
         ];
         // An oversized body without a declared length: cut off while streaming.

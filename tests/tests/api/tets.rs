@@ -4,13 +4,13 @@
 //! `isoray push` sends a `.vtu` series.
 
 use super::*;
-use crate::e2e::support::{next_frame, send_json};
+use crate::e2e::support::{frame_for_input, pixel_stddev, send_json};
 use glam::Vec3;
 use isoray_render::tet::generate::box_mesh;
 use isoray_render::tet::TetMesh;
 
 /// Two `.npy` arrays back to back: vertices `(V, 3)` f32, cells `(T, 4)` i64.
-fn mesh_npy(vertices: &[Vec3], cells: &[[i64; 4]]) -> Vec<u8> {
+pub(super) fn mesh_npy(vertices: &[Vec3], cells: &[[i64; 4]]) -> Vec<u8> {
     let mut out = npy(
         &vertices
             .iter()
@@ -37,7 +37,7 @@ fn cells_of(mesh: &TetMesh) -> Vec<[i64; 4]> {
     mesh.tets().iter().map(|t| t.map(i64::from)).collect()
 }
 
-fn put_mesh(base: &str, id: &str, token: &str, ct: &str, body: &[u8]) -> Response {
+pub(super) fn put_mesh(base: &str, id: &str, token: &str, ct: &str, body: &[u8]) -> Response {
     let auth = format!("Bearer {token}");
     Client::new(base)
         .expect("url")
@@ -50,7 +50,7 @@ fn put_mesh(base: &str, id: &str, token: &str, ct: &str, body: &[u8]) -> Respons
         .expect("answer")
 }
 
-fn post_json(base: &str, path: &str, body: &str) -> Response {
+pub(super) fn post_json(base: &str, path: &str, body: &str) -> Response {
     Client::new(base)
         .expect("url")
         .request(
@@ -293,18 +293,15 @@ async fn tet_scenes_are_validated_stored_streamed_and_reloaded() {
         serde_json::json!({"type": "resize", "input_id": 1, "width": 64, "height": 48}),
     )
     .await;
-    let frame = next_frame(&mut ws).await;
+    let frame = frame_for_input(&mut ws, 1).await;
     assert_eq!((frame.image.width(), frame.image.height()), (64, 48));
-    assert!(
-        crate::e2e::support::pixel_stddev(&frame.image) > 2.0,
-        "the surface shows"
-    );
+    assert!(pixel_stddev(&frame.image) > 2.0, "the surface shows");
     send_json(
         &mut ws,
         serde_json::json!({"type": "isovalue", "input_id": 2, "value": -0.25}),
     )
     .await;
-    let frame = crate::e2e::support::frame_for_input(&mut ws, 2).await;
+    let frame = frame_for_input(&mut ws, 2).await;
     assert!(
         frame.header.input_id >= 2,
         "a negative isovalue is accepted for a tet scene"
