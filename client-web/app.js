@@ -21,7 +21,6 @@ const canvas = $('view');
 const reproject = new Reprojector({ enabled: new URLSearchParams(location.search).get('reproject') !== 'off' });
 let lastCameraInput = 0; // input_id of the newest camera sent
 const view = new FrameView(canvas, { onImage: reprojectFrame });
-let codecs = ['jpeg', 'png']; // what this browser decodes; H.264 once WebCodecs says so
 const stats = new Stats($('stats'), $('stats-text'), $('stats-plot'));
 let info = null; // the server's `info` for the current session
 let scenes = []; // GET /api/v1/scenes
@@ -96,9 +95,10 @@ function reprojectFrame(frame) {
 }
 
 function sendStream() {
-  send({ type: 'stream', codecs, depth: reproject.enabled, visible: !document.hidden });
+  send({ type: 'stream', ...quality.streamFields(), depth: reproject.enabled, visible: !document.hidden });
 }
-supportedCodecs().then((found) => { codecs = found; sendStream(); });
+// What this browser decodes (H.264 once WebCodecs says so); the codec menu offers those.
+supportedCodecs().then((found) => { quality.setDecodable(found); sendStream(); });
 // A hidden page costs the server nothing: it renders no frames until the page shows again.
 document.addEventListener('visibilitychange', () => send({ type: 'stream', visible: !document.hidden }));
 
@@ -177,7 +177,7 @@ function sendSize(force = false) {
   lastSize = key;
   send({ type: 'resize', width, height });
 }
-const quality = new Quality(settings, canvas, { resized: () => sendSize(), saved });
+const quality = new Quality(settings, canvas, { resized: () => sendSize(), saved, streamChanged: () => sendStream() });
 
 const effects = new EffectsPanel(settings, {
   changed: (changes) => send({ type: 'effects', effects: changes }),
@@ -186,9 +186,8 @@ const effects = new EffectsPanel(settings, {
 
 // --- session start and frames ----------------------------------------------------------------
 function onInfo(message) {
-  const sceneChanged = !info || info.scene.id !== message.scene.id;
   info = message;
-  if (sceneChanged && !settings.cam) settings.cam = orbitFromPose(message.camera, settings.up);
+  // The camera the user had (from the URL, or before a reconnect) wins over the scene's own.
   if (!settings.cam) settings.cam = orbitFromPose(message.camera, settings.up);
   surfaces.setInfo(message);
   quality.setInfo(message);

@@ -16,8 +16,7 @@ export function defaults() {
     speed: 1, // playback speed: scene seconds per second (demos) or steps per second (stored)
     loop: true,
     fx: {}, // effect -> on (boolean) or quality setting -> level (number), where the user differs from the scene
-    codec: 'auto',
-    quality: null, // 1..100 or null for the server's default
+    codec: 'auto', // preferred codec while the view moves (`auto`: the browser's order)
     scale: 1, // resolution scale on top of canvas size × devicePixelRatio
     fps: null, // target frame rate, null for the server's default
     stats: false,
@@ -26,7 +25,7 @@ export function defaults() {
   };
 }
 
-const KNOWN = ['scene', 'cam', 'up', 'iso', 't', 'speed', 'loop', 'fx', 'codec', 'q', 'scale', 'fps', 'stats', 'token'];
+const KNOWN = ['scene', 'cam', 'up', 'iso', 't', 'speed', 'loop', 'fx', 'codec', 'scale', 'fps', 'stats', 'token'];
 
 const finite = (s) => (s !== null && s.trim() !== '' && Number.isFinite(Number(s)) ? Number(s) : null);
 
@@ -53,9 +52,7 @@ export function parseSettings(search) {
     if (toggle) s.fx[toggle[2]] = toggle[1] !== '-';
     else if (level) s.fx[level[1]] = Number(level[2]);
   }
-  if (p.get('codec')) s.codec = p.get('codec');
-  const quality = finite(p.get('q'));
-  if (quality !== null && quality >= 1 && quality <= 100) s.quality = Math.round(quality);
+  if (/^[a-z0-9]{1,16}$/.test(p.get('codec') || '')) s.codec = p.get('codec');
   const scale = finite(p.get('scale'));
   if (scale !== null && scale >= 0.1 && scale <= 2) s.scale = scale;
   const fps = finite(p.get('fps'));
@@ -85,7 +82,6 @@ export function serializeSettings(s) {
   const fx = Object.entries(s.fx).map(([k, v]) => (typeof v === 'number' ? `${k}:${v}` : v ? k : `-${k}`));
   if (fx.length) p.set('fx', fx.join(','));
   if (s.codec !== d.codec) p.set('codec', s.codec);
-  if (s.quality !== null) p.set('q', String(s.quality));
   if (s.scale !== d.scale) p.set('scale', round(s.scale));
   if (s.fps !== null) p.set('fps', round(s.fps));
   if (s.stats) p.set('stats', '1');

@@ -4,7 +4,7 @@ import assert from 'node:assert/strict';
 
 globalThis.location = { pathname: '/', search: '' };
 const { basis, orbitFromPose, poseFromOrbit, pan, rotate, zoom } = await import('../camera.js');
-const { parseSettings, serializeSettings, UP_AXES } = await import('../settings.js');
+const { defaults, parseSettings, serializeSettings, UP_AXES } = await import('../settings.js');
 const { renderSize } = await import('../quality.js');
 
 const close = (a, b, eps = 1e-9) => a.every((v, i) => Math.abs(v - b[i]) < eps);
@@ -67,4 +67,44 @@ test('render size follows CSS size × devicePixelRatio × scale, capped keeping 
   assert.deepEqual(renderSize(400, 300, 2, 0.5, 4096, 4096), [400, 300]);
   assert.deepEqual(renderSize(1000, 500, 2, 1, 1000, 1000), [1000, 500]);
   assert.deepEqual(renderSize(0, 0, 1, 1, 100, 100), [1, 1]);
+});
+
+test('codec preference picks the stream codecs the server chooses from', async () => {
+  const { codecOrder, offeredCodecs } = await import('../quality.js');
+  const all = ['h264', 'jpeg', 'png'];
+  assert.deepEqual(codecOrder('auto', all), all);
+  assert.deepEqual(codecOrder('jpeg', all), ['jpeg', 'png'], 'images only: no video');
+  assert.deepEqual(codecOrder('h264', all), ['h264', 'png'], 'no JPEG: video from the first moving frame');
+  assert.deepEqual(codecOrder('png', all), ['png']);
+  assert.deepEqual(codecOrder('h264', ['jpeg', 'png']), ['jpeg', 'png'], 'a codec not offered falls back to auto');
+  assert.deepEqual(codecOrder('vp9', all), all, 'an unknown preference (from a URL) falls back to auto');
+  assert.deepEqual(offeredCodecs(all, ['jpeg', 'png']), ['jpeg', 'png'], 'a server without H.264');
+  assert.deepEqual(offeredCodecs(['jpeg', 'png'], ['jpeg', 'png', 'h264']), ['jpeg', 'png'], 'a browser without H.264');
+  assert.deepEqual(offeredCodecs(all, undefined), all, 'before the server says');
+});
+
+test('the stream message carries the codecs and the target frame rate, capped by the server', async () => {
+  const { streamFields } = await import('../quality.js');
+  const info = { codecs: ['jpeg', 'png', 'h264'], max_fps: 30 };
+  const decodable = ['h264', 'jpeg', 'png'];
+  assert.deepEqual(streamFields({ codec: 'png', fps: 12 }, info, decodable), { codecs: ['png'], fps: 12 });
+  assert.deepEqual(streamFields({ codec: 'auto', fps: null }, info, decodable), { codecs: decodable, fps: 30 },
+    'back at the maximum the server is told so (an absent fps would keep the old target)');
+  assert.deepEqual(streamFields({ codec: 'auto', fps: 120 }, info, decodable).fps, 30, 'a URL asking for more gets the cap');
+  assert.deepEqual(streamFields({ codec: 'jpeg', fps: null }, null, ['jpeg', 'png']), { codecs: ['jpeg', 'png'] },
+    'before info: no frame rate');
+});
+
+test('codec and target frame rate are kept in the URL and checked when read', () => {
+  const s = { ...defaults(), codec: 'png', fps: 12 };
+  const q = serializeSettings(s);
+  assert.match(q, /codec=png/);
+  assert.match(q, /fps=12/);
+  const back = parseSettings(q);
+  assert.equal(back.codec, 'png');
+  assert.equal(back.fps, 12);
+  assert.equal(serializeSettings(defaults()).includes('codec'), false, 'the default is not written');
+  assert.equal(parseSettings('?codec=<script>').codec, 'auto', 'a malformed codec name is ignored');
+  assert.equal(parseSettings('?fps=0').fps, null, 'a frame rate under 1 is ignored');
+  assert.equal(parseSettings('?fps=abc').fps, null);
 });
