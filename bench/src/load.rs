@@ -42,6 +42,10 @@ pub struct LoadArgs {
     /// Camera inputs per second per viewer.
     #[arg(long, default_value_t = 30.0)]
     input_hz: f64,
+    /// Target frame rate each viewer asks for (the `stream` message's `fps`; default: the
+    /// server's `--max-fps`).
+    #[arg(long)]
+    fps: Option<f64>,
     /// View token, when the server needs one (sent as `?token=`).
     #[arg(long)]
     token: Option<String>,
@@ -154,6 +158,12 @@ pub fn run(args: LoadArgs) -> Result<(), String> {
     if !(args.input_hz.is_finite() && args.input_hz > 0.0 && args.input_hz <= 1000.0) {
         return Err("--input-hz must be in (0, 1000]".into());
     }
+    if args
+        .fps
+        .is_some_and(|f| !(f.is_finite() && (1.0..=1000.0).contains(&f)))
+    {
+        return Err("--fps must be in [1, 1000]".into());
+    }
     let (width, height) = parse_size(&args.size)?;
     let base = ws_base(&args.url)?;
     let scenes = if args.scene.is_empty() {
@@ -184,6 +194,7 @@ pub fn run(args: LoadArgs) -> Result<(), String> {
                     phase,
                     input_interval,
                     duration,
+                    args.fps,
                 ))
             })
             .collect();
@@ -321,6 +332,7 @@ fn fail(report: &mut SessionReport, why: String) {
 const SENT_KEPT: usize = 256;
 
 /// One viewer: connect, resize, drive the camera, acknowledge frames, until `duration`.
+#[allow(clippy::too_many_arguments)]
 async fn viewer(
     session: usize,
     scene: String,
@@ -329,6 +341,7 @@ async fn viewer(
     phase: f64,
     input_interval: Duration,
     duration: Duration,
+    fps: Option<f64>,
 ) -> SessionReport {
     let mut report = SessionReport {
         session,
@@ -379,6 +392,13 @@ async fn viewer(
     if let Err(e) = ws.send(Message::Text(resize.to_string().into())).await {
         fail(&mut report, format!("send: {e}"));
         return report;
+    }
+    if let Some(fps) = fps {
+        let stream = serde_json::json!({"type": "stream", "input_id": 1, "fps": fps});
+        if let Err(e) = ws.send(Message::Text(stream.to_string().into())).await {
+            fail(&mut report, format!("send: {e}"));
+            return report;
+        }
     }
     let target = info.camera.target;
     let eye = info.camera.eye;

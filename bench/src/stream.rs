@@ -227,9 +227,13 @@ fn measure(
     }
 }
 
-/// Mean PSNR; infinite only when every frame was bit-exact.
+/// Mean PSNR; infinite only when every frame was bit-exact, NaN when no frame has one (the
+/// depth channel, printed as `–`).
 fn mean_psnr(values: impl Iterator<Item = f64>) -> f64 {
     let v: Vec<f64> = values.collect();
+    if v.iter().all(|p| p.is_nan()) {
+        return f64::NAN;
+    }
     if v.iter().all(|p| p.is_infinite()) {
         return f64::INFINITY;
     }

@@ -42,7 +42,7 @@ pub struct Config {
     pub max_fps: f64,
 
     /// Smallest resolution scale of interactive frames (the still frame is always full size).
-    #[arg(long, env = "ISORAY_MIN_SCALE", default_value_t = 0.25)]
+    #[arg(long, env = "ISORAY_MIN_SCALE", default_value_t = 0.125)]
     pub min_scale: f64,
 
     /// Milliseconds without input after which a still view gets its lossless frame.

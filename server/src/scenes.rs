@@ -397,11 +397,12 @@ impl SceneEntry {
     }
 
     /// The state at `time`, prepared for tracing; built on first use and then shared. A live
-    /// view of a stored scene sees its newest step. Blocking: call it on the render pool. A
-    /// cache hit reports zero update and build time.
-    pub fn prepared_at(&self, time: f64, live: bool) -> PreparedState {
+    /// view of a stored scene sees its newest step; a live view of a demo the newest state
+    /// built that is newer than `seen` (the time of the state it showed last). Blocking: call
+    /// it on the render pool. A cache hit reports zero update and build time.
+    pub fn prepared_at(&self, time: f64, live: bool, seen: Option<f64>) -> PreparedState {
         match &self.source {
-            Source::Demo { pipeline, .. } if live => pipeline.live(time),
+            Source::Demo { pipeline, .. } if live => pipeline.live(time, seen),
             Source::Demo { pipeline, .. } => pipeline.pinned(time),
             Source::Stored { scene, .. } => {
                 let step = if live {
@@ -417,7 +418,7 @@ impl SceneEntry {
     /// A stored step prepared for tracing (an empty scene before the first push).
     pub fn prepared_step(&self, step: Option<&StoredStep>) -> PreparedState {
         let Source::Stored { setup, cache, .. } = &self.source else {
-            return self.prepared_at(0.0, false);
+            return self.prepared_at(0.0, false, None);
         };
         let build = |step: Option<&StoredStep>| {
             self.count_build();
@@ -518,9 +519,10 @@ impl Drop for FailOnDrop {
 
 /// A demo's prepared states and its live pipeline (fitted-bvh-metaballs.txt Fig. 7).
 ///
-/// A live request takes the newest live state built since the previous live request took
-/// one; if there is none it waits for the build in flight (or, at the very start, builds its
-/// own time). Then, if no build is in flight, it starts building the state one frame period
+/// A live request takes the newest live state built that is newer than the state the same
+/// viewer showed last (so each of many viewers shows every new state without waiting for the
+/// next build); if there is none it waits for the build in flight (or, at the very start,
+/// builds its own time). Then, if no build is in flight, it starts building the state one frame period
 /// ahead on the build pool and returns without waiting: that build runs while this frame
 /// renders, and the next live request shows it. The frame period is the spacing of recent
 /// live requests, at least the frame interval. A live view thus shows states up to a frame
@@ -551,8 +553,6 @@ struct PipelineState {
     ready: VecDeque<Cached>,
     /// The live build in flight.
     in_flight: Option<(f64, Arc<Pending>)>,
-    /// Time of the newest state a live request took.
-    last_live: Option<f64>,
     /// The previous live request's time, and the smoothed spacing of live requests.
     last_request: Option<f64>,
     spacing_secs: f64,
@@ -604,7 +604,10 @@ impl DemoPipeline {
     }
 
     /// The state a live view whose clock reads `time` shows (see the type's documentation).
-    pub fn live(&self, time: f64) -> PreparedState {
+    /// `seen` is the time of the state this viewer showed last: a built state newer than it is
+    /// shown at once, even if another viewer showed it already, so that many viewers of one
+    /// demo never wait on the build in flight while a state they have not shown is ready.
+    pub fn live(&self, time: f64, seen: Option<f64>) -> PreparedState {
         let mut inner = self.lock();
         if let Some(previous) = inner.last_request {
             // A viewer that paused does not stretch the estimate past a second.
@@ -618,10 +621,9 @@ impl DemoPipeline {
             }
         }
         inner.last_request = Some(time);
-        let last_live = inner.last_live;
         let fresh = inner
             .newest_live()
-            .filter(|e| last_live.is_none_or(|l| e.time > l))
+            .filter(|e| seen.is_none_or(|l| e.time > l))
             .map(|e| e.time);
         let shown = match (fresh, inner.in_flight.clone()) {
             (Some(t), _) => inner.take(t, true).map(|s| (t, s)),
@@ -654,7 +656,6 @@ impl DemoPipeline {
             drop(inner);
             return self.pinned(time);
         };
-        inner.last_live = Some(inner.last_live.map_or(shown_time, |l| l.max(shown_time)));
         if inner.in_flight.is_none() {
             let next = time.max(shown_time) + inner.spacing_secs.max(self.frame_interval_secs);
             let pending = self.start(next);
@@ -887,14 +888,14 @@ mod tests {
     fn a_live_frame_starts_building_the_next_state_and_the_next_frame_shows_it() {
         let p = DemoPipeline::new(DemoScene::Tornado4k, Arc::new(Builder::new(2)), 0.1);
         // Cold start: the first state is built for the request itself.
-        let first = p.live(1.0);
+        let first = p.live(1.0, None);
         assert_eq!(first.step_time, Some(1.0));
         assert!(first.build_us > 0);
         // Returning, it left the next state (one frame interval ahead) building on the pool,
         // to run while this frame renders (fitted-bvh-metaballs.txt Fig. 7).
         assert_eq!(p.lock().in_flight.as_ref().map(|f| f.0), Some(1.1));
         settle(&p);
-        let second = p.live(1.05);
+        let second = p.live(1.05, first.step_time);
         assert_eq!(
             second.step_time,
             Some(1.1),
@@ -913,8 +914,46 @@ mod tests {
         assert_eq!((again.step_time, again.build_us), (Some(7.0), 0));
         // Pinned states are never offered to live views.
         assert!(p
-            .live(1.1)
+            .live(1.1, second.step_time)
             .step_time
             .is_some_and(|t| (t - 1.2).abs() < 1e-9));
+    }
+
+    #[test]
+    fn a_viewer_shows_a_state_it_has_not_shown_without_waiting_for_the_build_in_flight() {
+        let p = DemoPipeline::new(DemoScene::Tornado4k, Arc::new(Builder::new(1)), 0.1);
+        let a = p.live(1.0, None);
+        settle(&p);
+        let a = p.live(1.1, a.step_time);
+        assert_eq!(a.step_time, Some(1.1));
+        settle(&p);
+        // 1.2 is ready; a build of 1.3 is in flight that ends (failed) only after 10 s.
+        let stuck = Arc::new(Pending {
+            slot: Mutex::new(PendingSlot::Building),
+            done: Condvar::new(),
+        });
+        p.lock().in_flight = Some((1.3, Arc::clone(&stuck)));
+        let release = Arc::clone(&stuck);
+        std::thread::spawn(move || {
+            std::thread::sleep(Duration::from_secs(10));
+            release.finish(PendingSlot::Failed);
+        });
+        let start = Instant::now();
+        // Viewer A shows 1.2 (its first frame of it reports the build) ...
+        let near = |t: Option<f64>, want: f64| t.is_some_and(|t| (t - want).abs() < 1e-9);
+        let a = p.live(1.2, a.step_time);
+        assert!(near(a.step_time, 1.2), "{:?}", a.step_time);
+        assert!(a.build_us > 0);
+        // ... and viewer B, which last showed 1.1, shows 1.2 too rather than waiting for 1.3.
+        let b = p.live(1.21, Some(1.1));
+        assert!(near(b.step_time, 1.2), "{:?}", b.step_time);
+        assert_eq!(b.build_us, 0);
+        assert!(
+            start.elapsed() < Duration::from_secs(5),
+            "no viewer waited for the build in flight: {:?}",
+            start.elapsed()
+        );
+        // A viewer that has shown the newest state waits for the next one.
+        stuck.finish(PendingSlot::Failed);
     }
 }

@@ -684,6 +684,9 @@ struct FramePlan {
     h264_bitrate_bps: u32,
     /// Start the H.264 stream over with a keyframe.
     h264_restart: bool,
+    /// Time of the live state this session showed last: a live view takes a newer built
+    /// state without waiting for the one in flight.
+    seen: Option<f64>,
 }
 
 /// What a render job hands back.
@@ -691,6 +694,8 @@ struct Rendered {
     bytes: Bytes,
     codec: Codec,
     video: VideoState,
+    /// Time of the state shown (a live demo's may differ from the plan's time).
+    state_time: Option<f64>,
 }
 
 async fn render_loop(
@@ -711,6 +716,7 @@ async fn render_loop(
     let mut last_change = tokio::time::Instant::now();
     let mut next_tick = tokio::time::Instant::now();
     let mut sequence = 0u64;
+    let mut seen: Option<f64> = None;
     // Effects hook: a still view keeps refining (one pass per still frame) until converged.
     let refinement = Arc::new(crate::refine::Refinement::new(config.max_refine_passes));
     loop {
@@ -817,7 +823,7 @@ async fn render_loop(
         let job_entry = Arc::clone(entry);
         let job_app = app.clone();
         let job_settings = current.clone();
-        let job_plan = plan;
+        let job_plan = FramePlan { seen, ..plan };
         let job_refinement = Arc::clone(&refinement);
         let result = app
             .scheduler()
@@ -851,6 +857,9 @@ async fn render_loop(
                 }
                 if rendered.video.is_some() {
                     video = rendered.video;
+                }
+                if rendered.state_time.is_some() {
+                    seen = rendered.state_time;
                 }
                 m::queue_wait(cost.queued);
                 shared.slot.put(
@@ -915,6 +924,7 @@ fn plan_frame(
         fps,
         h264_bitrate_bps: 0,
         h264_restart: false,
+        seen: None,
     };
     if quality == Quality::Still {
         return plan;
@@ -968,7 +978,7 @@ fn render_frame(
     video: VideoState,
     refinement: &crate::refine::Refinement,
 ) -> Result<Rendered, EncodeError> {
-    let state = entry.prepared_at(plan.time, settings.pinned_time.is_none());
+    let state = entry.prepared_at(plan.time, settings.pinned_time.is_none(), plan.seen);
     let view = View {
         width: plan.size.0,
         height: plan.size.1,
@@ -1058,6 +1068,7 @@ fn render_frame(
         bytes: Bytes::from(bytes),
         codec: plan.codec,
         video,
+        state_time: state.step_time,
     })
 }
 

@@ -270,7 +270,7 @@ pub(super) async fn histogram(
             }
             None => {
                 let time = q.time.unwrap_or(live_time);
-                (entry.prepared_at(time, false), time)
+                (entry.prepared_at(time, false, None), time)
             }
         };
         let histogram = match &state.prepared.scene().geometry {

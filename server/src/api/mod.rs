@@ -1069,7 +1069,7 @@ async fn render(
     app.backend().spawn(move || {
         let state = match (&step, entry.stored_scene()) {
             (_, Some(_)) => entry.prepared_step(step.as_deref()),
-            (_, None) => entry.prepared_at(time, false),
+            (_, None) => entry.prepared_at(time, false, None),
         };
         let (fb, _) = job_app
             .backend()
