@@ -2,6 +2,7 @@
 //! one subcommand per study, each in its own module; `bench/README.md` says what each
 //! measures and at what size.
 
+mod accuracy;
 mod common;
 mod effects;
 mod ingest;
@@ -33,6 +34,9 @@ enum Command {
     /// fps per secondary effect (the Fitted BVH paper's Table 2), rays per kind, and what
     /// an effect no material can use costs.
     Effects(effects::EffectsArgs),
+    /// What accuracy costs in time: each root finder at a ladder of tolerances, render ms
+    /// against the hit-distance error measured with the f64 reference.
+    Accuracy(accuracy::AccuracyArgs),
     /// Streaming: codecs along a camera path; sessions over loopback websockets.
     Stream(stream::Args),
     /// Many websocket viewers driving their cameras against a running server or load
@@ -49,6 +53,7 @@ fn main() {
         Command::Tets(args) => tets::run(args),
         Command::Ingest(args) => ingest::run(args),
         Command::Effects(args) => effects::run(args),
+        Command::Accuracy(args) => accuracy::run(args),
         Command::Stream(args) => stream::run(args),
         Command::Load(args) => load::run(args),
     };
