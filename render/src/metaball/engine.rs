@@ -481,18 +481,7 @@ fn build_accel(scene: &MetaballScene, kind: AccelKind) -> Accel {
     match kind {
         AccelKind::BruteForce => Accel::BruteForce,
         AccelKind::ActiveList => Accel::ActiveList,
-        AccelKind::Tree(opts) => {
-            let balls: Vec<TreeBall> = scene
-                .balls
-                .iter()
-                .map(|b| TreeBall {
-                    center: b.center,
-                    radius: b.radius,
-                    strength: b.strength,
-                })
-                .collect();
-            Accel::Tree(Tree::build(&balls, scene.kernel, opts))
-        }
+        AccelKind::Tree(opts) => Accel::Tree(Tree::build(&tree_balls(scene), scene.kernel, opts)),
     }
 }
 
@@ -506,7 +495,16 @@ fn build_fallback(scene: &MetaballScene, opts: &BuildOptions) -> Accel {
         discard_split: false,
         ..*opts
     };
-    let balls: Vec<TreeBall> = scene
+    Accel::Tree(Tree::build_on_this_thread(
+        &tree_balls(scene),
+        scene.kernel,
+        relaxed,
+    ))
+}
+
+/// What a tree build needs of each ball.
+fn tree_balls(scene: &MetaballScene) -> Vec<TreeBall> {
+    scene
         .balls
         .iter()
         .map(|b| TreeBall {
@@ -514,8 +512,7 @@ fn build_fallback(scene: &MetaballScene, opts: &BuildOptions) -> Accel {
             radius: b.radius,
             strength: b.strength,
         })
-        .collect();
-    Accel::Tree(Tree::build_on_this_thread(&balls, scene.kernel, relaxed))
+        .collect()
 }
 
 /// Brute force and Bézier clipping on an unprepared scene.

@@ -185,8 +185,14 @@ fn read_response(stream: &TcpStream) -> Result<Response, ClientError> {
 
 /// A `.npy` (version 1) header for a C-ordered little-endian f32 array of `rows × columns`.
 pub fn npy_header_f32(rows: u64, columns: u32) -> Vec<u8> {
+    npy_header("<f4", rows, u64::from(columns))
+}
+
+/// A `.npy` (version 1) header for a C-ordered array of `rows × columns` values of the NumPy
+/// type `descr` (`<f4`, `<f8`, `<i8`, ...).
+pub fn npy_header(descr: &str, rows: u64, columns: u64) -> Vec<u8> {
     let mut dict =
-        format!("{{'descr': '<f4', 'fortran_order': False, 'shape': ({rows}, {columns}), }}");
+        format!("{{'descr': '{descr}', 'fortran_order': False, 'shape': ({rows}, {columns}), }}");
     while (10 + dict.len() + 1) % 64 != 0 {
         dict.push(' ');
     }

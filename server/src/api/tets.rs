@@ -19,7 +19,8 @@ use super::{
 };
 use crate::kind::KindSetup;
 use crate::store::ingest::{
-    ingest_raw, BodyReader, IngestError, IngestLimits, Target, WrittenStep,
+    ingest_raw, npy_dict_value, npy_shape, BodyReader, IngestError, IngestLimits, Target,
+    WrittenStep,
 };
 use crate::AppState;
 use axum::body::Body;
@@ -531,14 +532,7 @@ fn read_head<R: Read>(r: &mut Counted<R>, npy: bool, which: &str) -> Result<Arra
         let mut text = vec![0u8; len];
         r.fill(&mut text, &format!("the {which} .npy header"))?;
         let text = String::from_utf8_lossy(&text);
-        let value = |key: &str| {
-            text.find(&format!("'{key}'")).map(|at| {
-                text[at + key.len() + 2..]
-                    .trim_start()
-                    .trim_start_matches(':')
-                    .trim_start()
-            })
-        };
+        let value = |key: &str| npy_dict_value(&text, key);
         let descr = value("descr").unwrap_or("");
         let element = [
             ("f4", Element::F32),
@@ -568,17 +562,7 @@ fn read_head<R: Read>(r: &mut Counted<R>, npy: bool, which: &str) -> Result<Arra
                 header_at,
             ));
         }
-        let dims: Option<Vec<u64>> = value("shape")
-            .and_then(|s| s.strip_prefix('('))
-            .and_then(|s| s.split(')').next())
-            .map(|inner| {
-                inner
-                    .split(',')
-                    .map(str::trim)
-                    .filter(|s| !s.is_empty())
-                    .filter_map(|s| s.trim_end_matches('L').parse::<u64>().ok())
-                    .collect()
-            });
+        let dims = value("shape").and_then(|s| npy_shape(s).ok());
         match dims.as_deref() {
             Some([rows, columns]) => (element, *rows, *columns),
             _ => {

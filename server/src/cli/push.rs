@@ -93,41 +93,22 @@ pub fn run(args: PushArgs) -> Result<(), String> {
             Some(e) if e.eq_ignore_ascii_case("npy") => "application/x-npy",
             _ => "application/octet-stream",
         };
-        let mut query = Vec::new();
-        if let Some(dt) = args.time_step {
-            query.push(format!("time={}", index as f64 * dt));
-        }
-        if args.replace {
-            query.push("replace=true".into());
-        }
-        let path = format!(
-            "/api/v1/scenes/{scene}/steps/{index}{}{}",
-            if query.is_empty() { "" } else { "?" },
-            query.join("&")
-        );
+        let time = args.time_step.map(|dt| index as f64 * dt);
+        let path = step_path(&scene, index, time, args.replace);
         let mut reader =
             std::fs::File::open(file).map_err(|e| format!("{}: {e}", file.display()))?;
         let len = reader
             .metadata()
             .map_err(|e| format!("{}: {e}", file.display()))?
             .len();
-        let r = client
-            .request(
-                "PUT",
-                &path,
-                &[("Content-Type", content_type), ("Authorization", &auth)],
-                Body::Reader(&mut reader, len),
-            )
-            .map_err(|e| format!("step {index} ({}): {e}", file.display()))?;
-        if !(r.status == 200 || r.status == 201) {
-            return Err(format!(
-                "step {index} ({}): the server answered {}: {}",
-                file.display(),
-                r.status,
-                r.text()
-            ));
-        }
-        let answer: serde_json::Value = r.json().map_err(|e| e.to_string())?;
+        let answer = put_step(
+            &client,
+            &path,
+            &auth,
+            content_type,
+            Body::Reader(&mut reader, len),
+            &format!("step {index} ({})", file.display()),
+        )?;
         println!(
             "step {index}: {} ({} rows, checksum {})",
             answer["outcome"].as_str().unwrap_or("?"),
@@ -147,6 +128,49 @@ pub fn run(args: PushArgs) -> Result<(), String> {
 }
 
 /// Creates the scene to push to; prints and returns its id and write token.
+/// `/api/v1/scenes/{scene}/steps/{index}` with its `time` and `replace` query.
+pub(super) fn step_path(scene: &str, index: u64, time: Option<f64>, replace: bool) -> String {
+    let mut query = Vec::new();
+    if let Some(t) = time {
+        query.push(format!("time={t}"));
+    }
+    if replace {
+        query.push("replace=true".into());
+    }
+    format!(
+        "/api/v1/scenes/{scene}/steps/{index}{}{}",
+        if query.is_empty() { "" } else { "?" },
+        query.join("&")
+    )
+}
+
+/// PUTs one step and returns the server's answer; errors start with `what`.
+pub(super) fn put_step(
+    client: &Client,
+    path: &str,
+    auth: &str,
+    content_type: &str,
+    body: Body<'_>,
+    what: &str,
+) -> Result<serde_json::Value, String> {
+    let r = client
+        .request(
+            "PUT",
+            path,
+            &[("Content-Type", content_type), ("Authorization", auth)],
+            body,
+        )
+        .map_err(|e| format!("{what}: {e}"))?;
+    if !(r.status == 200 || r.status == 201) {
+        return Err(format!(
+            "{what}: the server answered {}: {}",
+            r.status,
+            r.text()
+        ));
+    }
+    r.json().map_err(|e| e.to_string())
+}
+
 fn create(client: &Client, args: &PushArgs) -> Result<(String, String), String> {
     create_scene(client, args, br#"{"kind":"metaballs"}"#)
 }

@@ -9,8 +9,8 @@
 //! convention are reordered (corners 1 and 2 swapped) and counted, since the server refuses
 //! inverted tets.
 
-use super::push::PushArgs;
-use isoray_server::api::client::{npy_header_f32, Body, Client};
+use super::push::{put_step, step_path, PushArgs};
+use isoray_server::api::client::{npy_header, npy_header_f32, Body, Client};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 use vtkio::model::{Attribute, CellType, DataSet, ElementType};
@@ -221,25 +221,11 @@ fn volume6(points: &[[f64; 3]], cell: &[u64; 4]) -> f64 {
         + a[2] * (b[0] * c[1] - b[1] * c[0])
 }
 
-/// `(rows, columns)` `.npy` header of `descr` values.
-fn npy_header(descr: &str, rows: usize, columns: usize) -> Vec<u8> {
-    let mut dict =
-        format!("{{'descr': '{descr}', 'fortran_order': False, 'shape': ({rows}, {columns}), }}");
-    while (10 + dict.len() + 1) % 64 != 0 {
-        dict.push(' ');
-    }
-    dict.push('\n');
-    let mut out = b"\x93NUMPY\x01\x00".to_vec();
-    out.extend_from_slice(&(dict.len() as u16).to_le_bytes());
-    out.extend_from_slice(dict.as_bytes());
-    out
-}
-
 /// The body of `PUT .../mesh`: points `(V, 3)` float64, then cells `(T, 4)` int64.
 pub fn mesh_body(points: &[[f64; 3]], cells: &[[u64; 4]]) -> Vec<u8> {
-    let mut out = npy_header("<f8", points.len(), 3);
+    let mut out = npy_header("<f8", points.len() as u64, 3);
     out.extend(points.iter().flatten().flat_map(|v| v.to_le_bytes()));
-    out.extend(npy_header("<i8", cells.len(), 4));
+    out.extend(npy_header("<i8", cells.len() as u64, 4));
     out.extend(
         cells
             .iter()
@@ -351,40 +337,16 @@ pub fn run(args: &PushArgs) -> Result<(), String> {
         for &v in scalars {
             payload.extend_from_slice(&(v as f32).to_le_bytes());
         }
-        let mut query = Vec::new();
-        match (pvd_time, args.time_step) {
-            (Some(t), _) => query.push(format!("time={t}")),
-            (None, Some(dt)) => query.push(format!("time={}", index as f64 * dt)),
-            (None, None) => {}
-        }
-        if args.replace {
-            query.push("replace=true".into());
-        }
-        let path = format!(
-            "/api/v1/scenes/{scene}/steps/{index}{}{}",
-            if query.is_empty() { "" } else { "?" },
-            query.join("&")
-        );
-        let r = client
-            .request(
-                "PUT",
-                &path,
-                &[
-                    ("Content-Type", "application/x-npy"),
-                    ("Authorization", &auth),
-                ],
-                Body::Bytes(&payload),
-            )
-            .map_err(|e| format!("step {index} ({}): {e}", file.display()))?;
-        if !(r.status == 200 || r.status == 201) {
-            return Err(format!(
-                "step {index} ({}): the server answered {}: {}",
-                file.display(),
-                r.status,
-                r.text()
-            ));
-        }
-        let answer: serde_json::Value = r.json().map_err(|e| e.to_string())?;
+        let time = pvd_time.or(args.time_step.map(|dt| index as f64 * dt));
+        let path = step_path(&scene, index, time, args.replace);
+        let answer = put_step(
+            &client,
+            &path,
+            &auth,
+            "application/x-npy",
+            Body::Bytes(&payload),
+            &format!("step {index} ({})", file.display()),
+        )?;
         println!(
             "step {index}: {} ({} scalars of {:?}, checksum {})",
             answer["outcome"].as_str().unwrap_or("?"),

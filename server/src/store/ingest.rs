@@ -515,19 +515,41 @@ pub fn ingest_npy(
     writer.finish(rows, target.index, target.time)
 }
 
+/// The text after `'key':` in a `.npy` header's Python dict literal.
+pub(crate) fn npy_dict_value<'a>(header: &'a str, key: &str) -> Option<&'a str> {
+    let at = header.find(&format!("'{key}'"))?;
+    let rest = &header[at + key.len() + 2..];
+    Some(
+        rest.trim_start()
+            .strip_prefix(':')
+            .unwrap_or(rest)
+            .trim_start(),
+    )
+}
+
+/// The dimensions of a `.npy` header's `shape` value, `(a, b, ...)`.
+pub(crate) fn npy_shape(shape: &str) -> Result<Vec<u64>, IngestError> {
+    let inner = shape
+        .strip_prefix('(')
+        .and_then(|s| s.split(')').next())
+        .ok_or_else(|| IngestError::invalid("bad_npy", "unreadable shape").at_field("shape"))?;
+    inner
+        .split(',')
+        .map(str::trim)
+        .filter(|s| !s.is_empty())
+        .map(|s| s.trim_end_matches('L').parse::<u64>())
+        .collect::<Result<Vec<_>, _>>()
+        .map_err(|_| {
+            IngestError::invalid("bad_npy", format!("unreadable shape ({inner})")).at_field("shape")
+        })
+}
+
 /// Picks `descr`, `fortran_order` and `shape` out of the header's Python dict literal.
 fn parse_npy_header(header: &str) -> Result<(Dtype, Vec<u64>), IngestError> {
     let value_of = |key: &str| -> Result<&str, IngestError> {
-        let at = header.find(&format!("'{key}'")).ok_or_else(|| {
+        npy_dict_value(header, key).ok_or_else(|| {
             IngestError::invalid("bad_npy", format!(".npy header has no '{key}'")).at_field(key)
-        })?;
-        let rest = &header[at + key.len() + 2..];
-        let rest = rest
-            .trim_start()
-            .strip_prefix(':')
-            .unwrap_or(rest)
-            .trim_start();
-        Ok(rest)
+        })
     };
     let descr = value_of("descr")?;
     let dtype = if descr.starts_with("'<f4'") || descr.starts_with("'|f4'") {
@@ -549,21 +571,7 @@ fn parse_npy_header(header: &str) -> Result<(Dtype, Vec<u64>), IngestError> {
         )
         .at_field("fortran_order"));
     }
-    let shape = value_of("shape")?;
-    let inner = shape
-        .strip_prefix('(')
-        .and_then(|s| s.split(')').next())
-        .ok_or_else(|| IngestError::invalid("bad_npy", "unreadable shape").at_field("shape"))?;
-    let dims = inner
-        .split(',')
-        .map(str::trim)
-        .filter(|s| !s.is_empty())
-        .map(|s| s.trim_end_matches('L').parse::<u64>())
-        .collect::<Result<Vec<_>, _>>()
-        .map_err(|_| {
-            IngestError::invalid("bad_npy", format!("unreadable shape ({inner})")).at_field("shape")
-        })?;
-    Ok((dtype, dims))
+    Ok((dtype, npy_shape(value_of("shape")?)?))
 }
 
 /// Reads a raw body: the 16-byte header of [`RAW_STEP_MAGIC`], then the values.

@@ -217,6 +217,25 @@ pub fn repo_root() -> PathBuf {
         .to_path_buf()
 }
 
+/// The base URL (`http://HOST:PORT`) a starting `isoray` prints on `stdout`. The child's
+/// output is drained for its whole life, so it never blocks on a full pipe.
+pub fn served_address(stdout: std::process::ChildStdout) -> String {
+    let (tx, rx) = std::sync::mpsc::channel();
+    std::thread::spawn(move || {
+        for line in BufReader::new(stdout).lines().map_while(Result::ok) {
+            if let Some(at) = line.find("http://") {
+                let url: String = line[at..]
+                    .chars()
+                    .take_while(|c| !c.is_whitespace())
+                    .collect();
+                let _ = tx.send(url.trim_end_matches('/').to_string());
+            }
+        }
+    });
+    rx.recv_timeout(Duration::from_secs(60))
+        .expect("isoray prints the address it serves on")
+}
+
 /// A running `isoray` child process and its base URL.
 pub struct Process {
     child: Child,
@@ -240,22 +259,7 @@ impl Process {
             .spawn()
             .expect("isoray starts");
         let stdout = child.stdout.take().expect("piped stdout");
-        let (tx, rx) = std::sync::mpsc::channel();
-        // Drain the child's output for its whole life so it never blocks on a full pipe.
-        std::thread::spawn(move || {
-            for line in BufReader::new(stdout).lines().map_while(Result::ok) {
-                if let Some(at) = line.find("http://") {
-                    let url: String = line[at..]
-                        .chars()
-                        .take_while(|c| !c.is_whitespace())
-                        .collect();
-                    let _ = tx.send(url.trim_end_matches('/').to_string());
-                }
-            }
-        });
-        let base = rx
-            .recv_timeout(Duration::from_secs(60))
-            .expect("isoray prints the address it serves on");
+        let base = served_address(stdout);
         Process { child, base }
     }
 
