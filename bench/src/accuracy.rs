@@ -14,17 +14,12 @@ use clap::Args;
 use isoray_render::metaball::reference::reference_hit;
 use isoray_render::metaball::{PrepareOptions, RayCounters, RootFinder};
 use isoray_render::scene::Geometry;
-use isoray_render::scenes::DemoScene;
-use isoray_render::PreparedScene;
 use rayon::prelude::*;
 use serde::Serialize;
 use std::path::PathBuf;
 use std::sync::Arc;
-use std::time::Instant;
 
-const WIDTH: u32 = 640;
-const HEIGHT: u32 = 480;
-const T_MAX: f32 = 1.0e4;
+use crate::metaballs::{HEIGHT, T_MAX, WIDTH};
 
 #[derive(Args)]
 pub struct AccuracyArgs {
@@ -90,12 +85,8 @@ pub fn run(args: AccuracyArgs) -> Result<(), String> {
         args.sample
     );
     let mut rows = Vec::new();
-    for id in &ids {
-        let demo = DemoScene::ALL
-            .iter()
-            .copied()
-            .find(|d| d.id() == id)
-            .ok_or_else(|| format!("unknown scene {id:?}"))?;
+    for demo in crate::metaballs::pick(&ids)? {
+        let id = demo.id();
         let state = Arc::new(demo.state_at(1.0));
         let Geometry::Metaballs(balls) = &state.geometry else {
             return Err(format!("{id} is not a metaball scene"));
@@ -142,7 +133,7 @@ pub fn run(args: AccuracyArgs) -> Result<(), String> {
                 let mut times = Vec::new();
                 let mut counters = RayCounters::default();
                 for _ in 0..args.runs {
-                    let (ms, c) = render(&prepared, demo);
+                    let (ms, c) = crate::metaballs::render(&prepared, demo, 1);
                     times.push(ms);
                     counters = c;
                 }
@@ -175,7 +166,7 @@ pub fn run(args: AccuracyArgs) -> Result<(), String> {
                     }
                 }
                 let row = Row {
-                    scene: id.clone(),
+                    scene: id.to_string(),
                     finder: finder.name().into(),
                     tolerance,
                     render_ms: median(times),
@@ -220,28 +211,6 @@ pub fn run(args: AccuracyArgs) -> Result<(), String> {
         write_json(path, &Report { machine, rows })?;
     }
     Ok(())
-}
-
-/// Wall ms of one 640×480 image of first hits on all cores, and its counters.
-fn render(prepared: &PreparedScene, demo: DemoScene) -> (f64, RayCounters) {
-    let rays = demo.default_camera().rays(WIDTH, HEIGHT);
-    let isovalue = demo.default_isovalue();
-    let started = Instant::now();
-    let counters = (0..HEIGHT)
-        .into_par_iter()
-        .map(|y| {
-            let mut c = RayCounters::default();
-            for x in 0..WIDTH {
-                let ray = rays.through_pixel(x, y);
-                let _ = prepared.first_hit_counted(&ray, 0.0, T_MAX, isovalue, &mut c);
-            }
-            c
-        })
-        .reduce(RayCounters::default, |mut a, b| {
-            a.add(&b);
-            a
-        });
-    (started.elapsed().as_secs_f64() * 1e3, counters)
 }
 
 #[cfg(test)]

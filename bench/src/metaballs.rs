@@ -26,10 +26,10 @@ use std::path::PathBuf;
 use std::sync::Arc;
 use std::time::Instant;
 
-const WIDTH: u32 = 640;
-const HEIGHT: u32 = 480;
+pub(crate) const WIDTH: u32 = 640;
+pub(crate) const HEIGHT: u32 = 480;
 /// Far limit of every ray, as in the integrator.
-const T_MAX: f32 = 1.0e4;
+pub(crate) const T_MAX: f32 = 1.0e4;
 /// Scenes up to this many balls are traced in full by the O(N)-per-ray modes.
 const FULL_IMAGE_BALLS: usize = 10_000;
 
@@ -200,7 +200,7 @@ fn parse_finder(s: &str) -> Result<RootFinder, String> {
     }
 }
 
-fn pick(scenes: &[String]) -> Result<Vec<DemoScene>, String> {
+pub(crate) fn pick(scenes: &[String]) -> Result<Vec<DemoScene>, String> {
     if scenes.is_empty() {
         return Ok(DemoScene::PAPER.to_vec());
     }
@@ -217,7 +217,7 @@ fn pick(scenes: &[String]) -> Result<Vec<DemoScene>, String> {
 }
 
 /// Traces every `stride`-th row of the 640×480 image: (ms, counters).
-fn render(prepared: &PreparedScene, demo: DemoScene, stride: u32) -> (f64, RayCounters) {
+pub(crate) fn render(prepared: &PreparedScene, demo: DemoScene, stride: u32) -> (f64, RayCounters) {
     let rays = demo.default_camera().rays(WIDTH, HEIGHT);
     let isovalue = demo.default_isovalue();
     let rows: Vec<u32> = (0..HEIGHT).step_by(stride as usize).collect();

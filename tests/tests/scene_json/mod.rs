@@ -4,40 +4,7 @@
 //! server keeps serving. A valid description with every part is accepted.
 
 use isoray_server::api::client::{Body, Client};
-use isoray_server::{AppState, Config};
 use serde_json::Value;
-
-async fn start(
-    data_dir: &std::path::Path,
-) -> (
-    String,
-    tokio::sync::oneshot::Sender<()>,
-    tokio::task::JoinHandle<std::io::Result<()>>,
-) {
-    let dir = data_dir.to_str().expect("utf-8 temp path").to_string();
-    let argv = [
-        "isoray",
-        "--listen",
-        "127.0.0.1:0",
-        "--data-dir",
-        &dir,
-        "--max-ray-depth",
-        "4",
-        "--max-samples",
-        "16",
-    ];
-    let config = <Config as clap::Parser>::parse_from(argv);
-    let state = AppState::new(config).expect("valid config");
-    let listener = tokio::net::TcpListener::bind("127.0.0.1:0")
-        .await
-        .expect("bind");
-    let addr = listener.local_addr().expect("addr");
-    let (tx, rx) = tokio::sync::oneshot::channel::<()>();
-    let handle = tokio::spawn(isoray_server::serve(listener, state, async move {
-        let _ = rx.await;
-    }));
-    (format!("http://{addr}"), tx, handle)
-}
 
 /// POSTs `body` as a scene; returns (status, JSON answer).
 async fn create(base: &str, body: String) -> (u16, Value) {
@@ -66,7 +33,10 @@ fn scene(lighting: &str) -> String {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn bad_scene_descriptions_name_the_field_and_create_nothing() {
     let dir = tempfile::tempdir().expect("temp dir");
-    let (base, stop, handle) = start(dir.path()).await;
+    let server =
+        crate::api::Server::start(dir.path(), &["--max-ray-depth", "4", "--max-samples", "16"])
+            .await;
+    let base = server.base.clone();
     let cases: &[(&str, &str, &str)] = &[
         // (lighting JSON, field the error must name, word the message must contain)
         (
@@ -216,9 +186,5 @@ async fn bad_scene_descriptions_name_the_field_and_create_nothing() {
     }"#;
     let (status, answer) = create(&base, scene(good)).await;
     assert_eq!(status, 201, "{answer}");
-    let _ = stop.send(());
-    handle
-        .await
-        .expect("server task")
-        .expect("server ran without I/O error");
+    server.stop().await;
 }
