@@ -115,10 +115,11 @@ async fn sessions_on_the_same_time_step_share_one_prepared_state() {
         // Every session moves to the same new time step at once.
         let time = 100.0 + step as f64 * 0.25;
         let id = 10 + step;
+        // Counted before the inputs go out: the server may start the build at once.
+        let before = entry.states_built();
         for ws in &mut clients {
             send_json(ws, json!({"type": "time", "input_id": id, "time": time})).await;
         }
-        let before = entry.states_built();
         let mut builds = 0;
         for ws in &mut clients {
             let frame = frame_for_input(ws, id).await;
