@@ -9,7 +9,8 @@
 //! engine's image must match it within the tolerance below. On a mismatch the test writes
 //! `<name>-actual.png` and `<name>-difference.png` beside the reference; setting
 //! `ISORAY_BLESS_GOLDEN=1` rewrites the references from the analytic renderer (never from the
-//! engine), for when the scenes themselves change on purpose.
+//! engine), for when the scenes themselves change on purpose. `ISORAY_GOLDEN_OUT=DIR` writes
+//! every engine image to `DIR`, to compare engine changes byte for byte.
 //!
 //! Every primitive kind gets the same cases: metaballs (one ball: spheres) and tets (a linear
 //! field on a box of tets: squares); the volume case is metaballs only (the tet paper has no
@@ -637,6 +638,13 @@ fn effects_match_their_analytic_references_for_every_primitive_kind() {
             stale.max_step
         );
         let actual = engine_image(&backend, &case);
+        if let Some(out) = std::env::var_os("ISORAY_GOLDEN_OUT") {
+            // Every engine image, for byte-for-byte comparisons across engine changes.
+            let name = format!("{}-{}.png", case.kind.name(), case.name);
+            actual
+                .save(PathBuf::from(out).join(name))
+                .expect("write the engine image");
+        }
         let diff = compare(&actual, &committed, case.tolerance.big_step);
         eprintln!(
             "golden {:<9} {:<14} PSNR {:>6.2} dB, {:.3}% of pixels beyond {} steps, max step {}",
