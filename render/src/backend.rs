@@ -17,6 +17,74 @@ use rayon::prelude::*;
 /// Tile edge in pixels: small enough to balance two to sixty-four workers on one frame.
 const TILE: u32 = 16;
 
+/// The render backends, a closed set: the pass-level seam the server renders through. A new
+/// backend (the wgpu one) is a new variant; each method dispatches here and nowhere else.
+pub enum Backend {
+    /// Tiles traced on a rayon pool of this machine's cores.
+    Cpu(CpuBackend),
+}
+
+impl Backend {
+    /// The CPU backend with `threads` workers (0: one per core).
+    pub fn cpu(threads: usize) -> Result<Backend, PoolError> {
+        Ok(Backend::Cpu(CpuBackend::new(threads)?))
+    }
+
+    /// The backend's name, for logs and metrics.
+    pub fn name(&self) -> &'static str {
+        match self {
+            Backend::Cpu(_) => "cpu",
+        }
+    }
+
+    /// Worker threads that trace on the CPU.
+    pub fn threads(&self) -> usize {
+        match self {
+            Backend::Cpu(cpu) => cpu.threads(),
+        }
+    }
+
+    /// Runs a render job (trace and encode of one frame) on the backend's workers without
+    /// waiting for it.
+    pub fn spawn(&self, job: impl FnOnce() + Send + 'static) {
+        match self {
+            Backend::Cpu(cpu) => cpu.spawn(job),
+        }
+    }
+
+    /// Renders one frame with primary rays only, blocking the caller until it is done.
+    pub fn render(&self, scene: &PreparedScene, view: &View) -> Framebuffer {
+        match self {
+            Backend::Cpu(cpu) => cpu.render(scene, view),
+        }
+    }
+
+    /// See [`CpuBackend::render_effects`].
+    pub fn render_effects(
+        &self,
+        scene: &PreparedScene,
+        view: &View,
+        effects: &Effects,
+    ) -> (Framebuffer, FrameRays) {
+        match self {
+            Backend::Cpu(cpu) => cpu.render_effects(scene, view, effects),
+        }
+    }
+
+    /// See [`CpuBackend::refine`].
+    pub fn refine(
+        &self,
+        scene: &PreparedScene,
+        view: &View,
+        effects: &Effects,
+        accumulator: &mut Accumulator,
+    ) -> Framebuffer {
+        match self {
+            Backend::Cpu(cpu) => cpu.refine(scene, view, effects, accumulator),
+        }
+    }
+}
+
 /// A pool of render workers.
 pub struct CpuBackend {
     pool: rayon::ThreadPool,

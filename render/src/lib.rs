@@ -31,7 +31,7 @@ pub mod scenes;
 pub mod shade;
 pub mod tet;
 
-pub use backend::{Accumulator, CpuBackend, FrameRays};
+pub use backend::{Accumulator, Backend, CpuBackend, FrameRays};
 pub use camera::Camera;
 pub use effects::{EffectKind, Effects, EffectsPlan, RayCounts, RayKind};
 pub use framebuffer::Framebuffer;

@@ -10,7 +10,7 @@
 //! decide whether a still view wants another frame, and to render that frame (on the render
 //! pool; the lock is never held on the async runtime across an await).
 
-use isoray_render::{Accumulator, CpuBackend, Effects, Framebuffer, PreparedScene, View};
+use isoray_render::{Accumulator, Backend, Effects, Framebuffer, PreparedScene, View};
 use std::sync::Mutex;
 
 /// What a refinement accumulates: settings version, scene time (bits), width, height.
@@ -49,7 +49,7 @@ impl Refinement {
     /// image of the mean. Blocking: call it on the render pool.
     pub fn next_pass(
         &self,
-        backend: &CpuBackend,
+        backend: &Backend,
         scene: &PreparedScene,
         view: &View,
         effects: &Effects,

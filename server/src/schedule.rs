@@ -25,7 +25,7 @@
 //! more. The scheduler also tells each session how many sessions compete for the pool
 //! ([`RenderScheduler::active_sessions`]), which the adaptive controller divides its budget by.
 
-use isoray_render::CpuBackend;
+use isoray_render::Backend;
 use std::collections::HashMap;
 use std::sync::{Arc, Condvar, Mutex, Weak};
 use std::time::{Duration, Instant};
@@ -99,7 +99,7 @@ impl State {
 
 /// The render pool's gatekeeper, shared behind an `Arc`.
 pub struct RenderScheduler {
-    backend: Arc<CpuBackend>,
+    backend: Arc<Backend>,
     state: Mutex<State>,
     /// Wakes the timer thread when `recheck_at` moves earlier.
     timer: Condvar,
@@ -108,7 +108,7 @@ pub struct RenderScheduler {
 impl RenderScheduler {
     /// A scheduler running at most one job per pool thread, with its timer thread (which
     /// ends when the scheduler is dropped).
-    pub fn new(backend: Arc<CpuBackend>) -> Arc<RenderScheduler> {
+    pub fn new(backend: Arc<Backend>) -> Arc<RenderScheduler> {
         let slots = backend.threads().max(1);
         let scheduler = Arc::new(RenderScheduler {
             backend,
@@ -387,7 +387,7 @@ mod tests {
     #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
     async fn a_heavy_session_gets_no_more_pool_time_than_light_ones() {
         // One pool thread, so the jobs strictly share it.
-        let backend = Arc::new(CpuBackend::new(1).expect("pool"));
+        let backend = Arc::new(Backend::cpu(1).expect("pool"));
         let scheduler = RenderScheduler::new(backend);
         // Session 1's frames cost 8 ms (a big frame), sessions 2 to 4 take 1 ms.
         let costs = [8u64, 1, 1, 1].map(Duration::from_millis);
@@ -436,7 +436,7 @@ mod tests {
 
     #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
     async fn cost_is_pool_time_whether_a_job_runs_alone_or_shared() {
-        let backend = Arc::new(CpuBackend::new(2).expect("pool"));
+        let backend = Arc::new(Backend::cpu(2).expect("pool"));
         let scheduler = RenderScheduler::new(backend);
         let (_, alone) = scheduler
             .submit(1, || work(Duration::from_millis(20)))

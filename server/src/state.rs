@@ -5,7 +5,7 @@ use crate::config::Config;
 use crate::scenes::SceneRegistry;
 use crate::schedule::RenderScheduler;
 use crate::session::SessionStats;
-use isoray_render::CpuBackend;
+use isoray_render::Backend;
 use std::collections::BTreeMap;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
@@ -19,7 +19,7 @@ pub struct AppState {
 
 struct Inner {
     config: Config,
-    backend: Arc<CpuBackend>,
+    backend: Arc<Backend>,
     scheduler: Arc<RenderScheduler>,
     scenes: SceneRegistry,
     sessions: SessionTable,
@@ -31,7 +31,7 @@ impl AppState {
     pub fn new(config: Config) -> Result<AppState, String> {
         config.validate()?;
         crate::metrics::handle();
-        let backend = Arc::new(CpuBackend::new(config.threads).map_err(|e| e.to_string())?);
+        let backend = Arc::new(Backend::cpu(config.threads).map_err(|e| e.to_string())?);
         let scheduler = RenderScheduler::new(Arc::clone(&backend));
         let scenes = SceneRegistry::from_config(&config);
         Ok(AppState {
@@ -50,7 +50,7 @@ impl AppState {
         &self.inner.config
     }
 
-    pub fn backend(&self) -> &CpuBackend {
+    pub fn backend(&self) -> &Backend {
         &self.inner.backend
     }
 

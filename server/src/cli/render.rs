@@ -8,7 +8,7 @@ use clap::Parser;
 use isoray_protocol::api::{ApiCamera, CreateScene, JsonStep};
 use isoray_protocol::effects::EffectChanges;
 use isoray_render::scenes::DemoScene;
-use isoray_render::{Camera, CpuBackend, Scene, View};
+use isoray_render::{Backend, Camera, Scene, View};
 use isoray_server::api::convert;
 use isoray_server::effects::{self, EffectLimits};
 use isoray_server::kind::SceneSetup;
@@ -174,7 +174,7 @@ pub fn run(args: RenderArgs) -> Result<(), String> {
     if !(1..=100).contains(&args.quality) {
         return Err(format!("--quality {} must be in 1..=100", args.quality));
     }
-    let backend = CpuBackend::new(args.threads).map_err(|e| e.to_string())?;
+    let backend = Backend::cpu(args.threads).map_err(|e| e.to_string())?;
     let prepared = Arc::new(loaded.scene).prepare();
     let view = View {
         width: args.width,
