@@ -89,7 +89,7 @@ pub struct EffectsInfo {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct EffectsInput {
-    pub input_id: crate::InputId,
+    pub input_id: crate::messages::InputId,
     pub effects: EffectChanges,
 }
 
@@ -232,11 +232,11 @@ mod tests {
 
     #[test]
     fn effects_message_shape() {
-        let m: crate::ClientMessage = serde_json::from_str(
+        let m: crate::messages::ClientMessage = serde_json::from_str(
             r#"{"type":"effects","input_id":4,"effects":{"shadows":true,"depth":3}}"#,
         )
         .expect("parses");
-        let crate::ClientMessage::Effects(e) = m else {
+        let crate::messages::ClientMessage::Effects(e) = m else {
             panic!("effects message")
         };
         assert_eq!(e.effects.shadows, Some(true));
