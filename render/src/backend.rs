@@ -7,7 +7,7 @@ use crate::effects::{Effects, EffectsPlan, RayCounts, RayKind};
 use crate::framebuffer::Framebuffer;
 use crate::integrator::{shade_primary, Tracer, T_MAX};
 use crate::metaball::RayCounters;
-use crate::sampling::PixelRng;
+use crate::geom::rng::PixelRng;
 use crate::scene::PreparedScene;
 use crate::shade::linear_to_srgb8;
 use crate::View;

@@ -11,8 +11,9 @@
 use crate::camera::Camera;
 use crate::effects::Effects;
 use crate::metaball::{Kernel, Metaball, MetaballScene};
-use crate::scenes::SplitMix64;
-use crate::shade::{ClipBox, Floor, Isosurface, Light, Lighting, Material, MaterialGroup, Volume};
+use crate::geom::clip::ClipBox;
+use crate::geom::rng::SplitMix64;
+use crate::shade::{Floor, Isosurface, Light, Lighting, Material, MaterialGroup, Volume};
 use glam::Vec3;
 
 fn wave(f: f32, time: f64, p: f32) -> f32 {

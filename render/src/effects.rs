@@ -11,7 +11,8 @@
 //! tetrahedral-isosurface-ray-tracing.txt §7 (shadows, multiple transparent isosurfaces, clip
 //! box, depth-peeled transparency).
 
-use crate::shade::{ClipBox, Light, Lighting};
+use crate::geom::clip::ClipBox;
+use crate::shade::{Light, Lighting};
 
 /// Most reflection/refraction bounces and transparency layers the engine traces.
 pub const MAX_DEPTH: u32 = 16;

@@ -28,7 +28,8 @@
 use crate::effects::{EffectsPlan, RayCounts, RayKind};
 use crate::metaball::RayCounters;
 use crate::ray::{Hit, Ray};
-use crate::sampling::{cosine_hemisphere, uniform_cone, PixelRng};
+use crate::geom::rng::PixelRng;
+use crate::sampling::{cosine_hemisphere, uniform_cone};
 use crate::scene::PreparedScene;
 use crate::shade::{direct, facing, fresnel, Light, Lighting, Material};
 use glam::Vec3;

@@ -22,6 +22,7 @@ pub mod camera;
 mod demo_effects;
 pub mod effects;
 pub mod framebuffer;
+pub mod geom;
 pub mod integrator;
 pub mod metaball;
 pub mod ray;

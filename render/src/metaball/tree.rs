@@ -29,6 +29,7 @@
 //! fixed order, so the tree is the same whatever the thread count.
 
 use super::Kernel;
+use crate::geom::aabb::Aabb;
 use glam::Vec3;
 use rayon::prelude::*;
 
@@ -114,81 +115,6 @@ pub struct TreeBall {
     pub center: Vec3,
     pub radius: f32,
     pub strength: f32,
-}
-
-/// An axis-aligned box; empty when `min > max` on some axis.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Aabb {
-    pub min: Vec3,
-    pub max: Vec3,
-}
-
-impl Aabb {
-    pub const EMPTY: Aabb = Aabb {
-        min: Vec3::splat(f32::INFINITY),
-        max: Vec3::splat(f32::NEG_INFINITY),
-    };
-
-    pub fn around(center: Vec3, radius: f32) -> Aabb {
-        Aabb {
-            min: center - Vec3::splat(radius),
-            max: center + Vec3::splat(radius),
-        }
-    }
-
-    pub fn union(self, o: Aabb) -> Aabb {
-        Aabb {
-            min: self.min.min(o.min),
-            max: self.max.max(o.max),
-        }
-    }
-
-    pub fn intersection(self, o: Aabb) -> Aabb {
-        Aabb {
-            min: self.min.max(o.min),
-            max: self.max.min(o.max),
-        }
-    }
-
-    pub fn is_empty(&self) -> bool {
-        self.min.cmpgt(self.max).any()
-    }
-
-    pub fn area(&self) -> f32 {
-        if self.is_empty() {
-            return 0.0;
-        }
-        let d = self.max - self.min;
-        2.0 * (d.x * d.y + d.y * d.z + d.z * d.x)
-    }
-
-    /// Whether the sphere overlaps the box (closed).
-    pub fn overlaps_sphere(&self, center: Vec3, radius: f32) -> bool {
-        let d = center - center.clamp(self.min, self.max);
-        !self.is_empty() && d.length_squared() <= radius * radius
-    }
-
-    pub fn contains_box(&self, o: &Aabb, slack: f32) -> bool {
-        o.is_empty()
-            || (o.min.cmpge(self.min - Vec3::splat(slack)).all()
-                && o.max.cmple(self.max + Vec3::splat(slack)).all())
-    }
-
-    /// The ray's parameter range inside the box, given `1/dir`.
-    #[inline]
-    pub fn ray_range(
-        &self,
-        origin: Vec3,
-        inv_dir: Vec3,
-        t_min: f32,
-        t_max: f32,
-    ) -> Option<(f32, f32)> {
-        let t0 = (self.min - origin) * inv_dir;
-        let t1 = (self.max - origin) * inv_dir;
-        let near = t0.min(t1).max_element().max(t_min);
-        let far = t0.max(t1).min_element().min(t_max);
-        (near <= far).then_some((near, far))
-    }
 }
 
 /// One node of the flattened tree.
@@ -1223,7 +1149,7 @@ mod tests {
     use super::*;
 
     fn cloud(n: usize) -> Vec<TreeBall> {
-        let mut rng = crate::scenes::SplitMix64(7);
+        let mut rng = crate::geom::rng::SplitMix64(7);
         (0..n)
             .map(|_| TreeBall {
                 center: Vec3::new(

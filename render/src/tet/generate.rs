@@ -10,8 +10,9 @@
 //! cells never inverts one.
 
 use super::{TetMesh, TetScene};
-use crate::scenes::SplitMix64;
-use crate::shade::{ClipBox, Isosurface, Light, Lighting, Material};
+use crate::geom::clip::ClipBox;
+use crate::geom::rng::SplitMix64;
+use crate::shade::{Isosurface, Light, Lighting, Material};
 use glam::{Quat, Vec3};
 use rayon::prelude::*;
 use std::sync::{Arc, OnceLock};

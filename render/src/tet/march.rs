@@ -255,7 +255,7 @@ pub fn barycentric(corners: [Vec4; 4], p: Vec3) -> [f32; 4] {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::scenes::SplitMix64;
+    use crate::geom::rng::SplitMix64;
 
     #[test]
     fn the_case_table_is_marching_tets() {

@@ -38,7 +38,8 @@ mod scene_tests;
 pub use bvh::{BuildKind, Bvh, BvhStats};
 pub use packet::{PacketScratch, RayPacket};
 pub use prepared::{Normals, PreparedTets, TetOptions, TimeScheme};
-pub use traverse::{ClipBox, TetCounters, TetHit, TetQuery};
+pub use crate::geom::clip::ClipBox;
+pub use traverse::{TetCounters, TetHit, TetQuery};
 
 use glam::Vec3;
 use std::sync::{Arc, OnceLock};

@@ -6,11 +6,12 @@ use super::generate::{box_mesh, sample};
 use super::packet::{PacketScratch, RayPacket};
 use super::prepared::{Normals, PreparedTets, TetOptions, TimeScheme};
 use super::reference::{barycentric_min, reference_hit};
-use super::traverse::{ClipBox, TetCounters, TetHit, TetQuery};
+use super::traverse::{TetCounters, TetHit, TetQuery};
+use crate::geom::clip::ClipBox;
 use super::{TetMesh, TetScene};
 use crate::camera::Camera;
 use crate::ray::Ray;
-use crate::scenes::SplitMix64;
+use crate::geom::rng::SplitMix64;
 use glam::{DVec3, Vec3};
 use std::sync::Arc;
 

@@ -13,41 +13,20 @@
 use super::bvh::{Bvh, Node};
 use super::march::{extract, intersect_one};
 use super::{TetError, MAX_ISOSURFACES};
+use crate::geom::aabb;
+use crate::geom::clip::ClipBox;
 use crate::ray::Ray;
 use glam::{Vec3, Vec4, Vec4Swizzles};
 
-/// The region a clip box removes: every point with `lo ≤ p ≤ hi` (bounds may be infinite, to
-/// cut by a plane).
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct ClipBox {
-    lo: Vec3,
-    hi: Vec3,
-}
-
+/// A clip box checked for a tet query: `lo ≤ hi` on every axis, no NaN (bounds may be
+/// infinite, to cut by a plane). The one clip box type is [`ClipBox`]; this constructor is
+/// the tet kind's check of it.
 impl ClipBox {
     pub fn new(lo: Vec3, hi: Vec3) -> Result<ClipBox, TetError> {
         if lo.is_nan() || hi.is_nan() || lo.cmpgt(hi).any() {
             return Err(TetError::BadClipBox);
         }
-        Ok(ClipBox { lo, hi })
-    }
-
-    pub fn lo(&self) -> Vec3 {
-        self.lo
-    }
-
-    pub fn hi(&self) -> Vec3 {
-        self.hi
-    }
-
-    #[inline]
-    pub fn contains(&self, p: Vec3) -> bool {
-        self.lo.cmple(p).all() && p.cmple(self.hi).all()
-    }
-
-    #[inline]
-    fn encloses(&self, node: &Node) -> bool {
-        self.lo.cmple(node.lo.xyz()).all() && node.hi.xyz().cmple(self.hi).all()
+        Ok(ClipBox { min: lo, max: hi })
     }
 }
 
@@ -102,7 +81,7 @@ impl TetQuery {
         if !self.isovalues().iter().any(|&v| node.spans(v)) {
             return false;
         }
-        if self.clip.is_some_and(|clip| clip.encloses(node)) {
+        if self.clip.is_some_and(|clip| clip.encloses(node.lo.xyz(), node.hi.xyz())) {
             c.clipped_subtrees += 1;
             return false;
         }
@@ -193,12 +172,7 @@ pub(crate) fn slab(
     t_min: f32,
     t_max: f32,
 ) -> Option<f32> {
-    let t0 = (node.lo.xyz() - origin) * inv_dir;
-    let t1 = (node.hi.xyz() - origin) * inv_dir;
-    // f32::min/max drop a NaN (0 · ∞ on a box face parallel to the ray).
-    let near = t0.min(t1).max_element().max(t_min);
-    let far = t0.max(t1).min_element().min(t_max);
-    (near <= far).then_some(near)
+    aabb::slab(node.lo.xyz(), node.hi.xyz(), origin, inv_dir, t_min, t_max).map(|(near, _)| near)
 }
 
 /// A traversal stack that lives on the call stack up to a depth of 64 and spills beyond.

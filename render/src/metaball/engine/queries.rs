@@ -394,7 +394,8 @@ fn ball_integral(
 mod tests {
     use super::*;
     use crate::metaball::{Kernel, Metaball, MetaballScene, PrepareOptions};
-    use crate::scenes::{DemoScene, SplitMix64};
+    use crate::geom::rng::SplitMix64;
+    use crate::scenes::DemoScene;
     use glam::Vec3;
 
     fn blobs() -> MetaballScene {
