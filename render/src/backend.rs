@@ -5,9 +5,10 @@
 
 use crate::effects::{Effects, EffectsPlan, RayCounts, RayKind};
 use crate::framebuffer::Framebuffer;
-use crate::integrator::{shade_primary, Tracer, T_MAX};
-use crate::metaball::RayCounters;
+use crate::geom::counters::RayTotals;
 use crate::geom::rng::PixelRng;
+use crate::integrator::{shade_primary, Tracer, T_MAX};
+use crate::kinds::counters::SceneCounters;
 use crate::scene::PreparedScene;
 use crate::shade::linear_to_srgb8;
 use crate::View;
@@ -135,7 +136,11 @@ fn render_tiles(scene: &PreparedScene, view: &View) -> Framebuffer {
             let n = ((x1 - x0) * (y1 - y0)) as usize;
             let mut rgb = Vec::with_capacity(n * 3);
             let mut depth = Vec::with_capacity(n);
-            for (ray, hit) in scene.primary_hits(&rays, (x0, y0, x1, y1), view.isovalue, T_MAX) {
+            // Ray casting reports no counters (the frame's rays are its pixels).
+            let mut counters = SceneCounters::default();
+            for (ray, hit) in
+                scene.primary_hits(&rays, (x0, y0, x1, y1), view.isovalue, T_MAX, &mut counters)
+            {
                 let (color, t) = shade_primary(scene, &ray, hit.as_ref());
                 rgb.extend([color.x, color.y, color.z].map(linear_to_srgb8));
                 depth.push(t * ray.dir.dot(forward));
@@ -162,11 +167,13 @@ fn render_tiles(scene: &PreparedScene, view: &View) -> Framebuffer {
 
 // ---- Effects: frames traced by the effects plan, and progressive refinement. ----
 
-/// One frame's rays, per kind, and the traversal counters of their queries.
+/// One frame's rays, per ray kind, and the counters of their queries: the summary over
+/// every primitive kind, and each kind's own.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct FrameRays {
     pub rays: RayCounts,
-    pub counters: RayCounters,
+    pub counters: RayTotals,
+    pub kinds: SceneCounters,
 }
 
 impl CpuBackend {
@@ -271,7 +278,8 @@ fn trace_pass(scene: &PreparedScene, view: &View, plan: &EffectsPlan, pass: u32)
             }
             let rays = FrameRays {
                 rays: tracer.counts,
-                counters: tracer.counters,
+                counters: tracer.counters.totals(),
+                kinds: tracer.counters,
             };
             (x0, y0, color, depth, rays)
         })
@@ -295,6 +303,7 @@ fn trace_pass(scene: &PreparedScene, view: &View, plan: &EffectsPlan, pass: u32)
         }
         out.rays.rays.add(&rays.rays);
         out.rays.counters.add(&rays.counters);
+        out.rays.kinds.add(&rays.kinds);
     }
     out
 }

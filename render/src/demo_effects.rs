@@ -10,9 +10,9 @@
 
 use crate::camera::Camera;
 use crate::effects::Effects;
-use crate::metaball::{Kernel, Metaball, MetaballScene};
 use crate::geom::clip::ClipBox;
 use crate::geom::rng::SplitMix64;
+use crate::kinds::metaballs::{Kernel, Metaball, MetaballScene};
 use crate::shade::{Floor, Isosurface, Light, Lighting, Material, MaterialGroup, Volume};
 use glam::Vec3;
 

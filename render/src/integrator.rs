@@ -26,9 +26,9 @@
 //! materials in the plan they walk the crossings instead and multiply `1 - α` of each.
 
 use crate::effects::{EffectsPlan, RayCounts, RayKind};
-use crate::metaball::RayCounters;
-use crate::ray::{Hit, Ray};
 use crate::geom::rng::PixelRng;
+use crate::kinds::counters::SceneCounters;
+use crate::ray::{Hit, Ray};
 use crate::sampling::{cosine_hemisphere, uniform_cone};
 use crate::scene::PreparedScene;
 use crate::shade::{direct, facing, fresnel, Light, Lighting, Material};
@@ -88,7 +88,7 @@ pub struct Tracer<'a> {
     /// Rays traced so far, per kind.
     pub counts: RayCounts,
     /// Traversal and root-finder counters of every query.
-    pub counters: RayCounters,
+    pub counters: SceneCounters,
 }
 
 impl<'a> Tracer<'a> {
@@ -99,7 +99,7 @@ impl<'a> Tracer<'a> {
             plan,
             isovalue,
             counts: RayCounts::default(),
-            counters: RayCounters::default(),
+            counters: SceneCounters::default(),
         }
     }
 

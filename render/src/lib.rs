@@ -24,18 +24,21 @@ pub mod effects;
 pub mod framebuffer;
 pub mod geom;
 pub mod integrator;
-pub mod metaball;
+pub mod kinds;
 pub mod ray;
 pub mod sampling;
 pub mod scene;
 pub mod scenes;
 pub mod shade;
-pub mod tet;
 
 pub use backend::{Accumulator, Backend, CpuBackend, FrameRays};
 pub use camera::Camera;
+// Temporary aliases for the other crates' paths (`isoray_render::metaball::..`,
+// `isoray_render::tet::..`), until they name `kinds::` themselves.
 pub use effects::{EffectKind, Effects, EffectsPlan, RayCounts, RayKind};
 pub use framebuffer::Framebuffer;
+pub use kinds::metaballs as metaball;
+pub use kinds::tets as tet;
 pub use ray::{Hit, Ray};
 pub use scene::{PreparedScene, Scene, SceneError};
 pub use shade::Lighting;

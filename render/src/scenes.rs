@@ -11,8 +11,8 @@
 use crate::camera::Camera;
 use crate::demo_effects;
 pub use crate::geom::rng::SplitMix64;
-use crate::metaball::pdb::Element;
-use crate::metaball::{Kernel, Metaball, MetaballScene};
+use crate::kinds::metaballs::pdb::Element;
+use crate::kinds::metaballs::{Kernel, Metaball, MetaballScene};
 use crate::scene::{Geometry, Scene};
 use crate::shade::Lighting;
 use glam::{Quat, Vec3};
@@ -145,7 +145,7 @@ impl DemoScene {
             DemoScene::Tornado128k => 128_000,
             DemoScene::Molecule => 5_440,
             DemoScene::Pool => 10_000,
-            DemoScene::TetGyroid => crate::tet::generate::demo_mesh().tets().len(),
+            DemoScene::TetGyroid => crate::kinds::tets::generate::demo_mesh().tets().len(),
             DemoScene::Glass => demo_effects::GLASS_BALLS,
             DemoScene::Clouds => demo_effects::CLOUD_BALLS,
             DemoScene::Shells => demo_effects::SHELL_BALLS,
@@ -208,7 +208,7 @@ impl DemoScene {
             DemoScene::Pool => pool(time),
             DemoScene::TetGyroid => {
                 return Scene {
-                    geometry: Geometry::Tets(crate::tet::generate::demo_state(time)),
+                    geometry: Geometry::Tets(crate::kinds::tets::generate::demo_state(time)),
                     lighting: self.lighting(),
                 }
             }
@@ -228,7 +228,7 @@ impl DemoScene {
             DemoScene::Glass => demo_effects::glass_lighting(),
             DemoScene::Clouds => demo_effects::clouds_lighting(),
             DemoScene::Shells => demo_effects::shells_lighting(),
-            DemoScene::TetGyroid => crate::tet::generate::demo_lighting(),
+            DemoScene::TetGyroid => crate::kinds::tets::generate::demo_lighting(),
             _ => Lighting::default(),
         }
     }

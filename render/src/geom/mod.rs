@@ -3,4 +3,5 @@
 
 pub mod aabb;
 pub mod clip;
+pub mod counters;
 pub mod rng;

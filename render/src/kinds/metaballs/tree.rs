@@ -28,8 +28,8 @@
 //! chunk with their split lists on a stack, and the chunks are stitched once at the end in a
 //! fixed order, so the tree is the same whatever the thread count.
 
-use super::Kernel;
 use crate::geom::aabb::Aabb;
+use crate::kinds::metaballs::kernel::Kernel;
 use glam::Vec3;
 use rayon::prelude::*;
 

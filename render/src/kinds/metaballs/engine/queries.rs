@@ -16,9 +16,10 @@
 //!   Fitted BVH built without the §5.3 optimisations (the same fallback structure low
 //!   isovalues use), whose disjoint leaves together hold the complete field.
 
-use super::{build_fallback, Accel, AccelKind, PreparedMetaballs, RayCounters, SCRATCH};
-use crate::metaball::roots::{self, FindParams, KernelPoly, RayBall, RootFinder, Scratch};
-use crate::metaball::tree::{BuildOptions, Tree, TreeKind};
+use super::{build_fallback, Accel, AccelKind, PreparedMetaballs, SCRATCH};
+use crate::kinds::metaballs::counters::MetaballCounters;
+use crate::kinds::metaballs::roots::{self, FindParams, KernelPoly, RayBall, RootFinder, Scratch};
+use crate::kinds::metaballs::tree::{BuildOptions, Tree, TreeKind};
 use crate::ray::{Hit, Ray};
 
 impl PreparedMetaballs {
@@ -56,7 +57,7 @@ impl PreparedMetaballs {
         t_min: f32,
         t_max: f32,
         isovalue: f32,
-        counters: &mut RayCounters,
+        counters: &mut MetaballCounters,
     ) -> Option<f32> {
         counters.rays += 1;
         if !(isovalue > 0.0) || !isovalue.is_finite() || !(t_min < t_max) {
@@ -90,7 +91,7 @@ impl PreparedMetaballs {
         t_min: f32,
         t_max: f32,
         isovalue: f32,
-        counters: &mut RayCounters,
+        counters: &mut MetaballCounters,
     ) -> Option<Hit> {
         counters.rays += 1;
         if !(isovalue > 0.0) || !isovalue.is_finite() || !(t_min < t_max) {
@@ -179,7 +180,7 @@ impl PreparedMetaballs {
         gathered: &mut Vec<RayBall<f32>>,
         scratch: &mut Scratch<f32>,
         stack: &mut Vec<(u32, f32, f32)>,
-        counters: &mut RayCounters,
+        counters: &mut MetaballCounters,
     ) -> Option<f32> {
         let fitted = tree.kind == TreeKind::Fitted;
         let leaf_params = FindParams {
@@ -350,12 +351,12 @@ impl PreparedMetaballs {
 /// `f = Σ c_k w^k`, `w = 1 - s` and `s(t) = a (t - tc)² + s_min`, in closed form in `f64`.
 fn ball_integral(
     ball: &RayBall<f32>,
-    kernel: &[f64; crate::metaball::kernel::MAX_W_DEGREE + 1],
+    kernel: &[f64; crate::kinds::metaballs::kernel::MAX_W_DEGREE + 1],
     degree: usize,
     lo: f32,
     hi: f32,
 ) -> f64 {
-    const N: usize = 2 * crate::metaball::kernel::MAX_W_DEGREE + 1;
+    const N: usize = 2 * crate::kinds::metaballs::kernel::MAX_W_DEGREE + 1;
     let (a, tc, s_min) = (ball.a as f64, ball.tc as f64, ball.s_min as f64);
     let h = hi as f64 - lo as f64;
     // s(t) = a (t - tc)² + s_min; with d = lo - tc, s(lo + u) = s0 + s1 u + a u², so
@@ -393,8 +394,8 @@ fn ball_integral(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::metaball::{Kernel, Metaball, MetaballScene, PrepareOptions};
     use crate::geom::rng::SplitMix64;
+    use crate::kinds::metaballs::{Kernel, Metaball, MetaballScene, PrepareOptions};
     use crate::scenes::DemoScene;
     use glam::Vec3;
 
@@ -429,19 +430,19 @@ mod tests {
             let p = prepared(&scene, accel);
             let ray = Ray::new(Vec3::new(0.2, 0.1, 0.0), Vec3::X);
             let hit = p
-                .exit_hit_counted(&ray, 0.0, 100.0, 0.5, &mut RayCounters::default())
+                .exit_hit_counted(&ray, 0.0, 100.0, 0.5, &mut MetaballCounters::default())
                 .expect("leaves the unit sphere");
             let expected = (1.0f32 - 0.1 * 0.1).sqrt() - 0.2;
             assert!((hit.t - expected).abs() < 1e-4, "{accel:?}: {}", hit.t);
             assert!(hit.normal.dot(hit.position.normalize()) > 0.999);
             assert_eq!(
-                p.any_hit_counted(&ray, 0.0, 100.0, 0.5, &mut RayCounters::default()),
+                p.any_hit_counted(&ray, 0.0, 100.0, 0.5, &mut MetaballCounters::default()),
                 Some(0.0),
                 "any hit from inside reports the start"
             );
             let outside = Ray::new(Vec3::new(0.0, 0.0, 5.0), Vec3::NEG_Z);
             let t = p
-                .any_hit_counted(&outside, 0.0, 100.0, 0.5, &mut RayCounters::default())
+                .any_hit_counted(&outside, 0.0, 100.0, 0.5, &mut MetaballCounters::default())
                 .expect("hits");
             assert!((t - 4.0).abs() < 1e-3);
         }
@@ -454,7 +455,7 @@ mod tests {
         let fitted = prepared(&scene, AccelKind::Tree(BuildOptions::fitted(0.05)));
         let bvh = prepared(&scene, AccelKind::Tree(BuildOptions::bvh()));
         let mut rng = SplitMix64(7);
-        let mut c = RayCounters::default();
+        let mut c = MetaballCounters::default();
         let (mut inside, mut any) = (0, 0);
         for _ in 0..400 {
             let ray = random_ray(&mut rng, 3.0);

@@ -527,7 +527,7 @@ fn flatten(t: &Tmp, index: usize, nodes: &mut Vec<Node>) {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::tet::generate;
+    use crate::kinds::tets::generate;
 
     #[test]
     fn both_builds_are_valid_and_refit_equals_rebuild_for_static_vertices() {

@@ -10,11 +10,12 @@
 //! box are discarded. Ties in distance go to the lower tet index, so every build and
 //! traversal order returns the same hit.
 
-use super::bvh::{Bvh, Node};
-use super::march::{extract, intersect_one};
-use super::{TetError, MAX_ISOSURFACES};
 use crate::geom::aabb;
 use crate::geom::clip::ClipBox;
+use crate::kinds::tets::bvh::{Bvh, Node};
+use crate::kinds::tets::counters::TetCounters;
+use crate::kinds::tets::march::{extract, intersect_one};
+use crate::kinds::tets::mesh::{TetError, MAX_ISOSURFACES};
 use crate::ray::Ray;
 use glam::{Vec3, Vec4, Vec4Swizzles};
 
@@ -81,7 +82,10 @@ impl TetQuery {
         if !self.isovalues().iter().any(|&v| node.spans(v)) {
             return false;
         }
-        if self.clip.is_some_and(|clip| clip.encloses(node.lo.xyz(), node.hi.xyz())) {
+        if self
+            .clip
+            .is_some_and(|clip| clip.encloses(node.lo.xyz(), node.hi.xyz()))
+        {
             c.clipped_subtrees += 1;
             return false;
         }
@@ -119,47 +123,6 @@ impl TetHit {
 
     pub(crate) fn found(&self) -> bool {
         self.tet != u32::MAX
-    }
-}
-
-/// Work counters (tetrahedral-isosurface-ray-tracing.txt Table 4 counts the same things).
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
-pub struct TetCounters {
-    pub rays: u64,
-    pub hits: u64,
-    /// Nodes popped and examined.
-    pub nodes: u64,
-    /// Individual ray–box slab tests.
-    pub ray_box_tests: u64,
-    /// Interval-arithmetic packet–box tests (packets only).
-    pub frustum_box_tests: u64,
-    /// Isorange tests of nodes (one per packet).
-    pub isorange_tests: u64,
-    /// Isopolygons extracted (one per packet, tet and isovalue).
-    pub extractions: u64,
-    /// Individual ray–isopolygon tests (a packet's corner-ray test counts as four).
-    pub polygon_tests: u64,
-    /// Isopolygons a whole packet missed by the corner-ray test.
-    pub polygons_culled: u64,
-    /// Isopolygons a whole packet hit by the corner-ray test (distances only).
-    pub polygons_full: u64,
-    /// Subtrees skipped as wholly inside the clip box.
-    pub clipped_subtrees: u64,
-}
-
-impl TetCounters {
-    pub fn add(&mut self, o: &TetCounters) {
-        self.rays += o.rays;
-        self.hits += o.hits;
-        self.nodes += o.nodes;
-        self.ray_box_tests += o.ray_box_tests;
-        self.frustum_box_tests += o.frustum_box_tests;
-        self.isorange_tests += o.isorange_tests;
-        self.extractions += o.extractions;
-        self.polygon_tests += o.polygon_tests;
-        self.polygons_culled += o.polygons_culled;
-        self.polygons_full += o.polygons_full;
-        self.clipped_subtrees += o.clipped_subtrees;
     }
 }
 

@@ -26,10 +26,11 @@
 //! Every test is conservative and the per-ray arithmetic is the single-ray path's, so a
 //! packet returns, ray for ray, exactly what [`super::traverse`] returns.
 
-use super::bvh::{Bvh, Node};
-use super::march::{extract, FrustumTest, PolygonFromOrigin};
-use super::traverse::{slab, Stack, TetCounters, TetHit, TetQuery};
 use crate::camera::PrimaryRays;
+use crate::kinds::tets::bvh::{Bvh, Node};
+use crate::kinds::tets::counters::TetCounters;
+use crate::kinds::tets::march::{extract, FrustumTest, PolygonFromOrigin};
+use crate::kinds::tets::traverse::{slab, Stack, TetHit, TetQuery};
 use glam::{Vec3, Vec4, Vec4Swizzles};
 
 /// Rays from one origin. `corners` are four rays such that every ray of the packet is a

@@ -12,9 +12,10 @@
 //!   balls covers the ray; the nearest hit wins and prunes farther nodes.
 //! - [`Accel::Tree`] with a Fitted BVH (§5.2): leaves front to back; the first hit ends it.
 
-use super::roots::{self, FindParams, KernelPoly, RayBall, RootFinder, Scratch};
-use super::tree::{BuildOptions, Tree, TreeBall, TreeKind, TreeStats};
-use super::{MetaballScene, Shape};
+use crate::kinds::metaballs::counters::MetaballCounters;
+use crate::kinds::metaballs::roots::{self, FindParams, KernelPoly, RayBall, RootFinder, Scratch};
+use crate::kinds::metaballs::scene::{MetaballScene, Shape};
+use crate::kinds::metaballs::tree::{BuildOptions, Tree, TreeBall, TreeKind, TreeStats};
 use crate::ray::{Hit, Ray};
 use glam::{Mat3, Vec3};
 use std::cell::RefCell;
@@ -64,31 +65,6 @@ impl PrepareOptions {
 
     pub fn with_finder(self, finder: RootFinder) -> PrepareOptions {
         PrepareOptions { finder, ..self }
-    }
-}
-
-/// Per-ray counters (fitted-bvh-metaballs.txt Table 3, plus root-finder iterations).
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
-pub struct RayCounters {
-    pub rays: u64,
-    pub hits: u64,
-    pub node_traversals: u64,
-    pub leaf_tests: u64,
-    pub metaballs_considered: u64,
-    pub iterations: u64,
-    /// Iterations of the searches that produced the hits.
-    pub hit_iterations: u64,
-}
-
-impl RayCounters {
-    pub fn add(&mut self, o: &RayCounters) {
-        self.rays += o.rays;
-        self.hits += o.hits;
-        self.node_traversals += o.node_traversals;
-        self.leaf_tests += o.leaf_tests;
-        self.metaballs_considered += o.metaballs_considered;
-        self.iterations += o.iterations;
-        self.hit_iterations += o.hit_iterations;
     }
 }
 
@@ -192,7 +168,7 @@ impl PreparedMetaballs {
 
     /// The first hit along `ray` in `[t_min, t_max]`.
     pub fn first_hit(&self, ray: &Ray, t_min: f32, t_max: f32, isovalue: f32) -> Option<Hit> {
-        let mut counters = RayCounters::default();
+        let mut counters = MetaballCounters::default();
         self.first_hit_counted(ray, t_min, t_max, isovalue, &mut counters)
     }
 
@@ -203,7 +179,7 @@ impl PreparedMetaballs {
         t_min: f32,
         t_max: f32,
         isovalue: f32,
-        counters: &mut RayCounters,
+        counters: &mut MetaballCounters,
     ) -> Option<Hit> {
         counters.rays += 1;
         if !(isovalue > 0.0) || !isovalue.is_finite() || !(t_min < t_max) {
@@ -257,10 +233,10 @@ impl PreparedMetaballs {
         gathered: &mut Vec<RayBall<f32>>,
         scratch: &mut Scratch<f32>,
         stack: &mut Vec<(u32, f32, f32)>,
-        counters: &mut RayCounters,
+        counters: &mut MetaballCounters,
     ) -> Option<f32> {
         let finder = self.options.finder;
-        let mut record = |found: roots::Found<f32>, counters: &mut RayCounters, n: usize| {
+        let mut record = |found: roots::Found<f32>, counters: &mut MetaballCounters, n: usize| {
             counters.leaf_tests += 1;
             counters.metaballs_considered += n as u64;
             counters.iterations += found.iterations as u64;
@@ -346,8 +322,8 @@ impl PreparedMetaballs {
         gathered: &mut Vec<RayBall<f32>>,
         scratch: &mut Scratch<f32>,
         stack: &mut Vec<(u32, f32, f32)>,
-        counters: &mut RayCounters,
-        record: &mut impl FnMut(roots::Found<f32>, &mut RayCounters, usize) -> Option<f32>,
+        counters: &mut MetaballCounters,
+        record: &mut impl FnMut(roots::Found<f32>, &mut MetaballCounters, usize) -> Option<f32>,
     ) -> Option<f32> {
         let finder = self.options.finder;
         let inv_dir = ray.dir.recip();
@@ -516,6 +492,15 @@ fn tree_balls(scene: &MetaballScene) -> Vec<TreeBall> {
 }
 
 /// Brute force and Bézier clipping on an unprepared scene.
+/// (Defined here, beside the engine it builds, so that the scene's module needs no engine.)
+impl MetaballScene {
+    /// The first crossing of the isosurface along `ray` within `[t_min, t_max]`, by brute
+    /// force and Bézier clipping, without preparing anything (tests, one-off queries).
+    pub fn first_hit(&self, ray: &Ray, t_min: f32, t_max: f32, isovalue: f32) -> Option<Hit> {
+        first_hit_unprepared(self, ray, t_min, t_max, isovalue)
+    }
+}
+
 pub fn first_hit_unprepared(
     scene: &MetaballScene,
     ray: &Ray,

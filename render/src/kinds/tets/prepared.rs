@@ -10,11 +10,12 @@
 //! per-vertex gradients, the volume-weighted mean of the incident tets' gradients; faceted
 //! normals use the hit tet's own gradient (the "per-tet gradients" of §8.6).
 
-use super::bvh::{BuildKind, Bvh};
-use super::march::{barycentric, gradient};
-use super::packet::{self, PacketScratch, RayPacket};
-use super::traverse::{self, TetCounters, TetHit, TetQuery};
-use super::{TetMesh, TetScene};
+use crate::kinds::tets::bvh::{BuildKind, Bvh};
+use crate::kinds::tets::counters::TetCounters;
+use crate::kinds::tets::march::{barycentric, gradient};
+use crate::kinds::tets::mesh::{TetMesh, TetScene};
+use crate::kinds::tets::packet::{self, PacketScratch, RayPacket};
+use crate::kinds::tets::traverse::{self, TetHit, TetQuery};
 use crate::ray::{Hit, Ray};
 use glam::{Vec3, Vec4};
 use rayon::prelude::*;

@@ -1,17 +1,18 @@
 //! Whole-engine tests of tet scenes: analytic fields with known surfaces, agreement with the
 //! `f64` reference, and every build, time scheme and traversal giving the same image.
 
-use super::bvh::BuildKind;
-use super::generate::{box_mesh, sample};
-use super::packet::{PacketScratch, RayPacket};
-use super::prepared::{Normals, PreparedTets, TetOptions, TimeScheme};
-use super::reference::{barycentric_min, reference_hit};
-use super::traverse::{TetCounters, TetHit, TetQuery};
-use crate::geom::clip::ClipBox;
-use super::{TetMesh, TetScene};
 use crate::camera::Camera;
-use crate::ray::Ray;
+use crate::geom::clip::ClipBox;
 use crate::geom::rng::SplitMix64;
+use crate::kinds::tets::bvh::BuildKind;
+use crate::kinds::tets::counters::TetCounters;
+use crate::kinds::tets::generate::{box_mesh, sample};
+use crate::kinds::tets::mesh::{TetMesh, TetScene};
+use crate::kinds::tets::packet::{PacketScratch, RayPacket};
+use crate::kinds::tets::prepared::{Normals, PreparedTets, TetOptions, TimeScheme};
+use crate::kinds::tets::reference::{barycentric_min, reference_hit};
+use crate::kinds::tets::traverse::{TetHit, TetQuery};
+use crate::ray::Ray;
 use glam::{DVec3, Vec3};
 use std::sync::Arc;
 
@@ -467,7 +468,10 @@ fn the_demo_renders_the_same_on_one_and_two_threads() {
         crate::scene::PreparedGeometry::Tets(t) => t.vertices().len(),
         _ => 0,
     };
-    assert_eq!(verts, super::generate::demo_mesh().vertices().len());
+    assert_eq!(
+        verts,
+        crate::kinds::tets::generate::demo_mesh().vertices().len()
+    );
 }
 
 #[test]

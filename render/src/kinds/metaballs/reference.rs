@@ -4,8 +4,8 @@
 //! on a ray is an exact polynomial per section and clipping brackets its first root, so with
 //! a tolerance of `1e-9` it serves as ground truth).
 
-use super::roots::{self, FindParams, KernelPoly, RayBall, RootFinder, Scratch};
-use super::{MetaballScene, Shape};
+use crate::kinds::metaballs::roots::{self, FindParams, KernelPoly, RayBall, RootFinder, Scratch};
+use crate::kinds::metaballs::scene::{MetaballScene, Shape};
 use glam::{DMat3, DQuat, DVec3};
 
 /// Tolerance of the reference, world units.

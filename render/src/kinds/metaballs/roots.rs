@@ -29,7 +29,7 @@
 //! projection; sphere tracing one shorter than its tolerance; Bézier clipping nothing beyond
 //! the rounding of the field itself.
 
-use super::kernel::MAX_W_DEGREE;
+use crate::kinds::metaballs::kernel::MAX_W_DEGREE;
 use std::fmt::Debug;
 use std::ops::{Add, Div, Mul, Neg, Sub};
 
@@ -204,7 +204,7 @@ pub struct KernelPoly<R> {
 }
 
 impl<R: Real> KernelPoly<R> {
-    pub fn new(kernel: super::Kernel) -> Self {
+    pub fn new(kernel: crate::kinds::metaballs::kernel::Kernel) -> Self {
         let c64 = kernel.w_coefficients();
         let mut c = [R::default(); MAX_W_DEGREE + 1];
         for (d, s) in c.iter_mut().zip(c64) {

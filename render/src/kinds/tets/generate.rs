@@ -9,9 +9,9 @@
 //! corners lie at least 0.7 cell widths from the opposite faces, so a jitter of up to 0.3
 //! cells never inverts one.
 
-use super::{TetMesh, TetScene};
 use crate::geom::clip::ClipBox;
 use crate::geom::rng::SplitMix64;
+use crate::kinds::tets::mesh::{TetMesh, TetScene};
 use crate::shade::{Isosurface, Light, Lighting, Material};
 use glam::{Quat, Vec3};
 use rayon::prelude::*;
@@ -183,7 +183,7 @@ impl Grid {
                 let rest = k.map(|c| {
                     Vec3::new((c & 1) as f32, ((c >> 1) & 1) as f32, ((c >> 2) & 1) as f32)
                 });
-                if super::signed_volume6(rest) < 0.0 {
+                if crate::kinds::tets::mesh::signed_volume6(rest) < 0.0 {
                     tets.push([t[0], t[2], t[1], t[3]]);
                 } else {
                     tets.push(t);

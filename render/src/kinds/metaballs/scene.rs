@@ -1,33 +1,7 @@
-//! Metaballs: balls of finite support whose summed field defines the surface `F(p) = T`.
-//!
-//! How it works: each ball `i` has centre `p_i`, radius `R_i` and strength `q_i` (negative
-//! carves) and contributes `q_i · f(s)` with `s = |p - p_i|² / R_i²` inside its support and
-//! nothing outside (bezier-clipping-metaballs.txt §2, eq. 5). An ellipsoidal ball uses
-//! `s = |M (p - p_i)|²`, `M` the inverse of its rotated, scaled frame (ibid. §3.3); its
-//! `radius` is then the largest semi-axis, so the sphere of radius `R_i` still bounds it.
-//! The modules:
-//! - [`kernel`]: the falloffs `f` (Wyvill, degree four, `(1-s)^α`, the tutorial's).
-//! - [`roots`]: the root finders along one ray (marching, projections + secant, Bézier
-//!   clipping, sphere tracing), generic over `f32` and `f64`.
-//! - [`tree`]: the BVH with split metaballs and the Fitted BVH (fitted-bvh-metaballs.txt).
-//! - [`engine`]: a state prepared for tracing: per-ball data, the acceleration structure, and
-//!   the traversal modes (brute force, sorted active list, BVH, FBVH).
-//! - [`reference`]: the `f64` reference hit used by tests.
-//! - [`pdb`]: atoms of a PDB file as balls.
+//! A metaball state: the balls, their kernel, and the checks made when one arrives.
 
-pub mod engine;
-pub mod kernel;
-pub mod pdb;
-pub mod reference;
-pub mod roots;
-pub mod tree;
-
-pub use engine::{Accel, AccelKind, PrepareOptions, PreparedMetaballs, RayCounters};
-pub use kernel::Kernel;
-pub use roots::RootFinder;
-pub use tree::{BuildOptions, TreeKind};
-
-use crate::ray::{Hit, Ray};
+use crate::kinds::metaballs::kernel::Kernel;
+use crate::ray::Ray;
 use glam::{Mat3, Quat, Vec3};
 
 /// A ball's shape of support.
@@ -258,12 +232,6 @@ impl MetaballScene {
                 hi.max(b.center + Vec3::splat(b.radius)),
             )
         }))
-    }
-
-    /// The first crossing of the isosurface along `ray` within `[t_min, t_max]`, by brute
-    /// force and Bézier clipping, without preparing anything (tests, one-off queries).
-    pub fn first_hit(&self, ray: &Ray, t_min: f32, t_max: f32, isovalue: f32) -> Option<Hit> {
-        engine::first_hit_unprepared(self, ray, t_min, t_max, isovalue)
     }
 }
 

@@ -4,7 +4,8 @@
 //! der Waals sphere) and its colour the element's CPK colour. Parses a `&str`; reading the
 //! file is the caller's business, so the engine stays file-free.
 
-use super::{Kernel, Metaball, MetaballScene};
+use crate::kinds::metaballs::kernel::Kernel;
+use crate::kinds::metaballs::scene::{Metaball, MetaballScene};
 use glam::Vec3;
 
 /// The elements with their own radius and colour; the rest share `Other`'s.
