@@ -9,10 +9,11 @@
 //!   open by a clip box (tetrahedral-isosurface-ray-tracing.txt §7, Fig. 7).
 
 use crate::camera::Camera;
-use crate::effects::Effects;
+use crate::effects::toggles::Effects;
 use crate::geom::clip::ClipBox;
 use crate::geom::rng::SplitMix64;
-use crate::kinds::metaballs::{Kernel, Metaball, MetaballScene};
+use crate::kinds::metaballs::kernel::Kernel;
+use crate::kinds::metaballs::scene::{Metaball, MetaballScene};
 use crate::shade::{Floor, Isosurface, Light, Lighting, Material, MaterialGroup, Volume};
 use glam::Vec3;
 

@@ -25,7 +25,8 @@
 //! Shadow and occlusion rays ask the scene for any hit, with early exit; with transparent
 //! materials in the plan they walk the crossings instead and multiply `1 - α` of each.
 
-use crate::effects::{EffectsPlan, RayCounts, RayKind};
+use crate::effects::plan::EffectsPlan;
+use crate::effects::rays::{RayCounts, RayKind};
 use crate::geom::rng::PixelRng;
 use crate::kinds::counters::SceneCounters;
 use crate::ray::{Hit, Ray};

@@ -30,6 +30,7 @@ pub mod sampling;
 pub mod scene;
 pub mod scenes;
 pub mod shade;
+pub mod view;
 
 pub use backend::{Accumulator, Backend, CpuBackend, FrameRays};
 pub use camera::Camera;
@@ -42,13 +43,4 @@ pub use kinds::tets as tet;
 pub use ray::{Hit, Ray};
 pub use scene::{PreparedScene, Scene, SceneError};
 pub use shade::Lighting;
-
-/// Everything a session chooses about one frame, apart from the scene itself.
-#[derive(Clone, Debug, PartialEq)]
-pub struct View {
-    pub width: u32,
-    pub height: u32,
-    pub camera: Camera,
-    /// The isovalue of the surface to show.
-    pub isovalue: f32,
-}
+pub use view::View;

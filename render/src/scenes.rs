@@ -11,8 +11,9 @@
 use crate::camera::Camera;
 use crate::demo_effects;
 pub use crate::geom::rng::SplitMix64;
+use crate::kinds::metaballs::kernel::Kernel;
 use crate::kinds::metaballs::pdb::Element;
-use crate::kinds::metaballs::{Kernel, Metaball, MetaballScene};
+use crate::kinds::metaballs::scene::{Metaball, MetaballScene};
 use crate::scene::{Geometry, Scene};
 use crate::shade::Lighting;
 use glam::{Quat, Vec3};

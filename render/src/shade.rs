@@ -9,7 +9,7 @@
 //! light seen whole from above the horizon delivers exactly the irradiance of a point light at
 //! its centre, so unshadowed shading treats both alike; only shadows see the sphere's extent.
 
-use crate::effects::Effects;
+use crate::effects::toggles::Effects;
 pub use crate::geom::clip::ClipBox;
 use crate::ray::Hit;
 use glam::Vec3;
