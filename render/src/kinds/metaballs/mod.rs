@@ -15,11 +15,13 @@
 //! - [`reference`]: the `f64` reference hit used by tests.
 //! - [`pdb`]: atoms of a PDB file as balls.
 
+pub mod bezier;
 pub mod counters;
 pub mod engine;
 pub mod kernel;
 pub mod kind;
 pub mod pdb;
+pub mod real;
 pub mod reference;
 pub mod roots;
 pub mod scene;
