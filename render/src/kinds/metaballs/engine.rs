@@ -236,7 +236,7 @@ impl PreparedMetaballs {
         counters: &mut MetaballCounters,
     ) -> Option<f32> {
         let finder = self.options.finder;
-        let mut record = |found: roots::Found<f32>, counters: &mut MetaballCounters, n: usize| {
+        let record = |found: roots::Found<f32>, counters: &mut MetaballCounters, n: usize| {
             counters.leaf_tests += 1;
             counters.metaballs_considered += n as u64;
             counters.iterations += found.iterations as u64;
@@ -296,121 +296,20 @@ impl PreparedMetaballs {
                 }
                 None
             }
-            Accel::Tree(tree) => self.trace_tree(
+            Accel::Tree(tree) => self.leaf_walk(
                 tree,
                 ray,
                 t_min,
                 t_max,
                 params,
+                finder,
+                tree.kind == TreeKind::Fitted,
                 gathered,
                 scratch,
                 stack,
                 counters,
-                &mut record,
             ),
         }
-    }
-
-    #[allow(clippy::too_many_arguments)]
-    fn trace_tree(
-        &self,
-        tree: &Tree,
-        ray: &Ray,
-        t_min: f32,
-        t_max: f32,
-        params: &FindParams<f32>,
-        gathered: &mut Vec<RayBall<f32>>,
-        scratch: &mut Scratch<f32>,
-        stack: &mut Vec<(u32, f32, f32)>,
-        counters: &mut MetaballCounters,
-        record: &mut impl FnMut(roots::Found<f32>, &mut MetaballCounters, usize) -> Option<f32>,
-    ) -> Option<f32> {
-        let finder = self.options.finder;
-        let inv_dir = ray.dir.recip();
-        let fitted = tree.kind == TreeKind::Fitted;
-        let leaf_params = FindParams {
-            owners_only: !fitted,
-            ..*params
-        };
-        let mut best: Option<f32> = None;
-        let mut best_balls: Vec<RayBall<f32>> = Vec::new();
-        stack.clear();
-        let root = &tree.nodes[0];
-        if let Some((a, b)) = root.bounds.ray_range(ray.origin, inv_dir, t_min, t_max) {
-            stack.push((0, a, b));
-        }
-        while let Some((i, near, far)) = stack.pop() {
-            let limit = best.unwrap_or(t_max);
-            if near > limit {
-                continue;
-            }
-            counters.node_traversals += 1;
-            let node = &tree.nodes[i as usize];
-            if node.is_leaf() {
-                let leaf = tree.leaf_balls(node);
-                if leaf.is_empty() {
-                    continue;
-                }
-                let far = far.min(limit);
-                gathered.clear();
-                for (k, &b) in leaf.iter().enumerate() {
-                    self.gather(
-                        ray,
-                        b,
-                        fitted || k < node.owned as usize,
-                        near,
-                        far,
-                        gathered,
-                    );
-                }
-                if gathered.is_empty() {
-                    continue;
-                }
-                let found = roots::find_first(finder, &leaf_params, gathered, near, far, scratch);
-                if let Some(t) = record(found, counters, gathered.len()) {
-                    if fitted {
-                        return Some(t);
-                    }
-                    if best.is_none_or(|b| t < b) {
-                        best = Some(t);
-                        std::mem::swap(&mut best_balls, gathered);
-                    }
-                }
-                continue;
-            }
-            let c = node.first;
-            let l = tree.nodes[c as usize].bounds.ray_range(
-                ray.origin,
-                inv_dir,
-                near.max(t_min),
-                limit,
-            );
-            let r = tree.nodes[c as usize + 1].bounds.ray_range(
-                ray.origin,
-                inv_dir,
-                near.max(t_min),
-                limit,
-            );
-            // Push the farther child first so the nearer one is popped first.
-            match (l, r) {
-                (Some(l), Some(r)) => {
-                    let (first, second) = if l.0 <= r.0 {
-                        ((c, l), (c + 1, r))
-                    } else {
-                        ((c + 1, r), (c, l))
-                    };
-                    stack.push((second.0, second.1 .0, second.1 .1));
-                    stack.push((first.0, first.1 .0, first.1 .1));
-                }
-                (Some(l), None) => stack.push((c, l.0, l.1)),
-                (None, Some(r)) => stack.push((c + 1, r.0, r.1)),
-                (None, None) => {}
-            }
-        }
-        if best.is_some() {
-            *gathered = best_balls;
-        }
-        best
     }
 
     /// Appends ball `i` if the ray's stretch `[lo, hi]` crosses its support.

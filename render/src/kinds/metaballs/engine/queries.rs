@@ -168,7 +168,7 @@ impl PreparedMetaballs {
     /// overlapping leaves, searched only where an owner covers the ray). On return `gathered`
     /// holds the balls of the search that produced the answer.
     #[allow(clippy::too_many_arguments)]
-    fn leaf_walk(
+    pub(super) fn leaf_walk(
         &self,
         tree: &Tree,
         ray: &Ray,
@@ -188,28 +188,21 @@ impl PreparedMetaballs {
             ..*params
         };
         let inv_dir = ray.dir.recip();
-        let mut best: Option<f32> = None;
         let mut best_balls: Vec<RayBall<f32>> = Vec::new();
-        stack.clear();
-        if let Some((a, b)) = tree.nodes[0]
-            .bounds
-            .ray_range(ray.origin, inv_dir, t_min, t_max)
-        {
-            stack.push((0, a, b));
-        }
-        while let Some((i, near, far)) = stack.pop() {
-            let limit = best.unwrap_or(t_max);
-            if near > limit {
-                continue;
-            }
-            counters.node_traversals += 1;
-            let node = &tree.nodes[i as usize];
-            if node.is_leaf() {
+        let mut node_traversals = counters.node_traversals;
+        let best = tree.walk(
+            ray.origin,
+            inv_dir,
+            t_min,
+            t_max,
+            first_leaf,
+            stack,
+            &mut node_traversals,
+            |node, near, far, best| {
                 let leaf = tree.leaf_balls(node);
                 if leaf.is_empty() {
-                    continue;
+                    return None;
                 }
-                let far = far.min(limit);
                 gathered.clear();
                 for (k, &b) in leaf.iter().enumerate() {
                     self.gather(
@@ -222,48 +215,28 @@ impl PreparedMetaballs {
                     );
                 }
                 if gathered.is_empty() {
-                    continue;
+                    return None;
                 }
                 let found = roots::find_first(finder, &leaf_params, gathered, near, far, scratch);
                 counters.leaf_tests += 1;
                 counters.metaballs_considered += gathered.len() as u64;
                 counters.iterations += found.iterations as u64;
-                if let Some(t) = found.t {
-                    counters.hit_iterations += found.hit_iterations as u64;
-                    if first_leaf {
-                        return Some(t);
-                    }
-                    if best.is_none_or(|b| t < b) {
-                        best = Some(t);
-                        std::mem::swap(&mut best_balls, gathered);
-                    }
+                let t = found.t?;
+                counters.hit_iterations += found.hit_iterations as u64;
+                if first_leaf {
+                    return Some(t);
                 }
-                continue;
-            }
-            let c = node.first;
-            let lo = near.max(t_min);
-            let l = tree.nodes[c as usize]
-                .bounds
-                .ray_range(ray.origin, inv_dir, lo, limit);
-            let r = tree.nodes[c as usize + 1]
-                .bounds
-                .ray_range(ray.origin, inv_dir, lo, limit);
-            match (l, r) {
-                (Some(l), Some(r)) => {
-                    let (first, second) = if l.0 <= r.0 {
-                        ((c, l), (c + 1, r))
-                    } else {
-                        ((c + 1, r), (c, l))
-                    };
-                    stack.push((second.0, second.1 .0, second.1 .1));
-                    stack.push((first.0, first.1 .0, first.1 .1));
+                if best.is_none_or(|b| t < b) {
+                    std::mem::swap(&mut best_balls, gathered);
+                    return Some(t);
                 }
-                (Some(l), None) => stack.push((c, l.0, l.1)),
-                (None, Some(r)) => stack.push((c + 1, r.0, r.1)),
-                (None, None) => {}
-            }
-        }
-        if best.is_some() {
+                None
+            },
+        );
+        counters.node_traversals = node_traversals;
+        // The first leaf's root left its balls in `gathered`; the nearest of several swapped
+        // them out.
+        if best.is_some() && !first_leaf {
             *gathered = best_balls;
         }
         best

@@ -33,6 +33,7 @@ pub mod ctx;
 pub mod flat;
 pub mod neighbours;
 pub mod sah;
+pub mod walk;
 
 pub use crate::geom::aabb::Aabb;
 pub use flat::{
