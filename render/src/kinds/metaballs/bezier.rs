@@ -1,4 +1,4 @@
-//! Bézier clipping on one polynomial in Bernstein form (bezier-clipping-metaballs.txt §4):
+//! Bézier clipping on one polynomial in Bernstein form (bezier-clipping-metaballs.txt §3.1–3.2):
 //! the first root in `[0, 1]` by clipping to the convex hull's crossing and splitting where
 //! clipping stalls, and the power-to-Bernstein conversion it starts from.
 
