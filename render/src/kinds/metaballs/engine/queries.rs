@@ -168,6 +168,7 @@ impl PreparedMetaballs {
     /// overlapping leaves, searched only where an owner covers the ray). On return `gathered`
     /// holds the balls of the search that produced the answer.
     #[allow(clippy::too_many_arguments)]
+    #[inline]
     pub(super) fn leaf_walk(
         &self,
         tree: &Tree,
