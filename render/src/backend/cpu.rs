@@ -98,6 +98,9 @@ impl TracePasses for CpuBackend {
 /// A tile's pixels `x0..x1 × y0..y1`.
 type Rect = (u32, u32, u32, u32);
 
+/// A traced tile: its corner, its pixels and depths row by row, and its summary.
+type TracedTile<P, S> = (u32, u32, Vec<P>, Vec<f32>, S);
+
 /// The one tile loop: splits a `width × height` image into tiles, traces them in parallel
 /// with `trace` (which returns a tile's pixels row by row, `per_pixel` values each, its
 /// depths, and a summary), writes every tile into `pixels` and `depth` at its place, and
@@ -114,7 +117,7 @@ fn trace_tiles<P: Copy + Send, S: Send>(
 ) {
     let tiles_x = width.div_ceil(TILE);
     let tiles_y = height.div_ceil(TILE);
-    let tiles: Vec<(u32, u32, Vec<P>, Vec<f32>, S)> = (0..tiles_x * tiles_y)
+    let tiles: Vec<TracedTile<P, S>> = (0..tiles_x * tiles_y)
         .into_par_iter()
         .map(|tile| {
             let x0 = (tile % tiles_x) * TILE;
