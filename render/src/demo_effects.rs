@@ -9,10 +9,12 @@
 //!   open by a clip box (tetrahedral-isosurface-ray-tracing.txt §7, Fig. 7).
 
 use crate::camera::Camera;
-use crate::effects::Effects;
-use crate::metaball::{Kernel, Metaball, MetaballScene};
-use crate::scenes::SplitMix64;
-use crate::shade::{ClipBox, Floor, Isosurface, Light, Lighting, Material, MaterialGroup, Volume};
+use crate::effects::toggles::Effects;
+use crate::geom::clip::ClipBox;
+use crate::geom::rng::SplitMix64;
+use crate::kinds::metaballs::kernel::Kernel;
+use crate::kinds::metaballs::scene::{Metaball, MetaballScene};
+use crate::shade::{Floor, Isosurface, Light, Lighting, Material, MaterialGroup, Volume};
 use glam::Vec3;
 
 fn wave(f: f32, time: f64, p: f32) -> f32 {

@@ -25,10 +25,12 @@
 //! Shadow and occlusion rays ask the scene for any hit, with early exit; with transparent
 //! materials in the plan they walk the crossings instead and multiply `1 - α` of each.
 
-use crate::effects::{EffectsPlan, RayCounts, RayKind};
-use crate::metaball::RayCounters;
+use crate::effects::plan::EffectsPlan;
+use crate::effects::rays::{RayCounts, RayKind};
+use crate::geom::rng::PixelRng;
+use crate::kinds::counters::SceneCounters;
 use crate::ray::{Hit, Ray};
-use crate::sampling::{cosine_hemisphere, uniform_cone, PixelRng};
+use crate::sampling::{cosine_hemisphere, uniform_cone};
 use crate::scene::PreparedScene;
 use crate::shade::{direct, facing, fresnel, Light, Lighting, Material};
 use glam::Vec3;
@@ -87,7 +89,7 @@ pub struct Tracer<'a> {
     /// Rays traced so far, per kind.
     pub counts: RayCounts,
     /// Traversal and root-finder counters of every query.
-    pub counters: RayCounters,
+    pub counters: SceneCounters,
 }
 
 impl<'a> Tracer<'a> {
@@ -98,7 +100,7 @@ impl<'a> Tracer<'a> {
             plan,
             isovalue,
             counts: RayCounts::default(),
-            counters: RayCounters::default(),
+            counters: SceneCounters::default(),
         }
     }
 

@@ -22,29 +22,25 @@ pub mod camera;
 mod demo_effects;
 pub mod effects;
 pub mod framebuffer;
+pub mod geom;
 pub mod integrator;
-pub mod metaball;
+pub mod kinds;
 pub mod ray;
 pub mod sampling;
 pub mod scene;
 pub mod scenes;
 pub mod shade;
-pub mod tet;
+pub mod view;
 
 pub use backend::{Accumulator, Backend, CpuBackend, FrameRays};
 pub use camera::Camera;
+// Temporary aliases for the other crates' paths (`isoray_render::metaball::..`,
+// `isoray_render::tet::..`), until they name `kinds::` themselves.
 pub use effects::{EffectKind, Effects, EffectsPlan, RayCounts, RayKind};
 pub use framebuffer::Framebuffer;
+pub use kinds::metaballs as metaball;
+pub use kinds::tets as tet;
 pub use ray::{Hit, Ray};
 pub use scene::{PreparedScene, Scene, SceneError};
 pub use shade::Lighting;
-
-/// Everything a session chooses about one frame, apart from the scene itself.
-#[derive(Clone, Debug, PartialEq)]
-pub struct View {
-    pub width: u32,
-    pub height: u32,
-    pub camera: Camera,
-    /// The isovalue of the surface to show.
-    pub isovalue: f32,
-}
+pub use view::View;

@@ -1,42 +1,7 @@
-//! Deterministic per-pixel random sequences and the sample warps the effects use.
-//!
-//! Every pixel of every refinement pass draws from its own stream, seeded by a hash of the
-//! pixel's coordinates and the pass number only, so an image is the same whatever the thread
-//! count or tile order, and a test can reproduce any pass.
+//! The sample warps the effects use (their random numbers come from
+//! [`crate::geom::rng::PixelRng`], one stream per pixel and pass).
 
 use glam::Vec3;
-
-/// The random stream of one pixel in one pass (SplitMix64 over a hashed seed).
-#[derive(Clone, Debug)]
-pub struct PixelRng(u64);
-
-#[inline]
-fn mix(mut z: u64) -> u64 {
-    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-    z ^ (z >> 31)
-}
-
-impl PixelRng {
-    /// The stream of pixel (`x`, `y`) in pass `pass`.
-    #[inline]
-    pub fn new(x: u32, y: u32, pass: u32) -> PixelRng {
-        let key = ((y as u64) << 32 | x as u64) ^ mix((pass as u64).wrapping_add(0x1503_A7E5));
-        PixelRng(mix(key.wrapping_mul(0x9E37_79B9_7F4A_7C15)))
-    }
-
-    #[inline]
-    pub fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        mix(self.0)
-    }
-
-    /// Uniform in `[0, 1)`.
-    #[inline]
-    pub fn next_f32(&mut self) -> f32 {
-        (self.next_u64() >> 40) as f32 * (1.0 / (1u64 << 24) as f32)
-    }
-}
 
 /// An orthonormal basis `(t, b)` completing the unit vector `n` (Duff et al. 2017).
 #[inline]
@@ -74,6 +39,7 @@ pub fn uniform_cone(axis: Vec3, cos_max: f32, u1: f32, u2: f32) -> Vec3 {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::geom::rng::PixelRng;
 
     #[test]
     fn streams_are_reproducible_and_distinct() {

@@ -10,8 +10,10 @@
 
 use crate::camera::Camera;
 use crate::demo_effects;
-use crate::metaball::pdb::Element;
-use crate::metaball::{Kernel, Metaball, MetaballScene};
+pub use crate::geom::rng::SplitMix64;
+use crate::kinds::metaballs::kernel::Kernel;
+use crate::kinds::metaballs::pdb::Element;
+use crate::kinds::metaballs::scene::{Metaball, MetaballScene};
 use crate::scene::{Geometry, Scene};
 use crate::shade::Lighting;
 use glam::{Quat, Vec3};
@@ -144,7 +146,7 @@ impl DemoScene {
             DemoScene::Tornado128k => 128_000,
             DemoScene::Molecule => 5_440,
             DemoScene::Pool => 10_000,
-            DemoScene::TetGyroid => crate::tet::generate::demo_mesh().tets().len(),
+            DemoScene::TetGyroid => crate::kinds::tets::generate::demo_mesh().tets().len(),
             DemoScene::Glass => demo_effects::GLASS_BALLS,
             DemoScene::Clouds => demo_effects::CLOUD_BALLS,
             DemoScene::Shells => demo_effects::SHELL_BALLS,
@@ -207,7 +209,7 @@ impl DemoScene {
             DemoScene::Pool => pool(time),
             DemoScene::TetGyroid => {
                 return Scene {
-                    geometry: Geometry::Tets(crate::tet::generate::demo_state(time)),
+                    geometry: Geometry::Tets(crate::kinds::tets::generate::demo_state(time)),
                     lighting: self.lighting(),
                 }
             }
@@ -227,7 +229,7 @@ impl DemoScene {
             DemoScene::Glass => demo_effects::glass_lighting(),
             DemoScene::Clouds => demo_effects::clouds_lighting(),
             DemoScene::Shells => demo_effects::shells_lighting(),
-            DemoScene::TetGyroid => crate::tet::generate::demo_lighting(),
+            DemoScene::TetGyroid => crate::kinds::tets::generate::demo_lighting(),
             _ => Lighting::default(),
         }
     }
@@ -235,43 +237,6 @@ impl DemoScene {
 
 /// The lowest isovalue the paper scenes are built for (the slider's minimum).
 const MIN_ISOVALUE: f32 = 0.25;
-
-/// A small fixed-seed generator (SplitMix64) so scenes never depend on a platform RNG.
-pub struct SplitMix64(pub u64);
-
-impl SplitMix64 {
-    pub fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
-    }
-
-    /// Uniform in `[0, 1)`.
-    pub fn next_f32(&mut self) -> f32 {
-        (self.next_u64() >> 40) as f32 / (1u64 << 24) as f32
-    }
-
-    /// Uniform in `[lo, hi)`.
-    pub fn range(&mut self, lo: f32, hi: f32) -> f32 {
-        lo + (hi - lo) * self.next_f32()
-    }
-
-    /// Uniform in the unit ball.
-    pub fn in_unit_ball(&mut self) -> Vec3 {
-        loop {
-            let v = Vec3::new(
-                self.range(-1.0, 1.0),
-                self.range(-1.0, 1.0),
-                self.range(-1.0, 1.0),
-            );
-            if v.length_squared() <= 1.0 {
-                return v;
-            }
-        }
-    }
-}
 
 const PALETTE: [Vec3; 6] = [
     Vec3::new(0.80, 0.18, 0.12),

@@ -9,7 +9,8 @@
 //! light seen whole from above the horizon delivers exactly the irradiance of a point light at
 //! its centre, so unshadowed shading treats both alike; only shadows see the sphere's extent.
 
-use crate::effects::Effects;
+use crate::effects::toggles::Effects;
+pub use crate::geom::clip::ClipBox;
 use crate::ray::Hit;
 use glam::Vec3;
 
@@ -163,28 +164,6 @@ impl Floor {
         } else {
             self.colors[0]
         }
-    }
-}
-
-/// An axis-aligned box whose inside is cut away, exposing what lies within
-/// (tetrahedral-isosurface-ray-tracing.txt §7, "Clipping Planes and Boxes"). A very large
-/// extent on one side turns it into a clipping plane.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct ClipBox {
-    pub min: Vec3,
-    pub max: Vec3,
-}
-
-impl ClipBox {
-    /// Where `origin + t·dir` is inside the box, if anywhere.
-    #[inline]
-    pub fn range(&self, origin: Vec3, dir: Vec3) -> Option<(f32, f32)> {
-        let inv = dir.recip();
-        let a = (self.min - origin) * inv;
-        let b = (self.max - origin) * inv;
-        let near = a.min(b).max_element();
-        let far = a.max(b).min_element();
-        (near <= far).then_some((near, far))
     }
 }
 

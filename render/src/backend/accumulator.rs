@@ -1,0 +1,227 @@
+//! Above the backends: the frame logic every backend shares. A backend traces passes
+//! ([`TracePasses`]); a frame with effects is its first pass, and progressive refinement
+//! ([`Accumulator`]) the mean of its passes.
+
+use crate::effects::plan::EffectsPlan;
+use crate::effects::rays::{RayCounts, RayKind};
+use crate::effects::toggles::Effects;
+use crate::framebuffer::Framebuffer;
+use crate::geom::counters::RayTotals;
+use crate::kinds::counters::SceneCounters;
+use crate::scene::PreparedScene;
+use crate::shade::linear_to_srgb8;
+use crate::view::View;
+use glam::Vec3;
+
+/// One frame's rays, per ray kind, and the counters of their queries: the summary over
+/// every primitive kind, and each kind's own.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct FrameRays {
+    pub rays: RayCounts,
+    pub counters: RayTotals,
+    pub kinds: SceneCounters,
+}
+
+impl FrameRays {
+    pub fn add(&mut self, o: &FrameRays) {
+        self.rays.add(&o.rays);
+        self.counters.add(&o.counters);
+        self.kinds.add(&o.kinds);
+    }
+}
+
+/// One pass: linear colour and depth per pixel, and its rays.
+pub struct Pass {
+    pub color: Vec<Vec3>,
+    pub depth: Vec<f32>,
+    pub rays: FrameRays,
+}
+
+/// What a backend does: the pass-level seam. Everything above it (effects frames,
+/// refinement) is written once, in this file.
+pub trait TracePasses {
+    /// One frame of primary rays only (ray casting), blocking.
+    fn render_primary(&self, scene: &PreparedScene, view: &View) -> Framebuffer;
+    /// One pass of `plan` (pass `pass` seeds the per-pixel random streams), blocking.
+    fn trace_pass(&self, scene: &PreparedScene, view: &View, plan: &EffectsPlan, pass: u32)
+        -> Pass;
+}
+
+/// The plan of `effects` on `scene`.
+pub fn plan_for(scene: &PreparedScene, effects: &Effects) -> EffectsPlan {
+    let s = scene.scene();
+    EffectsPlan::new(&s.lighting, s.primitive_count(), effects)
+}
+
+/// Renders one frame with `effects` (its first refinement pass), blocking. A plan with
+/// primary rays only renders exactly as [`TracePasses::render_primary`] does.
+pub fn render_effects(
+    backend: &impl TracePasses,
+    scene: &PreparedScene,
+    view: &View,
+    effects: &Effects,
+) -> (Framebuffer, FrameRays) {
+    let plan = plan_for(scene, effects);
+    if plan.is_primary_only() {
+        let fb = backend.render_primary(scene, view);
+        let mut rays = FrameRays::default();
+        rays.rays
+            .add_n(RayKind::Primary, view.width as u64 * view.height as u64);
+        return (fb, rays);
+    }
+    let pass = backend.trace_pass(scene, view, &plan, 0);
+    let mut fb = Framebuffer::new(view.width, view.height);
+    for (i, c) in pass.color.iter().enumerate() {
+        fb.rgb[i * 3..i * 3 + 3].copy_from_slice(&[c.x, c.y, c.z].map(linear_to_srgb8));
+    }
+    fb.depth = pass.depth;
+    (fb, pass.rays)
+}
+
+/// Adds one refinement pass to `accumulator` (reset first if the frame it holds differs)
+/// and returns the image of the mean so far. Once converged it renders nothing and returns
+/// the same image again.
+pub fn refine(
+    backend: &impl TracePasses,
+    scene: &PreparedScene,
+    view: &View,
+    effects: &Effects,
+    accumulator: &mut Accumulator,
+) -> Framebuffer {
+    if accumulator.width != view.width || accumulator.height != view.height {
+        accumulator.reset(view.width, view.height);
+    }
+    if !accumulator.converged {
+        let plan = plan_for(scene, effects);
+        if plan.is_primary_only() {
+            // Ray casting has nothing to refine: one frame by the fast path is final.
+            let fb = backend.render_primary(scene, view);
+            accumulator.passes = 1;
+            accumulator.converged = true;
+            accumulator.last_delta = f32::INFINITY;
+            accumulator.sum.clear();
+            accumulator.fixed = Some(fb.clone());
+            return fb;
+        }
+        let pass_index = accumulator.passes;
+        let pass = backend.trace_pass(scene, view, &plan, pass_index);
+        accumulator.add(pass, plan.is_stochastic());
+    }
+    accumulator.image()
+}
+
+/// Progressive refinement of one still view: the sum of every pass so far, per pixel.
+///
+/// Each pass draws new samples for soft shadows and occlusion (the per-pixel streams are
+/// seeded by the pass number), and the image shown is the mean. The refinement converges when
+/// the mean changes by less than [`Accumulator::threshold`] per pixel and channel on average
+/// from one pass to the next, or after [`Accumulator::max_passes`]; a plan with nothing
+/// random converges after its first pass.
+#[derive(Clone, Debug)]
+pub struct Accumulator {
+    width: u32,
+    height: u32,
+    sum: Vec<Vec3>,
+    depth: Vec<f32>,
+    /// The final image of a plan with nothing to accumulate.
+    fixed: Option<Framebuffer>,
+    passes: u32,
+    converged: bool,
+    /// Mean absolute change of the linear mean from the previous pass (`INFINITY` before 2).
+    last_delta: f32,
+    /// Convergence: mean per-channel change of the linear mean below this.
+    pub threshold: f32,
+    pub max_passes: u32,
+}
+
+impl Default for Accumulator {
+    fn default() -> Accumulator {
+        Accumulator::new(DEFAULT_MAX_PASSES)
+    }
+}
+
+/// Passes after which refinement stops even if it has not met its threshold.
+pub const DEFAULT_MAX_PASSES: u32 = 64;
+/// A mean change of 1e-4 in linear light is a twentieth of one 8-bit sRGB step at mid-grey.
+pub const DEFAULT_THRESHOLD: f32 = 1.0e-4;
+
+impl Accumulator {
+    pub fn new(max_passes: u32) -> Accumulator {
+        Accumulator {
+            width: 0,
+            height: 0,
+            sum: Vec::new(),
+            depth: Vec::new(),
+            fixed: None,
+            passes: 0,
+            converged: false,
+            last_delta: f32::INFINITY,
+            threshold: DEFAULT_THRESHOLD,
+            max_passes: max_passes.max(1),
+        }
+    }
+
+    /// Forgets every pass (the view, scene or effects changed).
+    pub fn reset(&mut self, width: u32, height: u32) {
+        self.width = width;
+        self.height = height;
+        self.sum.clear();
+        self.depth.clear();
+        self.fixed = None;
+        self.passes = 0;
+        self.converged = false;
+        self.last_delta = f32::INFINITY;
+    }
+
+    pub fn passes(&self) -> u32 {
+        self.passes
+    }
+
+    pub fn converged(&self) -> bool {
+        self.converged
+    }
+
+    /// Mean absolute per-channel change of the mean image made by the last pass.
+    pub fn last_delta(&self) -> f32 {
+        self.last_delta
+    }
+
+    fn add(&mut self, pass: Pass, stochastic: bool) {
+        if self.passes == 0 {
+            self.sum = pass.color;
+            self.depth = pass.depth;
+        } else {
+            let k = self.passes as f32;
+            let mut change = 0.0f64;
+            for (s, c) in self.sum.iter_mut().zip(&pass.color) {
+                // |(S + c)/(k + 1) - S/k| = |c - S/k| / (k + 1)
+                let d = (*c - *s / k).abs() / (k + 1.0);
+                change += (d.x + d.y + d.z) as f64;
+                *s += *c;
+            }
+            self.last_delta = (change / (3.0 * self.sum.len().max(1) as f64)) as f32;
+        }
+        self.passes += 1;
+        self.converged = !stochastic
+            || self.passes >= self.max_passes
+            || (self.passes >= 2 && self.last_delta < self.threshold);
+    }
+
+    /// The mean of the passes so far, as an sRGB frame.
+    pub fn image(&self) -> Framebuffer {
+        if let Some(fb) = &self.fixed {
+            return fb.clone();
+        }
+        let mut fb = Framebuffer::new(self.width, self.height);
+        if self.passes == 0 {
+            return fb;
+        }
+        let inv = 1.0 / self.passes as f32;
+        for (i, s) in self.sum.iter().enumerate() {
+            let c = *s * inv;
+            fb.rgb[i * 3..i * 3 + 3].copy_from_slice(&[c.x, c.y, c.z].map(linear_to_srgb8));
+        }
+        fb.depth.clone_from(&self.depth);
+        fb
+    }
+}

@@ -1,0 +1,432 @@
+//! The CPU backend: an image split into tiles, traced on a rayon pool.
+//!
+//! This is the one place in the engine that knows about threads. A render called from inside
+//! the pool (as the server's render jobs are) runs its tiles on that same pool. Both kinds of
+//! frame (ray casting, and a pass of an effects plan) go through the one tile loop,
+//! [`trace_tiles`].
+
+use crate::backend::accumulator::{self, Accumulator, FrameRays, Pass, TracePasses};
+use crate::effects::plan::EffectsPlan;
+use crate::effects::toggles::Effects;
+use crate::framebuffer::Framebuffer;
+use crate::geom::rng::PixelRng;
+use crate::integrator::{shade_primary, Tracer, T_MAX};
+use crate::kinds::counters::SceneCounters;
+use crate::scene::PreparedScene;
+use crate::shade::linear_to_srgb8;
+use crate::view::View;
+use glam::Vec3;
+use rayon::prelude::*;
+
+/// Tile edge in pixels: small enough to balance two to sixty-four workers on one frame.
+const TILE: u32 = 16;
+
+/// A pool of render workers.
+pub struct CpuBackend {
+    pool: rayon::ThreadPool,
+}
+
+/// Why the pool could not be made.
+#[derive(Debug, thiserror::Error)]
+#[error("could not start the render pool: {0}")]
+pub struct PoolError(#[from] rayon::ThreadPoolBuildError);
+
+impl CpuBackend {
+    /// A pool of `threads` workers (0: one per core).
+    pub fn new(threads: usize) -> Result<CpuBackend, PoolError> {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .thread_name(|i| format!("isoray-render-{i}"))
+            .build()?;
+        Ok(CpuBackend { pool })
+    }
+
+    pub fn threads(&self) -> usize {
+        self.pool.current_num_threads()
+    }
+
+    /// Runs `job` on the pool without waiting for it (the server's entry point).
+    pub fn spawn(&self, job: impl FnOnce() + Send + 'static) {
+        self.pool.spawn(job);
+    }
+
+    /// Renders one frame with primary rays only, blocking the caller until it is done.
+    pub fn render(&self, scene: &PreparedScene, view: &View) -> Framebuffer {
+        self.render_primary(scene, view)
+    }
+
+    /// Renders one frame with `effects` (its first refinement pass), blocking. A plan with
+    /// primary rays only renders exactly as [`CpuBackend::render`] does.
+    pub fn render_effects(
+        &self,
+        scene: &PreparedScene,
+        view: &View,
+        effects: &Effects,
+    ) -> (Framebuffer, FrameRays) {
+        accumulator::render_effects(self, scene, view, effects)
+    }
+
+    /// Adds one refinement pass to `accumulator` and returns the image of the mean so far
+    /// (see [`accumulator::refine`]).
+    pub fn refine(
+        &self,
+        scene: &PreparedScene,
+        view: &View,
+        effects: &Effects,
+        accumulator: &mut Accumulator,
+    ) -> Framebuffer {
+        accumulator::refine(self, scene, view, effects, accumulator)
+    }
+}
+
+impl TracePasses for CpuBackend {
+    fn render_primary(&self, scene: &PreparedScene, view: &View) -> Framebuffer {
+        self.pool.install(|| render_tiles(scene, view))
+    }
+
+    fn trace_pass(
+        &self,
+        scene: &PreparedScene,
+        view: &View,
+        plan: &EffectsPlan,
+        pass: u32,
+    ) -> Pass {
+        self.pool.install(|| trace_pass(scene, view, plan, pass))
+    }
+}
+
+/// A tile's pixels `x0..x1 × y0..y1`.
+type Rect = (u32, u32, u32, u32);
+
+/// A traced tile: its corner, its pixels and depths row by row, and its summary.
+type TracedTile<P, S> = (u32, u32, Vec<P>, Vec<f32>, S);
+
+/// The one tile loop: splits a `width × height` image into tiles, traces them in parallel
+/// with `trace` (which returns a tile's pixels row by row, `per_pixel` values each, its
+/// depths, and a summary), writes every tile into `pixels` and `depth` at its place, and
+/// hands each summary to `fold`, in tile order.
+#[allow(clippy::too_many_arguments)]
+fn trace_tiles<P: Copy + Send, S: Send>(
+    width: u32,
+    height: u32,
+    per_pixel: usize,
+    trace: impl Fn(Rect) -> (Vec<P>, Vec<f32>, S) + Sync + Send,
+    pixels: &mut [P],
+    depth: &mut [f32],
+    mut fold: impl FnMut(S),
+) {
+    let tiles_x = width.div_ceil(TILE);
+    let tiles_y = height.div_ceil(TILE);
+    let tiles: Vec<TracedTile<P, S>> = (0..tiles_x * tiles_y)
+        .into_par_iter()
+        .map(|tile| {
+            let x0 = (tile % tiles_x) * TILE;
+            let y0 = (tile / tiles_x) * TILE;
+            let (x1, y1) = ((x0 + TILE).min(width), (y0 + TILE).min(height));
+            let (p, d, s) = trace((x0, y0, x1, y1));
+            (x0, y0, p, d, s)
+        })
+        .collect();
+    for (x0, y0, p, d, s) in tiles {
+        let tile_w = (TILE.min(width - x0)) as usize;
+        for (row, (p_row, d_row)) in p
+            .chunks_exact(tile_w * per_pixel)
+            .zip(d.chunks_exact(tile_w))
+            .enumerate()
+        {
+            let start = (y0 as usize + row) * width as usize + x0 as usize;
+            pixels[start * per_pixel..(start + tile_w) * per_pixel].copy_from_slice(p_row);
+            depth[start..start + tile_w].copy_from_slice(d_row);
+        }
+        fold(s);
+    }
+}
+
+/// Ray casting: each tile's primary hits found together (a kind may trace them as a packet)
+/// and shaded, straight to sRGB.
+fn render_tiles(scene: &PreparedScene, view: &View) -> Framebuffer {
+    let (width, height) = (view.width, view.height);
+    let rays = view.camera.rays(width, height);
+    let forward = rays.forward();
+    let mut fb = Framebuffer::new(width, height);
+    let trace = |rect: Rect| {
+        let (x0, y0, x1, y1) = rect;
+        let n = ((x1 - x0) * (y1 - y0)) as usize;
+        let mut rgb = Vec::with_capacity(n * 3);
+        let mut depth = Vec::with_capacity(n);
+        // Ray casting reports no counters (the frame's rays are its pixels).
+        let mut counters = SceneCounters::default();
+        for (ray, hit) in scene.primary_hits(&rays, rect, view.isovalue, T_MAX, &mut counters) {
+            let (color, t) = shade_primary(scene, &ray, hit.as_ref());
+            rgb.extend([color.x, color.y, color.z].map(linear_to_srgb8));
+            depth.push(t * ray.dir.dot(forward));
+        }
+        (rgb, depth, ())
+    };
+    trace_tiles(width, height, 3, trace, &mut fb.rgb, &mut fb.depth, |()| {});
+    fb
+}
+
+/// One pass of an effects plan: every pixel's primary ray followed by the integrator, in
+/// linear colour, with its rays counted.
+fn trace_pass(scene: &PreparedScene, view: &View, plan: &EffectsPlan, pass: u32) -> Pass {
+    let (width, height) = (view.width, view.height);
+    let rays = view.camera.rays(width, height);
+    let forward = rays.forward();
+    let n = width as usize * height as usize;
+    let mut out = Pass {
+        color: vec![Vec3::ZERO; n],
+        depth: vec![f32::INFINITY; n],
+        rays: FrameRays::default(),
+    };
+    let trace = |(x0, y0, x1, y1): Rect| {
+        let n = ((x1 - x0) * (y1 - y0)) as usize;
+        let mut color = Vec::with_capacity(n);
+        let mut depth = Vec::with_capacity(n);
+        let mut tracer = Tracer::new(scene, plan, view.isovalue);
+        for y in y0..y1 {
+            for x in x0..x1 {
+                let ray = rays.through_pixel(x, y);
+                let mut rng = PixelRng::new(x, y, pass);
+                let (c, t) = tracer.primary(&ray, &mut rng);
+                color.push(c);
+                depth.push(t * ray.dir.dot(forward));
+            }
+        }
+        let rays = FrameRays {
+            rays: tracer.counts,
+            counters: tracer.counters.totals(),
+            kinds: tracer.counters,
+        };
+        (color, depth, rays)
+    };
+    let mut total = FrameRays::default();
+    trace_tiles(
+        width,
+        height,
+        1,
+        trace,
+        &mut out.color,
+        &mut out.depth,
+        |r| total.add(&r),
+    );
+    out.rays = total;
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scenes::DemoScene;
+    use crate::View;
+    use std::sync::Arc;
+
+    #[test]
+    fn render_is_deterministic_across_thread_counts() {
+        let demo = DemoScene::Blobs;
+        let scene = Arc::new(demo.state_at(1.25)).prepare();
+        let view = View {
+            width: 37,
+            height: 23,
+            camera: demo.default_camera(),
+            isovalue: 0.5,
+        };
+        let one = CpuBackend::new(1).expect("pool").render(&scene, &view);
+        let two = CpuBackend::new(2).expect("pool").render(&scene, &view);
+        assert_eq!(one, two);
+        assert!(one.hit_count() > 0, "the default camera sees the blobs");
+        assert!(one.hit_count() < 37 * 23, "and some background");
+    }
+}
+
+#[cfg(test)]
+mod effects_tests {
+    use super::*;
+    use crate::effects::{Effects, RayCounts, RayKind};
+    use crate::scenes::DemoScene;
+    use crate::shade::Lighting;
+    use crate::{Scene, View};
+    use std::sync::Arc;
+
+    fn view(demo: DemoScene) -> View {
+        View {
+            width: 40,
+            height: 30,
+            camera: demo.default_camera(),
+            isovalue: 0.5,
+        }
+    }
+
+    /// Renders `scene` with `a` and with `b` and asserts equal ray counts per kind and
+    /// identical images; returns the counts.
+    fn same_rays(scene: &PreparedScene, v: &View, a: Effects, b: Effects) -> RayCounts {
+        let backend = CpuBackend::new(2).expect("pool");
+        let (fa, ra) = backend.render_effects(scene, v, &a);
+        let (fb, rb) = backend.render_effects(scene, v, &b);
+        for kind in RayKind::ALL {
+            assert_eq!(
+                ra.rays.get(kind),
+                rb.rays.get(kind),
+                "{} rays differ between {a:?} and {b:?}",
+                kind.name()
+            );
+        }
+        assert_eq!(fa, fb, "the images differ");
+        ra.rays
+    }
+
+    #[test]
+    fn effects_no_material_can_use_trace_no_rays() {
+        // Blobs: one directional light, one opaque, non-reflective material.
+        let demo = DemoScene::Blobs;
+        let scene = Arc::new(demo.state_at(1.0)).prepare();
+        let v = view(demo);
+        let pixels = (v.width * v.height) as u64;
+        let off = Effects::OFF;
+        let rays = same_rays(
+            &scene,
+            &v,
+            off,
+            Effects {
+                reflections: true,
+                depth: 3,
+                refraction: true,
+                transparency: true,
+                soft_shadows: true,
+                clip_box: true,
+                isosurfaces: true,
+                ..off
+            },
+        );
+        assert_eq!(rays.get(RayKind::Primary), pixels);
+        assert_eq!(rays.total(), pixels, "ray casting alone");
+
+        // With shadows on (so the full integrator runs), unusable effects still add nothing.
+        let shadows = Effects {
+            shadows: true,
+            ..off
+        };
+        let rays = same_rays(
+            &scene,
+            &v,
+            shadows,
+            Effects {
+                reflections: true,
+                refraction: true,
+                transparency: true,
+                depth: 3,
+                ..shadows
+            },
+        );
+        assert!(rays.get(RayKind::Shadow) > 0, "the light casts shadows");
+        assert_eq!(rays.get(RayKind::Reflection), 0);
+        assert_eq!(rays.get(RayKind::Refraction), 0);
+        assert_eq!(rays.get(RayKind::Transparency), 0);
+
+        // No light: shadows switched on trace nothing.
+        let dark = Scene {
+            lighting: Lighting {
+                lights: Vec::new(),
+                ..Lighting::default()
+            },
+            ..demo.state_at(1.0)
+        };
+        let dark = Arc::new(dark).prepare();
+        let rays = same_rays(&dark, &v, off, shadows);
+        assert_eq!(rays.total(), pixels);
+    }
+
+    #[test]
+    fn effects_a_material_uses_trace_their_rays() {
+        let demo = DemoScene::Glass;
+        let scene = Arc::new(demo.state_at(1.0)).prepare();
+        let v = view(demo);
+        let backend = CpuBackend::new(2).expect("pool");
+        let on = Effects {
+            depth: 1,
+            ..scene.scene().lighting.effects
+        };
+        let (_, rays) = backend.render_effects(&scene, &v, &on);
+        for kind in [RayKind::Shadow, RayKind::Reflection, RayKind::Refraction] {
+            assert!(rays.rays.get(kind) > 0, "{} rays", kind.name());
+        }
+        let deeper = Effects { depth: 3, ..on };
+        let (_, deep) = backend.render_effects(&scene, &v, &deeper);
+        assert!(deep.rays.get(RayKind::Reflection) > rays.rays.get(RayKind::Reflection));
+    }
+
+    fn soft_shadow_view() -> (PreparedScene, View, Effects) {
+        let demo = DemoScene::Glass;
+        let scene = Arc::new(demo.state_at(1.0)).prepare();
+        let effects = Effects {
+            shadows: true,
+            soft_shadows: true,
+            light_samples: 2,
+            ..Effects::OFF
+        };
+        (scene, view(demo), effects)
+    }
+
+    #[test]
+    fn refinement_of_soft_shadows_converges() {
+        let (scene, v, effects) = soft_shadow_view();
+        let backend = CpuBackend::new(2).expect("pool");
+        let mut acc = Accumulator::new(40);
+        acc.threshold = 0.0;
+        let mut deltas = Vec::new();
+        loop {
+            backend.refine(&scene, &v, &effects, &mut acc);
+            if acc.passes() >= 2 {
+                deltas.push(acc.last_delta());
+            }
+            if acc.converged() {
+                break;
+            }
+        }
+        assert_eq!(acc.passes(), 40);
+        // The change from one pass to the next falls monotonically on average: its means over
+        // blocks of eight passes strictly decrease (it goes as 1/k for a running mean).
+        let blocks: Vec<f32> = deltas
+            .chunks(8)
+            .map(|c| c.iter().sum::<f32>() / c.len() as f32)
+            .collect();
+        assert!(
+            blocks.windows(2).all(|w| w[1] < w[0]),
+            "block means {blocks:?}"
+        );
+        assert!(blocks[0] > 0.0, "soft shadows are sampled");
+        assert!(
+            blocks[blocks.len() - 1] < blocks[0] / 4.0,
+            "block means {blocks:?}"
+        );
+    }
+
+    #[test]
+    fn refinement_stops_once_converged() {
+        let (scene, v, effects) = soft_shadow_view();
+        let backend = CpuBackend::new(2).expect("pool");
+        let mut acc = Accumulator::new(2000);
+        let mut image = backend.refine(&scene, &v, &effects, &mut acc);
+        while !acc.converged() {
+            image = backend.refine(&scene, &v, &effects, &mut acc);
+        }
+        let passes = acc.passes();
+        assert!(
+            (2..2000).contains(&passes),
+            "converged by its threshold after {passes} passes"
+        );
+        assert!(acc.last_delta() < acc.threshold);
+        // Converged: further calls render nothing and return the same image.
+        let again = backend.refine(&scene, &v, &effects, &mut acc);
+        assert_eq!(acc.passes(), passes);
+        assert_eq!(again, image);
+        // Without anything random in the plan, one pass is final.
+        let hard = Effects {
+            soft_shadows: false,
+            ..effects
+        };
+        let mut acc = Accumulator::new(2000);
+        backend.refine(&scene, &v, &hard, &mut acc);
+        assert!(acc.converged() && acc.passes() == 1);
+    }
+}

@@ -1,0 +1,84 @@
+//! The closed set of render backends and the one place that matches on it.
+//!
+//! The seam is the pass ([`TracePasses`]): a backend traces a frame of primary rays or one
+//! pass of an effects plan; what is built from passes (effects frames, refinement) lives
+//! above it in [`crate::backend::accumulator`], written once. A wgpu backend is a new
+//! variant here (`Gpu(GpuBackend)`, its type in `backend/gpu.rs` implementing
+//! [`TracePasses`]) and an arm in each `match` below.
+
+use crate::backend::accumulator::{self, Accumulator, FrameRays, TracePasses};
+use crate::backend::cpu::{CpuBackend, PoolError};
+use crate::effects::toggles::Effects;
+use crate::framebuffer::Framebuffer;
+use crate::scene::PreparedScene;
+use crate::view::View;
+
+/// The render backends, a closed set: the pass-level seam the server renders through. A new
+/// backend (the wgpu one) is a new variant; each method dispatches here and nowhere else.
+pub enum Backend {
+    /// Tiles traced on a rayon pool of this machine's cores.
+    Cpu(CpuBackend),
+}
+
+impl Backend {
+    /// The CPU backend with `threads` workers (0: one per core).
+    pub fn cpu(threads: usize) -> Result<Backend, PoolError> {
+        Ok(Backend::Cpu(CpuBackend::new(threads)?))
+    }
+
+    /// The backend's name, for logs and metrics.
+    pub fn name(&self) -> &'static str {
+        match self {
+            Backend::Cpu(_) => "cpu",
+        }
+    }
+
+    /// Worker threads that trace on the CPU.
+    pub fn threads(&self) -> usize {
+        match self {
+            Backend::Cpu(cpu) => cpu.threads(),
+        }
+    }
+
+    /// Runs a render job (trace and encode of one frame) on the backend's workers without
+    /// waiting for it.
+    pub fn spawn(&self, job: impl FnOnce() + Send + 'static) {
+        match self {
+            Backend::Cpu(cpu) => cpu.spawn(job),
+        }
+    }
+
+    /// Renders one frame with primary rays only, blocking the caller until it is done.
+    pub fn render(&self, scene: &PreparedScene, view: &View) -> Framebuffer {
+        match self {
+            Backend::Cpu(cpu) => cpu.render_primary(scene, view),
+        }
+    }
+
+    /// Renders one frame with `effects` (its first refinement pass), blocking; see
+    /// [`accumulator::render_effects`](crate::backend::accumulator::render_effects).
+    pub fn render_effects(
+        &self,
+        scene: &PreparedScene,
+        view: &View,
+        effects: &Effects,
+    ) -> (Framebuffer, FrameRays) {
+        match self {
+            Backend::Cpu(cpu) => accumulator::render_effects(cpu, scene, view, effects),
+        }
+    }
+
+    /// Adds one refinement pass to `accumulator`; see
+    /// [`accumulator::refine`](crate::backend::accumulator::refine).
+    pub fn refine(
+        &self,
+        scene: &PreparedScene,
+        view: &View,
+        effects: &Effects,
+        accumulator: &mut Accumulator,
+    ) -> Framebuffer {
+        match self {
+            Backend::Cpu(cpu) => accumulator::refine(cpu, scene, view, effects, accumulator),
+        }
+    }
+}

@@ -1,0 +1,10 @@
+//! The render backends behind one closed enum ([`dispatch::Backend`]); the seam is the pass
+//! ([`accumulator::TracePasses`]).
+
+pub mod accumulator;
+pub mod cpu;
+pub mod dispatch;
+
+pub use accumulator::{Accumulator, FrameRays, Pass, DEFAULT_MAX_PASSES, DEFAULT_THRESHOLD};
+pub use cpu::{CpuBackend, PoolError};
+pub use dispatch::Backend;

@@ -1,0 +1,297 @@
+//! The closed set of primitive kinds, and the one place that matches on it.
+//!
+//! Every query a scene answers is one `match` here that hands the kind's prepared state to a
+//! generic function of the [`PreparedKind`] contract, so each arm is monomorphic. Adding a
+//! kind adds a variant to [`Geometry`] and [`PreparedGeometry`], an arm to each `match` below
+//! (the compiler lists them: no arm is a wildcard) and a field to
+//! [`SceneCounters`].
+
+use crate::camera::PrimaryRays;
+use crate::kinds::contract::PreparedKind;
+use crate::kinds::counters::SceneCounters;
+use crate::kinds::metaballs::counters::MetaballCounters;
+use crate::kinds::metaballs::engine::{PrepareOptions, PreparedMetaballs};
+use crate::kinds::metaballs::scene::{MetaballError, MetaballScene};
+use crate::kinds::tets::mesh::{TetError, TetScene};
+use crate::kinds::tets::prepared::{PreparedTets, TetOptions};
+use crate::ray::{Hit, Ray};
+use std::sync::Arc;
+
+/// The primitive kinds isoray traces. New kinds are new variants, matched in this file.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Geometry {
+    Metaballs(MetaballScene),
+    /// A tetrahedral mesh with one scalar field (one time step).
+    Tets(TetScene),
+}
+
+/// The prepared form of each primitive kind.
+#[derive(Clone, Debug)]
+pub enum PreparedGeometry {
+    Metaballs(Arc<PreparedMetaballs>),
+    Tets(Arc<PreparedTets>),
+}
+
+/// Why scene data was rejected.
+#[derive(Debug, thiserror::Error, PartialEq)]
+pub enum SceneError {
+    #[error(transparent)]
+    Metaball(#[from] MetaballError),
+    #[error(transparent)]
+    Tet(#[from] TetError),
+}
+
+impl Geometry {
+    /// Checks the data against the engine's limits.
+    pub fn validate(&self, primitive_limit: usize) -> Result<(), SceneError> {
+        match self {
+            Geometry::Metaballs(m) => m.validate(primitive_limit)?,
+            Geometry::Tets(t) => t.validate(primitive_limit)?,
+        }
+        Ok(())
+    }
+
+    /// Number of primitives.
+    pub fn primitive_count(&self) -> usize {
+        match self {
+            Geometry::Metaballs(m) => m.balls.len(),
+            Geometry::Tets(t) => t.tet_count(),
+        }
+    }
+
+    /// Isovalues for which the surface may exist, as an open interval.
+    pub fn isovalue_range(&self) -> (f32, f32) {
+        match self {
+            Geometry::Metaballs(m) => m.isovalue_range(),
+            Geometry::Tets(t) => t.isovalue_range(),
+        }
+    }
+
+    /// The metaball options a plain prepare uses: the Fitted BVH with every optimisation,
+    /// for the state's lowest isovalue, and Bézier clipping.
+    pub fn default_metaball_options(&self) -> PrepareOptions {
+        match self {
+            Geometry::Metaballs(m) => PrepareOptions::fitted(m.min_isovalue),
+            Geometry::Tets(_) => PrepareOptions::fitted(0.0),
+        }
+    }
+
+    /// Builds what tracing needs; each kind takes its own options and ignores the others.
+    pub fn prepare(&self, options: PrepareOptions, tet_options: TetOptions) -> PreparedGeometry {
+        match self {
+            Geometry::Metaballs(m) => {
+                PreparedGeometry::Metaballs(Arc::new(PreparedMetaballs::new(m.clone(), options)))
+            }
+            Geometry::Tets(t) => {
+                PreparedGeometry::Tets(Arc::new(PreparedTets::new(t.clone(), tet_options)))
+            }
+        }
+    }
+}
+
+/// Where a query's work is counted: every kind's counters, or (for the benches, which
+/// count metaball scenes) the metaball counters alone.
+pub trait Tally {
+    /// Runs `f` on this tally's counters of kind `K`.
+    fn count<K: PreparedKind, R>(&mut self, f: impl FnOnce(&mut K::Counters) -> R) -> R;
+}
+
+impl Tally for SceneCounters {
+    #[inline]
+    fn count<K: PreparedKind, R>(&mut self, f: impl FnOnce(&mut K::Counters) -> R) -> R {
+        f(K::counters_in(self))
+    }
+}
+
+/// The metaball counters as a tally: metaball queries count in full, other kinds add their
+/// rays and hits only (as before kinds had counters of their own).
+impl Tally for MetaballCounters {
+    #[inline]
+    fn count<K: PreparedKind, R>(&mut self, f: impl FnOnce(&mut K::Counters) -> R) -> R {
+        let mut all = SceneCounters {
+            metaballs: *self,
+            ..SceneCounters::default()
+        };
+        let r = f(K::counters_in(&mut all));
+        *self = all.metaballs;
+        all.metaballs = MetaballCounters::default();
+        let others = all.totals();
+        self.rays += others.rays;
+        self.hits += others.hits;
+        r
+    }
+}
+
+/// The queries, one `match` each, every arm the same generic call.
+impl PreparedGeometry {
+    pub fn build_ms(&self) -> f64 {
+        match self {
+            PreparedGeometry::Metaballs(m) => build_ms(m.as_ref()),
+            PreparedGeometry::Tets(t) => build_ms(t.as_ref()),
+        }
+    }
+
+    #[inline]
+    pub fn first_hit<C: Tally>(
+        &self,
+        ray: &Ray,
+        t_min: f32,
+        t_max: f32,
+        isovalue: f32,
+        counters: &mut C,
+    ) -> Option<Hit> {
+        match self {
+            PreparedGeometry::Metaballs(m) => {
+                first_hit(m.as_ref(), ray, t_min, t_max, isovalue, counters)
+            }
+            PreparedGeometry::Tets(t) => {
+                first_hit(t.as_ref(), ray, t_min, t_max, isovalue, counters)
+            }
+        }
+    }
+
+    /// [`PreparedGeometry::first_hit`] with its work counted nowhere.
+    #[inline]
+    pub fn first_hit_uncounted(
+        &self,
+        ray: &Ray,
+        t_min: f32,
+        t_max: f32,
+        isovalue: f32,
+    ) -> Option<Hit> {
+        match self {
+            PreparedGeometry::Metaballs(m) => uncounted(m.as_ref(), ray, t_min, t_max, isovalue),
+            PreparedGeometry::Tets(t) => uncounted(t.as_ref(), ray, t_min, t_max, isovalue),
+        }
+    }
+
+    #[inline]
+    pub fn any_hit<C: Tally>(
+        &self,
+        ray: &Ray,
+        t_min: f32,
+        t_max: f32,
+        isovalue: f32,
+        counters: &mut C,
+    ) -> Option<f32> {
+        match self {
+            PreparedGeometry::Metaballs(m) => {
+                any_hit(m.as_ref(), ray, t_min, t_max, isovalue, counters)
+            }
+            PreparedGeometry::Tets(t) => any_hit(t.as_ref(), ray, t_min, t_max, isovalue, counters),
+        }
+    }
+
+    #[inline]
+    pub fn exit_hit<C: Tally>(
+        &self,
+        ray: &Ray,
+        t_min: f32,
+        t_max: f32,
+        isovalue: f32,
+        counters: &mut C,
+    ) -> Option<Hit> {
+        match self {
+            PreparedGeometry::Metaballs(m) => {
+                exit_hit(m.as_ref(), ray, t_min, t_max, isovalue, counters)
+            }
+            PreparedGeometry::Tets(t) => {
+                exit_hit(t.as_ref(), ray, t_min, t_max, isovalue, counters)
+            }
+        }
+    }
+
+    #[inline]
+    pub fn optical_depth(&self, ray: &Ray, t_min: f32, t_max: f32) -> f32 {
+        match self {
+            PreparedGeometry::Metaballs(m) => optical_depth(m.as_ref(), ray, t_min, t_max),
+            PreparedGeometry::Tets(t) => optical_depth(t.as_ref(), ray, t_min, t_max),
+        }
+    }
+
+    pub fn primary_tile<C: Tally>(
+        &self,
+        rays: &PrimaryRays,
+        rect: (u32, u32, u32, u32),
+        isovalue: f32,
+        t_max: f32,
+        counters: &mut C,
+    ) -> Vec<(Ray, Option<Hit>)> {
+        match self {
+            PreparedGeometry::Metaballs(m) => {
+                primary_tile(m.as_ref(), rays, rect, isovalue, t_max, counters)
+            }
+            PreparedGeometry::Tets(t) => {
+                primary_tile(t.as_ref(), rays, rect, isovalue, t_max, counters)
+            }
+        }
+    }
+}
+
+fn build_ms<K: PreparedKind>(k: &K) -> f64 {
+    k.build_ms()
+}
+
+#[inline]
+fn optical_depth<K: PreparedKind>(k: &K, ray: &Ray, t_min: f32, t_max: f32) -> f32 {
+    k.optical_depth(ray, t_min, t_max)
+}
+
+#[inline]
+fn first_hit<K: PreparedKind, C: Tally>(
+    k: &K,
+    ray: &Ray,
+    t_min: f32,
+    t_max: f32,
+    isovalue: f32,
+    counters: &mut C,
+) -> Option<Hit> {
+    counters.count::<K, _>(|c| k.first_hit(ray, t_min, t_max, isovalue, c))
+}
+
+#[inline]
+fn uncounted<K: PreparedKind>(
+    k: &K,
+    ray: &Ray,
+    t_min: f32,
+    t_max: f32,
+    isovalue: f32,
+) -> Option<Hit> {
+    let mut c = K::Counters::default();
+    k.first_hit(ray, t_min, t_max, isovalue, &mut c)
+}
+
+#[inline]
+fn any_hit<K: PreparedKind, C: Tally>(
+    k: &K,
+    ray: &Ray,
+    t_min: f32,
+    t_max: f32,
+    isovalue: f32,
+    counters: &mut C,
+) -> Option<f32> {
+    counters.count::<K, _>(|c| k.any_hit(ray, t_min, t_max, isovalue, c))
+}
+
+#[inline]
+fn exit_hit<K: PreparedKind, C: Tally>(
+    k: &K,
+    ray: &Ray,
+    t_min: f32,
+    t_max: f32,
+    isovalue: f32,
+    counters: &mut C,
+) -> Option<Hit> {
+    counters.count::<K, _>(|c| k.exit_hit(ray, t_min, t_max, isovalue, c))
+}
+
+fn primary_tile<K: PreparedKind, C: Tally>(
+    k: &K,
+    rays: &PrimaryRays,
+    rect: (u32, u32, u32, u32),
+    isovalue: f32,
+    t_max: f32,
+    counters: &mut C,
+) -> Vec<(Ray, Option<Hit>)> {
+    counters.count::<K, _>(|c| k.primary_tile(rays, rect, isovalue, t_max, c))
+}

@@ -1,0 +1,158 @@
+//! Bézier clipping on one polynomial in Bernstein form (bezier-clipping-metaballs.txt §3.1–3.2):
+//! the first root in `[0, 1]` by clipping to the convex hull's crossing and splitting where
+//! clipping stalls, and the power-to-Bernstein conversion it starts from.
+
+use crate::kinds::metaballs::kernel::MAX_W_DEGREE;
+use crate::kinds::metaballs::real::Real;
+
+/// Highest Bernstein degree along a ray: `2 · MAX_W_DEGREE`.
+pub const MAX_DEGREE: usize = 2 * MAX_W_DEGREE;
+
+/// Iterations a finder may spend on one ray before it gives up (a miss).
+pub const ITERATION_CAP: u32 = 20_000;
+
+/// Bézier clipping's pending halves: (control points, lo, hi).
+pub type HalfStack<R> = Vec<([R; MAX_DEGREE + 1], R, R)>;
+/// Most halves Bézier clipping keeps pending; past it, it clips instead of splitting.
+const MAX_PENDING_HALVES: usize = 48;
+
+pub(crate) const BINOMIAL: [[f64; MAX_DEGREE + 1]; MAX_DEGREE + 1] = {
+    let mut c = [[0.0; MAX_DEGREE + 1]; MAX_DEGREE + 1];
+    let mut n = 0;
+    while n <= MAX_DEGREE {
+        c[n][0] = 1.0;
+        let mut k = 1;
+        while k <= n {
+            c[n][k] = c[n - 1][k - 1] + if k < n { c[n - 1][k] } else { 0.0 };
+            k += 1;
+        }
+        n += 1;
+    }
+    c
+};
+
+/// `TO_BERNSTEIN[n][j][i] = C(j, i) / C(n, i)`: power to Bernstein coefficients of degree `n`.
+const TO_BERNSTEIN: [[[f64; MAX_DEGREE + 1]; MAX_DEGREE + 1]; MAX_DEGREE + 1] = {
+    let mut m = [[[0.0; MAX_DEGREE + 1]; MAX_DEGREE + 1]; MAX_DEGREE + 1];
+    let mut n = 0;
+    while n <= MAX_DEGREE {
+        let mut j = 0;
+        while j <= n {
+            let mut i = 0;
+            while i <= j {
+                m[n][j][i] = BINOMIAL[j][i] / BINOMIAL[n][i];
+                i += 1;
+            }
+            j += 1;
+        }
+        n += 1;
+    }
+    m
+};
+
+/// `b_j = Σ_{i ≤ j} C(j, i) / C(n, i) · p_i` for `p(v) = Σ p_i v^i` on `[0, 1]`.
+#[inline]
+pub fn power_to_bernstein<R: Real>(poly: &[R], n: usize, out: &mut [R]) {
+    let m = &TO_BERNSTEIN[n];
+    for j in 0..=n {
+        let mut acc = R::default();
+        for (i, &pi) in poly.iter().enumerate().take(j + 1) {
+            acc = acc + R::of(m[j][i]) * pi;
+        }
+        out[j] = acc;
+    }
+}
+
+/// De Casteljau at `v`: the control points of `[0, v]` into `left`, `[v, 1]` into `right`.
+#[inline]
+pub(crate) fn de_casteljau<R: Real>(b: &[R], n: usize, v: R, left: &mut [R], right: &mut [R]) {
+    let mut tmp = [R::default(); MAX_DEGREE + 1];
+    tmp[..=n].copy_from_slice(&b[..=n]);
+    let u = R::of(1.0) - v;
+    for r in 0..=n {
+        left[r] = tmp[0];
+        right[n - r] = tmp[n - r];
+        for i in 0..n - r {
+            tmp[i] = u * tmp[i] + v * tmp[i + 1];
+        }
+    }
+}
+
+/// The smallest `v ∈ [0, 1]` where the Bernstein polynomial `b` reaches zero from below
+/// (`b_0 ≥ 0` gives 0), to within `tol_v`; `None` when it stays negative.
+#[inline]
+pub fn bezier_first_root<R: Real>(
+    b: &[R; MAX_DEGREE + 1],
+    n: usize,
+    tol_v: R,
+    iters: &mut u32,
+    halves: &mut HalfStack<R>,
+) -> Option<R> {
+    let zero = R::default();
+    let inv_n = R::of(1.0 / n.max(1) as f64);
+    // Pending halves, nearest last popped first.
+    halves.clear();
+    let mut cur = (*b, zero, R::of(1.0));
+    loop {
+        let (ref mut c, ref mut lo, ref mut hi) = cur;
+        *iters += 1;
+        let mut done = *iters > ITERATION_CAP;
+        if c[0] >= zero {
+            return Some(*lo);
+        }
+        if !done && c[..=n].iter().all(|&x| x < zero) {
+            done = true; // the hull lies below the axis: no root here
+        }
+        if !done {
+            // Where the convex hull of (k/n, c_k) meets the axis: over every segment from a
+            // negative to a non-negative control point.
+            let (mut xl, mut xr) = (R::of(1.0), zero);
+            for i in 0..=n {
+                if c[i] >= zero {
+                    continue;
+                }
+                for j in 0..=n {
+                    if c[j] < zero {
+                        continue;
+                    }
+                    let (xi, xj) = (R::of(i as f64) * inv_n, R::of(j as f64) * inv_n);
+                    let x = xi + (xj - xi) * (-c[i]) / (c[j] - c[i]);
+                    xl = xl.min(x);
+                    xr = xr.max(x);
+                }
+            }
+            let (xl, xr) = (xl.max(zero), xr.min(R::of(1.0)));
+            let width = *hi - *lo;
+            if width * (xr - xl) <= tol_v || width <= tol_v {
+                return Some(*lo + width * xl);
+            }
+            let mut left = [zero; MAX_DEGREE + 1];
+            let mut right = [zero; MAX_DEGREE + 1];
+            if xr - xl > R::of(0.8) && halves.len() < MAX_PENDING_HALVES {
+                // Clipping stalls (several roots or a flat stretch): split in half.
+                de_casteljau(c, n, R::of(0.5), &mut left, &mut right);
+                let mid = *lo + width * R::of(0.5);
+                halves.push((right, mid, *hi));
+                *c = left;
+                *hi = mid;
+            } else {
+                // Keep [xl, xr]: cut at xr, then cut the left part at xl / xr.
+                de_casteljau(c, n, xr, &mut left, &mut right);
+                let inner = if xr > zero { xl / xr } else { zero };
+                let mut l2 = [zero; MAX_DEGREE + 1];
+                de_casteljau(&left, n, inner, &mut l2, c);
+                let new_lo = *lo + width * xl;
+                *hi = *lo + width * xr;
+                *lo = new_lo;
+            }
+            continue;
+        }
+        if *iters > ITERATION_CAP {
+            return None;
+        }
+        match halves.pop() {
+            Some(half) => cur = half,
+            None => return None,
+        }
+    }
+}

@@ -1,0 +1,415 @@
+//! A metaball state prepared for tracing: per-ball data for the `f32` hot path, the chosen
+//! acceleration structure, and the traversal modes that feed the root finders.
+//!
+//! How it works: a traversal mode picks which balls a root finder sees on which stretch of
+//! the ray, and counts what fitted-bvh-metaballs.txt Table 3 counts (node traversals, leaf
+//! intersection tests, metaballs considered):
+//! - [`Accel::BruteForce`]: every ball the ray crosses, one search over `[t_min, t_max]`.
+//! - [`Accel::ActiveList`]: metaballs-tutorial.txt §III: all entries and exits sorted, and
+//!   one search per stretch between them with only the balls active there.
+//! - [`Accel::Tree`] with a BVH (fitted-bvh-metaballs.txt §4): every leaf the ray crosses,
+//!   nearest first, searched over its box with its balls and split balls where one of its own
+//!   balls covers the ray; the nearest hit wins and prunes farther nodes.
+//! - [`Accel::Tree`] with a Fitted BVH (§5.2): leaves front to back; the first hit ends it.
+
+use crate::kinds::metaballs::counters::MetaballCounters;
+use crate::kinds::metaballs::roots::{self, FindParams, KernelPoly, RayBall, RootFinder, Scratch};
+use crate::kinds::metaballs::scene::{MetaballScene, Shape};
+use crate::kinds::metaballs::tree::{BuildOptions, Tree, TreeBall, TreeKind, TreeStats};
+use crate::ray::{Hit, Ray};
+use glam::{Mat3, Vec3};
+use std::cell::RefCell;
+use std::sync::{Arc, OnceLock};
+
+// Secondary-ray queries (any hit, exit from the solid, optical depth): the effects layer's.
+mod queries;
+
+/// The closed set of acceleration modes.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Accel {
+    BruteForce,
+    ActiveList,
+    Tree(Tree),
+}
+
+/// Which acceleration mode to build.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum AccelKind {
+    BruteForce,
+    ActiveList,
+    Tree(BuildOptions),
+}
+
+/// How to prepare a state.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PrepareOptions {
+    pub accel: AccelKind,
+    pub finder: RootFinder,
+    /// Absolute tolerance on hit distances, world units.
+    pub tolerance: f32,
+}
+
+impl PrepareOptions {
+    /// The Fitted BVH with every optimisation, for `scene.min_isovalue`, and Bézier clipping.
+    pub fn fitted(min_isovalue: f32) -> PrepareOptions {
+        PrepareOptions {
+            accel: AccelKind::Tree(BuildOptions::fitted(min_isovalue)),
+            finder: RootFinder::BezierClipping,
+            tolerance: 1e-4,
+        }
+    }
+
+    pub fn with_accel(self, accel: AccelKind) -> PrepareOptions {
+        PrepareOptions { accel, ..self }
+    }
+
+    pub fn with_finder(self, finder: RootFinder) -> PrepareOptions {
+        PrepareOptions { finder, ..self }
+    }
+}
+
+/// The hot-path copy of one ball.
+#[derive(Clone, Copy, Debug)]
+struct Ball {
+    center: Vec3,
+    inv_r: f32,
+    strength: f32,
+    lipschitz: f32,
+    min_radius: f32,
+    /// Index into `frames` for an ellipsoid, `u32::MAX` for a sphere.
+    frame: u32,
+}
+
+/// A metaball state ready to trace.
+#[derive(Debug)]
+pub struct PreparedMetaballs {
+    scene: MetaballScene,
+    balls: Vec<Ball>,
+    frames: Vec<Mat3>,
+    options: PrepareOptions,
+    accel: Accel,
+    build_ms: f64,
+    /// Built on first use when a query's isovalue is below the one the §5.3 optimisations
+    /// were built for: the same structure without them.
+    fallback: OnceLock<Accel>,
+}
+
+/// Per-thread buffers of a ray query: the balls along the ray, the root finder's scratch and
+/// the (ball, entry, exit) intervals.
+type RayScratch = (Vec<RayBall<f32>>, Scratch<f32>, Vec<(u32, f32, f32)>);
+
+thread_local! {
+    static SCRATCH: RefCell<RayScratch> =
+        RefCell::new(Default::default());
+}
+
+impl PreparedMetaballs {
+    /// Prepares `scene` (already validated) with `options`.
+    pub fn new(scene: MetaballScene, options: PrepareOptions) -> PreparedMetaballs {
+        let started = std::time::Instant::now();
+        let slope = scene.kernel.max_slope();
+        let mut frames = Vec::new();
+        let balls = scene
+            .balls
+            .iter()
+            .map(|b| {
+                let frame = match b.shape {
+                    Shape::Sphere => u32::MAX,
+                    Shape::Ellipsoid { .. } => {
+                        frames.push(b.normalizing());
+                        (frames.len() - 1) as u32
+                    }
+                };
+                Ball {
+                    center: b.center,
+                    inv_r: 1.0 / b.radius,
+                    strength: b.strength,
+                    lipschitz: b.strength.abs() * slope / b.min_semi_axis(),
+                    min_radius: b.min_semi_axis(),
+                    frame,
+                }
+            })
+            .collect();
+        let accel = build_accel(&scene, options.accel);
+        PreparedMetaballs {
+            scene,
+            balls,
+            frames,
+            options,
+            accel,
+            build_ms: started.elapsed().as_secs_f64() * 1e3,
+            fallback: OnceLock::new(),
+        }
+    }
+
+    pub fn scene(&self) -> &MetaballScene {
+        &self.scene
+    }
+
+    pub fn options(&self) -> &PrepareOptions {
+        &self.options
+    }
+
+    pub fn accel(&self) -> &Accel {
+        &self.accel
+    }
+
+    /// Wall time of [`PreparedMetaballs::new`], milliseconds.
+    pub fn build_ms(&self) -> f64 {
+        self.build_ms
+    }
+
+    pub fn tree_stats(&self) -> Option<TreeStats> {
+        match &self.accel {
+            Accel::Tree(t) => Some(t.stats()),
+            _ => None,
+        }
+    }
+
+    /// The first hit along `ray` in `[t_min, t_max]`.
+    pub fn first_hit(&self, ray: &Ray, t_min: f32, t_max: f32, isovalue: f32) -> Option<Hit> {
+        let mut counters = MetaballCounters::default();
+        self.first_hit_counted(ray, t_min, t_max, isovalue, &mut counters)
+    }
+
+    /// [`PreparedMetaballs::first_hit`], adding to `counters`.
+    pub fn first_hit_counted(
+        &self,
+        ray: &Ray,
+        t_min: f32,
+        t_max: f32,
+        isovalue: f32,
+        counters: &mut MetaballCounters,
+    ) -> Option<Hit> {
+        counters.rays += 1;
+        if !(isovalue > 0.0) || !isovalue.is_finite() || !(t_min < t_max) {
+            return None;
+        }
+        let accel = match (&self.options.accel, &self.accel) {
+            (AccelKind::Tree(opts), Accel::Tree(_))
+                if opts.depends_on_isovalue() && isovalue < opts.isovalue =>
+            {
+                self.fallback
+                    .get_or_init(|| build_fallback(&self.scene, opts))
+            }
+            (_, accel) => accel,
+        };
+        let params = FindParams {
+            kernel: KernelPoly::new(self.scene.kernel),
+            isovalue,
+            tolerance: self.options.tolerance,
+            owners_only: false,
+        };
+        SCRATCH.with(|cell| {
+            let mut guard = cell.borrow_mut();
+            let (gathered, scratch, stack) = &mut *guard;
+            let t = self.trace(
+                accel, ray, t_min, t_max, &params, gathered, scratch, stack, counters,
+            )?;
+            counters.hits += 1;
+            let position = ray.at(t);
+            let (normal, albedo, primitive) = self
+                .scene
+                .surface_detail(gathered.iter().map(|b| b.ball), position);
+            Some(Hit {
+                t,
+                position,
+                normal,
+                albedo,
+                primitive,
+            })
+        })
+    }
+
+    /// The hit distance; on return `gathered` holds the balls of the search that hit.
+    #[allow(clippy::too_many_arguments)]
+    fn trace(
+        &self,
+        accel: &Accel,
+        ray: &Ray,
+        t_min: f32,
+        t_max: f32,
+        params: &FindParams<f32>,
+        gathered: &mut Vec<RayBall<f32>>,
+        scratch: &mut Scratch<f32>,
+        stack: &mut Vec<(u32, f32, f32)>,
+        counters: &mut MetaballCounters,
+    ) -> Option<f32> {
+        let finder = self.options.finder;
+        let record = |found: roots::Found<f32>, counters: &mut MetaballCounters, n: usize| {
+            counters.leaf_tests += 1;
+            counters.metaballs_considered += n as u64;
+            counters.iterations += found.iterations as u64;
+            if found.t.is_some() {
+                counters.hit_iterations += found.hit_iterations as u64;
+            }
+            found.t
+        };
+        match accel {
+            Accel::BruteForce => {
+                gathered.clear();
+                for i in 0..self.balls.len() as u32 {
+                    self.gather(ray, i, true, t_min, t_max, gathered);
+                }
+                let found = roots::find_first(finder, params, gathered, t_min, t_max, scratch);
+                record(found, counters, gathered.len())
+            }
+            Accel::ActiveList => {
+                gathered.clear();
+                for i in 0..self.balls.len() as u32 {
+                    self.gather(ray, i, true, t_min, t_max, gathered);
+                }
+                // Sorted entries and exits; each stretch searched with its active balls.
+                let mut events: Vec<(f32, u32)> = Vec::with_capacity(gathered.len() * 2);
+                for (k, b) in gathered.iter().enumerate() {
+                    events.push((b.t0.max(t_min), (k as u32) << 1));
+                    events.push((b.t1.min(t_max), ((k as u32) << 1) | 1));
+                }
+                events.sort_unstable_by(|x, y| x.0.total_cmp(&y.0).then(x.1.cmp(&y.1)));
+                let mut active: Vec<u32> = Vec::new();
+                let mut section: Vec<RayBall<f32>> = Vec::new();
+                let mut e = 0;
+                while e < events.len() {
+                    let t = events[e].0;
+                    while e < events.len() && events[e].0 <= t {
+                        let k = events[e].1 >> 1;
+                        if events[e].1 & 1 == 0 {
+                            active.push(k);
+                        } else if let Some(p) = active.iter().position(|&a| a == k) {
+                            active.swap_remove(p);
+                        }
+                        e += 1;
+                    }
+                    if e >= events.len() || active.is_empty() {
+                        continue;
+                    }
+                    section.clear();
+                    // Ball order fixed by index, so the sum is the same whatever the sort.
+                    active.sort_unstable();
+                    section.extend(active.iter().map(|&k| gathered[k as usize]));
+                    let found =
+                        roots::find_first(finder, params, &section, t, events[e].0, scratch);
+                    if let Some(t) = record(found, counters, section.len()) {
+                        *gathered = section;
+                        return Some(t);
+                    }
+                }
+                None
+            }
+            Accel::Tree(tree) => self.leaf_walk(
+                tree,
+                ray,
+                t_min,
+                t_max,
+                params,
+                finder,
+                tree.kind == TreeKind::Fitted,
+                gathered,
+                scratch,
+                stack,
+                counters,
+            ),
+        }
+    }
+
+    /// Appends ball `i` if the ray's stretch `[lo, hi]` crosses its support.
+    #[inline]
+    fn gather(
+        &self,
+        ray: &Ray,
+        i: u32,
+        owner: bool,
+        lo: f32,
+        hi: f32,
+        out: &mut Vec<RayBall<f32>>,
+    ) {
+        let b = &self.balls[i as usize];
+        let (e, g) = if b.frame == u32::MAX {
+            let inv_r = b.inv_r;
+            ((ray.origin - b.center) * inv_r, ray.dir * inv_r)
+        } else {
+            let m = self.frames[b.frame as usize];
+            (m * (ray.origin - b.center), m * ray.dir)
+        };
+        let Some((t0, t1, a, tc, s_min)) = RayBall::along(e.to_array(), g.to_array()) else {
+            return;
+        };
+        if t1 < lo || t0 > hi {
+            return;
+        }
+        out.push(RayBall {
+            ball: i,
+            t0,
+            t1,
+            a,
+            tc,
+            s_min,
+            q: b.strength,
+            lipschitz: b.lipschitz,
+            min_radius: b.min_radius,
+            owner,
+        });
+    }
+}
+
+fn build_accel(scene: &MetaballScene, kind: AccelKind) -> Accel {
+    match kind {
+        AccelKind::BruteForce => Accel::BruteForce,
+        AccelKind::ActiveList => Accel::ActiveList,
+        AccelKind::Tree(opts) => Accel::Tree(Tree::build(&tree_balls(scene), scene.kernel, opts)),
+    }
+}
+
+/// The tree for isovalues below the one the §5.3 optimisations were built for: the same
+/// structure without them. Built lazily inside a `OnceLock` that other render threads may
+/// wait on, so it never forks (a forking thread may run one of those waiting frames and wait
+/// on itself).
+fn build_fallback(scene: &MetaballScene, opts: &BuildOptions) -> Accel {
+    let relaxed = BuildOptions {
+        tight_boxes: false,
+        discard_split: false,
+        ..*opts
+    };
+    Accel::Tree(Tree::build_on_this_thread(
+        &tree_balls(scene),
+        scene.kernel,
+        relaxed,
+    ))
+}
+
+/// What a tree build needs of each ball.
+fn tree_balls(scene: &MetaballScene) -> Vec<TreeBall> {
+    scene
+        .balls
+        .iter()
+        .map(|b| TreeBall {
+            center: b.center,
+            radius: b.radius,
+            strength: b.strength,
+        })
+        .collect()
+}
+
+/// Brute force and Bézier clipping on an unprepared scene.
+/// (Defined here, beside the engine it builds, so that the scene's module needs no engine.)
+impl MetaballScene {
+    /// The first crossing of the isosurface along `ray` within `[t_min, t_max]`, by brute
+    /// force and Bézier clipping, without preparing anything (tests, one-off queries).
+    pub fn first_hit(&self, ray: &Ray, t_min: f32, t_max: f32, isovalue: f32) -> Option<Hit> {
+        first_hit_unprepared(self, ray, t_min, t_max, isovalue)
+    }
+}
+
+pub fn first_hit_unprepared(
+    scene: &MetaballScene,
+    ray: &Ray,
+    t_min: f32,
+    t_max: f32,
+    isovalue: f32,
+) -> Option<Hit> {
+    let opts = PrepareOptions::fitted(scene.min_isovalue).with_accel(AccelKind::BruteForce);
+    PreparedMetaballs::new(scene.clone(), opts).first_hit(ray, t_min, t_max, isovalue)
+}
+
+/// Shares a prepared state.
+pub type SharedMetaballs = Arc<PreparedMetaballs>;

@@ -1,0 +1,81 @@
+//! The metaball kind's side of the kind contract: the queries of [`PreparedKind`] answered by
+//! the prepared Fitted BVH (or the structure the options chose) and the root finders.
+
+use crate::camera::PrimaryRays;
+use crate::kinds::contract::PreparedKind;
+use crate::kinds::counters::SceneCounters;
+use crate::kinds::metaballs::counters::MetaballCounters;
+use crate::kinds::metaballs::engine::PreparedMetaballs;
+use crate::ray::{Hit, Ray};
+
+impl PreparedKind for PreparedMetaballs {
+    type Counters = MetaballCounters;
+
+    #[inline]
+    fn counters_in(all: &mut SceneCounters) -> &mut MetaballCounters {
+        &mut all.metaballs
+    }
+
+    fn build_ms(&self) -> f64 {
+        PreparedMetaballs::build_ms(self)
+    }
+
+    #[inline]
+    fn first_hit(
+        &self,
+        ray: &Ray,
+        t_min: f32,
+        t_max: f32,
+        isovalue: f32,
+        counters: &mut MetaballCounters,
+    ) -> Option<Hit> {
+        self.first_hit_counted(ray, t_min, t_max, isovalue, counters)
+    }
+
+    #[inline]
+    fn any_hit(
+        &self,
+        ray: &Ray,
+        t_min: f32,
+        t_max: f32,
+        isovalue: f32,
+        counters: &mut MetaballCounters,
+    ) -> Option<f32> {
+        self.any_hit_counted(ray, t_min, t_max, isovalue, counters)
+    }
+
+    #[inline]
+    fn exit_hit(
+        &self,
+        ray: &Ray,
+        t_min: f32,
+        t_max: f32,
+        isovalue: f32,
+        counters: &mut MetaballCounters,
+    ) -> Option<Hit> {
+        self.exit_hit_counted(ray, t_min, t_max, isovalue, counters)
+    }
+
+    #[inline]
+    fn optical_depth(&self, ray: &Ray, t_min: f32, t_max: f32) -> f32 {
+        PreparedMetaballs::optical_depth(self, ray, t_min, t_max)
+    }
+
+    /// Metaballs trace a tile ray by ray.
+    fn primary_tile(
+        &self,
+        rays: &PrimaryRays,
+        (x0, y0, x1, y1): (u32, u32, u32, u32),
+        isovalue: f32,
+        t_max: f32,
+        counters: &mut MetaballCounters,
+    ) -> Vec<(Ray, Option<Hit>)> {
+        (y0..y1)
+            .flat_map(|y| (x0..x1).map(move |x| rays.through_pixel(x, y)))
+            .map(|ray| {
+                let hit = self.first_hit_counted(&ray, 0.0, t_max, isovalue, counters);
+                (ray, hit)
+            })
+            .collect()
+    }
+}

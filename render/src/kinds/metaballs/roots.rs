@@ -1,0 +1,647 @@
+//! The root finders: the first point along a ray segment where the summed field reaches the
+//! isovalue, each with a tolerance and an iteration count, generic over `f32` (the hot path)
+//! and `f64` (the reference).
+//!
+//! How it works: the acceleration layer hands a finder the balls whose support the ray
+//! crosses, each as a [`RayBall`]: its entry/exit `[t0, t1]` and the quadratic
+//! `s(t) = a t² + b t + c = |M (o + t d - p)|²` (`M = I/R` for a sphere, the inverse of the
+//! scaled rotation for an ellipsoid, bezier-clipping-metaballs.txt §3.3). The hit is the
+//! smallest `t` in `[lo, hi]` with `F(t) ≥ T` (`F(lo) ≥ T` gives `lo`).
+//! - [`RootFinder::March`]: metaballs-tutorial.txt §II–III: walk the sorted entry/exit
+//!   sections with the active list, step a quarter of the smallest active radius, then bisect.
+//! - [`RootFinder::Secant`]: fitted-bvh-metaballs.txt §3: evaluate `F` at the projections of the
+//!   owners' centres on the ray, take `b` as the first with `F ≥ T` and `a` as the sample
+//!   before it, then the secant method (Illinois variant, so it keeps a bracket). Rays that
+//!   graze the surface between projections are missed, as in the paper.
+//! - [`RootFinder::BezierClipping`]: bezier-clipping-metaballs.txt §3.2: sort the entry/exit
+//!   points, and in each section between consecutive ones express every active ball's field
+//!   over the section as a polynomial of degree `2·deg_w` and add them up. The paper adds the
+//!   balls' Bézier control points; adding power coefficients and converting the sum once is
+//!   the same by linearity and cheaper. The convex hull of the control points clips the
+//!   parameter range; when it shrinks by less than 20% the curve is split in half by de
+//!   Casteljau and the nearer half is searched first, so the first root comes out first.
+//! - [`RootFinder::SphereTracing`]: per section, step `(T - F)/L` with `L = Σ |q_i|·L_k/R_i`
+//!   the Lipschitz bound of the active balls (`L_k` the kernel's steepest slope), never less
+//!   than the tolerance, and bisect the last step.
+//!
+//! What each finder can miss (the "grazing" rays of the tests): marching skips a stretch
+//! inside the surface shorter than its step; the secant method one that holds no centre
+//! projection; sphere tracing one shorter than its tolerance; Bézier clipping nothing beyond
+//! the rounding of the field itself.
+
+// Re-exported for the other crates' paths; the definitions are in `bezier` and `real`.
+use crate::kinds::metaballs::bezier::{bezier_first_root, power_to_bernstein};
+pub use crate::kinds::metaballs::bezier::{HalfStack, ITERATION_CAP, MAX_DEGREE};
+use crate::kinds::metaballs::kernel::MAX_W_DEGREE;
+pub use crate::kinds::metaballs::real::Real;
+
+/// The closed set of root finders.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum RootFinder {
+    /// (a) fixed-step marching over the active sections, refined by bisection.
+    March,
+    /// (b) centre projections bracket the first root, the secant method narrows it.
+    Secant,
+    /// (c) Bézier clipping over the sorted entry/exit sections.
+    BezierClipping,
+    /// (d) sphere tracing with a Lipschitz bound per section.
+    SphereTracing,
+}
+
+impl RootFinder {
+    pub const ALL: [RootFinder; 4] = [
+        RootFinder::March,
+        RootFinder::Secant,
+        RootFinder::BezierClipping,
+        RootFinder::SphereTracing,
+    ];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            RootFinder::March => "march+bisect",
+            RootFinder::Secant => "projections+secant",
+            RootFinder::BezierClipping => "bezier clipping",
+            RootFinder::SphereTracing => "sphere tracing",
+        }
+    }
+}
+
+/// One ball as one ray sees it.
+///
+/// `s(t) = a (t - tc)² + s_min`: the quadratic is kept centred on the projection `tc` of the
+/// ball's centre, so that `s` near the ball stays accurate in `f32` however far the ray's
+/// origin is (the expanded `a t² + b t + c` cancels catastrophically at large `t`).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct RayBall<R> {
+    /// Index of the ball in its scene.
+    pub ball: u32,
+    /// Where the ray enters and leaves the support.
+    pub t0: R,
+    pub t1: R,
+    /// Curvature of `s` along the ray (`|M d|²`).
+    pub a: R,
+    /// The parameter of the centre's projection: where `s` is smallest.
+    pub tc: R,
+    /// `s` at `tc`, in `[0, 1)`.
+    pub s_min: R,
+    /// Strength `q_i`.
+    pub q: R,
+    /// `|q_i| · L_k / (smallest semi-axis)`: this ball's bound on `|dF/dt|`.
+    pub lipschitz: R,
+    /// Smallest semi-axis, for the marching step.
+    pub min_radius: R,
+    /// Whether this ball's centre projection is a secant sample point, and (for the BVH with
+    /// split metaballs) whether its support marks where this leaf's field is complete.
+    pub owner: bool,
+}
+
+impl<R: Real> RayBall<R> {
+    /// The ball as seen along `o + t d`, from `e = M (o - p)` and `g = M d` (`M` maps the
+    /// ball's support to the unit sphere); `None` when the ray misses the support.
+    #[inline]
+    pub fn along(e: [R; 3], g: [R; 3]) -> Option<(R, R, R, R, R)> {
+        let dot = |x: [R; 3], y: [R; 3]| x[0] * y[0] + x[1] * y[1] + x[2] * y[2];
+        let a = dot(g, g);
+        if !(a > R::default()) {
+            return None;
+        }
+        let tc = -dot(e, g) / a;
+        let q = [e[0] + tc * g[0], e[1] + tc * g[1], e[2] + tc * g[2]];
+        let s_min = dot(q, q);
+        if !(s_min < R::of(1.0)) {
+            return None;
+        }
+        let half = ((R::of(1.0) - s_min) / a).sqrt();
+        Some((tc - half, tc + half, a, tc, s_min))
+    }
+
+    /// `s` at `t`.
+    #[inline]
+    pub fn s_at(&self, t: R) -> R {
+        let u = t - self.tc;
+        self.a * u * u + self.s_min
+    }
+
+    /// The ball's term of the field at `t`.
+    #[inline]
+    pub fn term(&self, k: &KernelPoly<R>, t: R) -> R {
+        let s = self.s_at(t);
+        if s >= R::of(1.0) {
+            return R::default();
+        }
+        self.q * k.at_w(R::of(1.0) - s)
+    }
+
+    /// The parameter of the centre's projection.
+    #[inline]
+    pub fn projection(&self) -> R {
+        self.tc
+    }
+}
+
+/// A kernel as `Σ c_k w^k`, in the finder's precision.
+#[derive(Clone, Copy, Debug)]
+pub struct KernelPoly<R> {
+    pub c: [R; MAX_W_DEGREE + 1],
+    pub degree: usize,
+}
+
+impl<R: Real> KernelPoly<R> {
+    pub fn new(kernel: crate::kinds::metaballs::kernel::Kernel) -> Self {
+        let c64 = kernel.w_coefficients();
+        let mut c = [R::default(); MAX_W_DEGREE + 1];
+        for (d, s) in c.iter_mut().zip(c64) {
+            *d = R::of(s);
+        }
+        KernelPoly {
+            c,
+            degree: kernel.w_degree(),
+        }
+    }
+
+    #[inline]
+    pub fn at_w(&self, w: R) -> R {
+        let mut acc = self.c[self.degree];
+        let mut k = self.degree;
+        while k > 0 {
+            k -= 1;
+            acc = acc * w + self.c[k];
+        }
+        acc
+    }
+}
+
+/// What a finder needs besides the balls.
+#[derive(Clone, Copy, Debug)]
+pub struct FindParams<R> {
+    pub kernel: KernelPoly<R>,
+    pub isovalue: R,
+    /// Absolute tolerance on the hit distance, world units.
+    pub tolerance: R,
+    /// Only search where an owner's support covers the ray (the BVH's leaves, whose field is
+    /// complete only inside their own balls).
+    pub owners_only: bool,
+}
+
+/// The outcome of one search.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Found<R> {
+    pub t: Option<R>,
+    /// Iterations spent in total.
+    pub iterations: u32,
+    /// Iterations spent on the section or bracket that produced the hit.
+    pub hit_iterations: u32,
+}
+
+/// Reusable buffers, one set per thread.
+#[derive(Debug, Default)]
+pub struct Scratch<R> {
+    events: Vec<(R, u32)>,
+    active: Vec<u32>,
+    samples: Vec<R>,
+    domains: Vec<(R, R)>,
+    halves: HalfStack<R>,
+}
+
+#[inline]
+fn field<R: Real>(k: &KernelPoly<R>, balls: &[RayBall<R>], active: &[u32], t: R) -> R {
+    let mut f = R::default();
+    for &i in active {
+        f = f + balls[i as usize].term(k, t);
+    }
+    f
+}
+
+#[inline]
+fn field_all<R: Real>(k: &KernelPoly<R>, balls: &[RayBall<R>], t: R) -> R {
+    let mut f = R::default();
+    for b in balls {
+        f = f + b.term(k, t);
+    }
+    f
+}
+
+/// The first `t` in `[lo, hi]` with `F(t) ≥ T`, by `finder`.
+pub fn find_first<R: Real>(
+    finder: RootFinder,
+    p: &FindParams<R>,
+    balls: &[RayBall<R>],
+    lo: R,
+    hi: R,
+    scratch: &mut Scratch<R>,
+) -> Found<R> {
+    if balls.is_empty() || !(lo < hi) {
+        return Found::default();
+    }
+    match finder {
+        RootFinder::Secant => secant(p, balls, lo, hi, scratch),
+        RootFinder::March => walk_sections(p, balls, lo, hi, scratch, march_section),
+        RootFinder::BezierClipping => walk_sections(p, balls, lo, hi, scratch, bezier_section),
+        RootFinder::SphereTracing => walk_sections(p, balls, lo, hi, scratch, trace_section),
+    }
+}
+
+type SectionFn<R> =
+    fn(&FindParams<R>, &[RayBall<R>], &[u32], R, R, &mut u32, &mut HalfStack<R>) -> Option<R>;
+
+/// Whether the field can reach `T` on `[a, b]`. The kernels are monotone in `s` with one
+/// sign (a caller may negate them, as the exit query does), so a ball whose term is positive
+/// is largest at its smallest `s` on the stretch and one whose term is negative is at most 0:
+/// their sum is an upper bound. Sections below it are skipped without searching.
+#[inline]
+fn may_reach<R: Real>(p: &FindParams<R>, balls: &[RayBall<R>], active: &[u32], a: R, b: R) -> bool {
+    let peak = p.kernel.at_w(R::of(1.0));
+    let mut bound = R::default();
+    for &i in active {
+        let ball = &balls[i as usize];
+        if ball.q * peak > R::default() {
+            bound = bound + ball.term(&p.kernel, ball.tc.max(a).min(b));
+        }
+    }
+    !(bound < p.isovalue)
+}
+
+/// Sorts the entry/exit points in `[lo, hi]` and calls `section` on each stretch between
+/// consecutive ones with the balls active there (the tutorial's active list).
+fn walk_sections<R: Real>(
+    p: &FindParams<R>,
+    balls: &[RayBall<R>],
+    lo: R,
+    hi: R,
+    scratch: &mut Scratch<R>,
+    section: SectionFn<R>,
+) -> Found<R> {
+    let events = &mut scratch.events;
+    events.clear();
+    for (i, b) in balls.iter().enumerate() {
+        let (t0, t1) = (b.t0.max(lo), b.t1.min(hi));
+        if t0 < t1 {
+            events.push((t0, (i as u32) << 1));
+            events.push((t1, ((i as u32) << 1) | 1));
+        }
+    }
+    events.sort_unstable_by(|x, y| {
+        x.0.partial_cmp(&y.0)
+            .unwrap_or(std::cmp::Ordering::Equal)
+            .then(x.1.cmp(&y.1))
+    });
+    let active = &mut scratch.active;
+    active.clear();
+    let mut owners = 0u32;
+    let mut found = Found::default();
+    let mut e = 0;
+    while e < events.len() {
+        let t = events[e].0;
+        // Apply every event at this parameter.
+        while e < events.len() && !(t < events[e].0) {
+            let (_, code) = events[e];
+            let i = code >> 1;
+            let owner = balls[i as usize].owner;
+            if code & 1 == 0 {
+                active.push(i);
+                owners += owner as u32;
+            } else if let Some(pos) = active.iter().position(|&a| a == i) {
+                active.swap_remove(pos);
+                owners -= owner as u32;
+            }
+            e += 1;
+        }
+        if e >= events.len() || active.is_empty() || (p.owners_only && owners == 0) {
+            continue;
+        }
+        let next = events[e].0;
+        if !may_reach(p, balls, active, t, next) {
+            continue;
+        }
+        let mut iters = 0;
+        let hit = section(p, balls, active, t, next, &mut iters, &mut scratch.halves);
+        found.iterations += iters;
+        if hit.is_some() {
+            found.t = hit;
+            found.hit_iterations = iters;
+            return found;
+        }
+        if found.iterations > ITERATION_CAP {
+            return found;
+        }
+    }
+    found
+}
+
+/// (a) Fixed steps of a quarter of the smallest active radius, then bisection to tolerance.
+fn march_section<R: Real>(
+    p: &FindParams<R>,
+    balls: &[RayBall<R>],
+    active: &[u32],
+    a: R,
+    b: R,
+    iters: &mut u32,
+    _: &mut HalfStack<R>,
+) -> Option<R> {
+    let mut step = R::of(f64::INFINITY);
+    for &i in active {
+        step = step.min(balls[i as usize].min_radius);
+    }
+    let step = step * R::of(0.25);
+    let g = |t: R| field(&p.kernel, balls, active, t) - p.isovalue;
+    let mut t0 = a;
+    *iters += 1;
+    if g(t0) >= R::default() {
+        return Some(t0);
+    }
+    while t0 < b {
+        let t1 = (t0 + step).min(b);
+        if !(t1 > t0) || *iters > ITERATION_CAP {
+            return None; // the precision (or the budget) is exhausted
+        }
+        *iters += 1;
+        if g(t1) >= R::default() {
+            return Some(bisect(&g, t0, t1, p.tolerance, iters));
+        }
+        t0 = t1;
+    }
+    None
+}
+
+/// (d) Sphere tracing: steps of `(T - F) / L`, which cannot pass a root, but never shorter
+/// than the tolerance (so a near-tangency cannot stall it; only a stretch inside the surface
+/// shorter than the tolerance can be stepped over); the last step is refined by bisection.
+fn trace_section<R: Real>(
+    p: &FindParams<R>,
+    balls: &[RayBall<R>],
+    active: &[u32],
+    a: R,
+    b: R,
+    iters: &mut u32,
+    _: &mut HalfStack<R>,
+) -> Option<R> {
+    let mut lipschitz = R::default();
+    for &i in active {
+        lipschitz = lipschitz + balls[i as usize].lipschitz;
+    }
+    let g = |t: R| field(&p.kernel, balls, active, t) - p.isovalue;
+    let mut t = a;
+    let mut prev: Option<R> = None;
+    loop {
+        *iters += 1;
+        let gt = g(t);
+        if gt >= R::default() {
+            return Some(match prev {
+                None => t,
+                Some(lo) => bisect(&g, lo, t, p.tolerance, iters),
+            });
+        }
+        if !(t < b) || *iters > ITERATION_CAP {
+            return None;
+        }
+        let step = (-gt / lipschitz).max(p.tolerance);
+        let next = (t + step).min(b);
+        if !(next > t) {
+            return None; // the precision is exhausted
+        }
+        prev = Some(t);
+        t = next;
+    }
+}
+
+/// Narrows `[lo, hi]` with `g(lo) < 0 ≤ g(hi)` to the tolerance; returns the upper end.
+#[inline]
+fn bisect<R: Real>(g: &impl Fn(R) -> R, lo: R, hi: R, tolerance: R, iters: &mut u32) -> R {
+    let (mut lo, mut hi) = (lo, hi);
+    while hi - lo > tolerance && *iters < ITERATION_CAP {
+        let mid = R::of(0.5) * (lo + hi);
+        if !(lo < mid && mid < hi) {
+            break; // the precision is exhausted
+        }
+        *iters += 1;
+        if g(mid) < R::default() {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    hi
+}
+
+/// (b) fitted-bvh-metaballs.txt §3: bracket by centre projections, then the secant method.
+///
+/// The search runs over `[lo, hi]`, or (for a BVH leaf, `owners_only`) over each stretch of
+/// it that the leaf's own balls cover, where the leaf's field is complete. In each stretch,
+/// `a` starts at its entry and `b` is the first projection with `F ≥ T`, or the stretch's end
+/// (our addition: without it a root between the last projection and a leaf's exit would be
+/// reported at the next leaf's entry, inside the surface); then Illinois regula falsi keeps
+/// `g(a) < 0 ≤ g(b)` and narrows to the tolerance.
+fn secant<R: Real>(
+    p: &FindParams<R>,
+    balls: &[RayBall<R>],
+    lo: R,
+    hi: R,
+    scratch: &mut Scratch<R>,
+) -> Found<R> {
+    let g = |t: R| field_all(&p.kernel, balls, t) - p.isovalue;
+    let mut found = Found::default();
+    let samples = &mut scratch.samples;
+    samples.clear();
+    samples.extend(
+        balls
+            .iter()
+            .filter(|b| b.owner)
+            .map(|b| b.projection())
+            .filter(|&t| lo < t && t < hi),
+    );
+    samples.sort_unstable_by(|x, y| x.partial_cmp(y).unwrap_or(std::cmp::Ordering::Equal));
+    let domains = &mut scratch.domains;
+    domains.clear();
+    if p.owners_only {
+        domains.extend(
+            balls
+                .iter()
+                .filter(|b| b.owner)
+                .map(|b| (b.t0.max(lo), b.t1.min(hi)))
+                .filter(|(a, b)| a < b),
+        );
+        domains.sort_unstable_by(|x, y| x.0.partial_cmp(&y.0).unwrap_or(std::cmp::Ordering::Equal));
+        // Merge overlapping stretches in place.
+        let mut merged = 0;
+        for k in 0..domains.len() {
+            let d = domains[k];
+            if merged > 0 && !(domains[merged - 1].1 < d.0) {
+                domains[merged - 1].1 = domains[merged - 1].1.max(d.1);
+            } else {
+                domains[merged] = d;
+                merged += 1;
+            }
+        }
+        domains.truncate(merged);
+    } else {
+        domains.push((lo, hi));
+    }
+    let mut next_sample = 0;
+    for &(d0, d1) in domains.iter() {
+        let (mut a, mut ga) = (d0, g(d0));
+        found.iterations += 1;
+        if ga >= R::default() {
+            found.t = Some(d0);
+            return found;
+        }
+        let mut bracket = None;
+        while next_sample < samples.len() && !(d0 < samples[next_sample]) {
+            next_sample += 1;
+        }
+        while next_sample < samples.len() && samples[next_sample] < d1 {
+            let t = samples[next_sample];
+            next_sample += 1;
+            found.iterations += 1;
+            let gt = g(t);
+            if gt >= R::default() {
+                bracket = Some((t, gt));
+                break;
+            }
+            (a, ga) = (t, gt);
+        }
+        if bracket.is_none() {
+            // The stretch's end is a sample too, so a root just before a leaf or section
+            // boundary is bracketed here rather than reported at the next one's entry.
+            found.iterations += 1;
+            let g1 = g(d1);
+            if g1 >= R::default() {
+                bracket = Some((d1, g1));
+            }
+        }
+        let Some((mut b, mut gb)) = bracket else {
+            continue;
+        };
+        // Illinois regula falsi: the secant step, halving the stale end's weight.
+        let mut side = 0i8;
+        let mut iters = 0;
+        while b - a > p.tolerance && iters < 200 {
+            iters += 1;
+            let mut c = b - gb * (b - a) / (gb - ga);
+            if !(a < c && c < b) {
+                c = R::of(0.5) * (a + b);
+                if !(a < c && c < b) {
+                    break; // the precision is exhausted
+                }
+            }
+            let gc = g(c);
+            if gc >= R::default() {
+                (b, gb) = (c, gc);
+                if side == 1 {
+                    ga = ga * R::of(0.5);
+                }
+                side = 1;
+            } else {
+                (a, ga) = (c, gc);
+                if side == -1 {
+                    gb = gb * R::of(0.5);
+                }
+                side = -1;
+            }
+        }
+        found.t = Some(b);
+        found.iterations += iters;
+        found.hit_iterations = iters;
+        return found;
+    }
+    found
+}
+
+/// (c) The section's field minus `T` as a Bernstein polynomial, then Bézier clipping.
+fn bezier_section<R: Real>(
+    p: &FindParams<R>,
+    balls: &[RayBall<R>],
+    active: &[u32],
+    a: R,
+    b: R,
+    iters: &mut u32,
+    halves: &mut HalfStack<R>,
+) -> Option<R> {
+    let h = b - a;
+    let degree = 2 * p.kernel.degree;
+    let mut poly = [R::default(); MAX_DEGREE + 1];
+    for &i in active {
+        let ball = &balls[i as usize];
+        // s(a + h v) = s0 + s1 v + s2 v², so w = 1 - s in power form.
+        let d = a - ball.tc;
+        let s0 = ball.a * d * d + ball.s_min;
+        let s1 = R::of(2.0) * ball.a * d * h;
+        let s2 = ball.a * h * h;
+        // w = 1 - s as a quadratic in v, and its powers up to the kernel's degree.
+        let (w0, w1, w2) = (R::of(1.0) - s0, -s1, -s2);
+        let mut wk = [R::default(); MAX_DEGREE + 1];
+        wk[0] = w0;
+        wk[1] = w1;
+        wk[2] = w2;
+        let mut len = 3;
+        let mut k = 1;
+        loop {
+            let ck = p.kernel.c[k] * ball.q;
+            if ck != R::default() {
+                for j in 0..len {
+                    poly[j] = poly[j] + ck * wk[j];
+                }
+            }
+            if k == p.kernel.degree {
+                break;
+            }
+            // wk ← wk · (w0 + w1 v + w2 v²), from the top down so it works in place.
+            wk[len + 1] = wk[len - 1] * w2;
+            wk[len] = wk[len - 1] * w1 + wk[len - 2] * w2;
+            let mut j = len - 1;
+            while j >= 2 {
+                wk[j] = wk[j] * w0 + wk[j - 1] * w1 + wk[j - 2] * w2;
+                j -= 1;
+            }
+            wk[1] = wk[1] * w0 + wk[0] * w1;
+            wk[0] = wk[0] * w0;
+            len += 2;
+            k += 1;
+        }
+    }
+    poly[0] = poly[0] - p.isovalue;
+    let mut bern = [R::default(); MAX_DEGREE + 1];
+    power_to_bernstein(&poly, degree, &mut bern);
+    let tol_v = p.tolerance / h;
+    bezier_first_root(&bern, degree, tol_v, iters, halves).map(|v| a + h * v)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::kinds::metaballs::bezier::{de_casteljau, BINOMIAL};
+
+    #[test]
+    fn bezier_clipping_finds_the_smallest_root_of_a_cubic() {
+        // (v - 0.2)(v - 0.5)(v - 0.9) · -1: negative at 0, roots at 0.2, 0.5, 0.9.
+        let poly = [0.09, -0.73, 1.6, -1.0, 0.0, 0.0, 0.0, 0.0, 0.0];
+        let mut b = [0.0f64; MAX_DEGREE + 1];
+        power_to_bernstein(&poly, 3, &mut b);
+        let mut iters = 0;
+        let v = bezier_first_root(
+            &[-b[0], -b[1], -b[2], -b[3], 0.0, 0.0, 0.0, 0.0, 0.0],
+            3,
+            1e-12,
+            &mut iters,
+            &mut Vec::new(),
+        )
+        .expect("a root");
+        assert!((v - 0.2).abs() < 1e-9, "v = {v}");
+        assert!(iters < 40, "{iters} iterations");
+    }
+
+    #[test]
+    fn de_casteljau_halves_evaluate_like_the_whole() {
+        let b = [0.1f64, -0.5, 0.3, 0.9, 0.0, 0.0, 0.0, 0.0, 0.0];
+        let mut l = [0.0; MAX_DEGREE + 1];
+        let mut r = [0.0; MAX_DEGREE + 1];
+        de_casteljau(&b, 3, 0.3, &mut l, &mut r);
+        assert!((l[3] - r[0]).abs() < 1e-12);
+        let eval = |c: &[f64], v: f64| {
+            (0..=3)
+                .map(|k| BINOMIAL[3][k] * v.powi(k as i32) * (1.0 - v).powi(3 - k as i32) * c[k])
+                .sum::<f64>()
+        };
+        assert!((eval(&b, 0.15) - eval(&l, 0.5)).abs() < 1e-12);
+        assert!((eval(&b, 0.65) - eval(&r, 0.5)).abs() < 1e-12);
+    }
+}

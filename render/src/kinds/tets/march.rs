@@ -1,0 +1,499 @@
+//! Marching tetrahedra and the ray–isopolygon test.
+//!
+//! How it works (tetrahedral-isosurface-ray-tracing.txt §4.1–4.3):
+//! - Extraction (§4.1): each corner is above the isovalue or not, giving one of 16 cases;
+//!   [`CASES`] stores, per case, how many polygon vertices there are and the tet edges they
+//!   lie on, in cyclic order. Each vertex is interpolated along its edge, always from the
+//!   corner with the lower *global* vertex index, so two tets sharing an edge compute the
+//!   same point bit for bit.
+//! - Intersection (§4.2): the paper projects the ray's hit on the polygon's plane to 2-D and
+//!   tests it against each edge's half-plane. We do the same half-space test one dimension
+//!   up: each edge and the ray origin span a plane with normal `m = (p_i - o) × (p_{i+1} - o)`,
+//!   and the ray direction `d` passes inside the polygon exactly when every `m · d ≥ 0`
+//!   (with the edges oriented as seen from `o`). Two reasons: the `m` depend only on the
+//!   origin, so a packet of rays from one eye computes them once per polygon and then pays
+//!   one dot product per edge and ray; and a shared edge gives its two polygons exactly
+//!   negated `m` (the cross product is antisymmetric in floating point too), so a ray on
+//!   the edge is never lost between neighbouring tets (the surface is watertight).
+//! - Frustum culling (§4.3): a ray through a tile is a positive combination of the tile's
+//!   four corner rays, so when all four corners fail the same edge the whole packet misses,
+//!   and when all four pass every edge the whole packet hits and only distances remain.
+
+use glam::{Vec3, Vec4, Vec4Swizzles};
+
+/// Tet edges as pairs of corners.
+pub const EDGES: [(usize, usize); 6] = [(0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3)];
+
+/// Per case (bit `i` set: corner `i` above the isovalue): the number of polygon vertices
+/// (0, 3 or 4) and the edges (indices into [`EDGES`]) they lie on, in cyclic order.
+pub const CASES: [(u8, [u8; 4]); 16] = [
+    (0, [0; 4]),
+    (3, [0, 1, 2, 0]),
+    (3, [0, 3, 4, 0]),
+    (4, [1, 2, 4, 3]),
+    (3, [1, 3, 5, 0]),
+    (4, [0, 2, 5, 3]),
+    (4, [0, 4, 5, 1]),
+    (3, [2, 4, 5, 0]),
+    (3, [2, 4, 5, 0]),
+    (4, [0, 1, 5, 4]),
+    (4, [0, 3, 5, 2]),
+    (3, [1, 3, 5, 0]),
+    (4, [1, 3, 4, 2]),
+    (3, [0, 3, 4, 0]),
+    (3, [0, 1, 2, 0]),
+    (0, [0; 4]),
+];
+
+/// The marching-tets case of a tet's four scalars against `isovalue`: bit `i` is set when
+/// scalar `i` is above it. A polygon exists exactly when `min ≤ isovalue < max`.
+#[inline]
+pub fn case_of(scalars: [f32; 4], isovalue: f32) -> usize {
+    (scalars[0] > isovalue) as usize
+        | ((scalars[1] > isovalue) as usize) << 1
+        | ((scalars[2] > isovalue) as usize) << 2
+        | ((scalars[3] > isovalue) as usize) << 3
+}
+
+/// A tet's isopolygon: three or four vertices in cyclic order.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Isopolygon {
+    pub count: usize,
+    pub points: [Vec3; 4],
+}
+
+/// The isopolygon of the tet with global vertex indices `ids` and corners `corners`
+/// (`xyz` position, `w` scalar), or `None` when the isovalue misses the tet.
+#[inline]
+pub fn extract(ids: [u32; 4], corners: [Vec4; 4], isovalue: f32) -> Option<Isopolygon> {
+    let (count, edges) = CASES[case_of(corners.map(|c| c.w), isovalue)];
+    if count == 0 {
+        return None;
+    }
+    let mut points = [Vec3::ZERO; 4];
+    for (point, &edge) in points.iter_mut().zip(&edges[..count as usize]) {
+        let (a, b) = EDGES[edge as usize];
+        // From the lower global index, so a shared edge gives the same point in every tet.
+        let (a, b) = if ids[a] < ids[b] { (a, b) } else { (b, a) };
+        let (pa, pb) = (corners[a], corners[b]);
+        let s = (isovalue - pa.w) / (pb.w - pa.w);
+        *point = pa.xyz() + (pb.xyz() - pa.xyz()) * s;
+    }
+    Some(Isopolygon {
+        count: count as usize,
+        points,
+    })
+}
+
+/// An isopolygon set up for rays from one origin: the oriented edge-plane normals, the
+/// polygon's plane normal and `n · (p_0 - o)`.
+#[derive(Clone, Copy, Debug)]
+pub struct PolygonFromOrigin {
+    count: usize,
+    edge_normals: [Vec3; 4],
+    normal: Vec3,
+    numerator: f32,
+}
+
+/// The verdict of the corner-ray frustum test on one polygon.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum FrustumTest {
+    /// Every ray of the packet misses: skip the per-ray tests.
+    Miss,
+    /// Every ray of the packet passes every edge: only the distance remains.
+    Hit,
+    /// Test each ray.
+    Partial,
+}
+
+/// Corner rays must clear an edge plane by this fraction of `|m|` (directions are unit) for
+/// the frustum verdicts, far above the rounding of one dot product (≈ 4·10⁻⁷), so a verdict
+/// never disagrees with the per-ray test.
+const FRUSTUM_MARGIN: f32 = 1e-5;
+
+impl PolygonFromOrigin {
+    #[inline]
+    pub fn new(poly: &Isopolygon, origin: Vec3) -> PolygonFromOrigin {
+        let n = poly.count;
+        let rel = poly.points.map(|p| p - origin);
+        let normal = if n == 3 {
+            (rel[1] - rel[0]).cross(rel[2] - rel[0])
+        } else {
+            (rel[2] - rel[0]).cross(rel[3] - rel[1])
+        };
+        let numerator = normal.dot(rel[0]);
+        // Seen from the origin's side of the plane the edges turn the other way.
+        let sign = if numerator < 0.0 { -1.0 } else { 1.0 };
+        let mut edge_normals = [Vec3::ZERO; 4];
+        for i in 0..n {
+            let j = if i + 1 == n { 0 } else { i + 1 };
+            edge_normals[i] = rel[i].cross(rel[j]) * sign;
+        }
+        PolygonFromOrigin {
+            count: n,
+            edge_normals,
+            normal,
+            numerator,
+        }
+    }
+
+    /// Distance along `dir` (unit) from the origin to the polygon, if the ray passes inside.
+    #[inline]
+    pub fn intersect(&self, dir: Vec3) -> Option<f32> {
+        for m in &self.edge_normals[..self.count] {
+            if m.dot(dir) < 0.0 {
+                return None;
+            }
+        }
+        self.distance(dir)
+    }
+
+    /// Distance to the polygon's plane along `dir` (for rays known to pass inside).
+    #[inline]
+    pub fn distance(&self, dir: Vec3) -> Option<f32> {
+        let t = self.numerator / self.normal.dot(dir);
+        t.is_finite().then_some(t)
+    }
+
+    /// §4.3: the four corner rays of a packet against every edge.
+    #[inline]
+    pub fn frustum(&self, corners: &[Vec3; 4]) -> FrustumTest {
+        let mut all_inside = true;
+        for m in &self.edge_normals[..self.count] {
+            let margin = FRUSTUM_MARGIN * m.length();
+            let mut all_outside = true;
+            for c in corners {
+                let v = m.dot(*c);
+                all_outside &= v < -margin;
+                all_inside &= v > margin;
+            }
+            if all_outside {
+                return FrustumTest::Miss;
+            }
+        }
+        if all_inside {
+            FrustumTest::Hit
+        } else {
+            FrustumTest::Partial
+        }
+    }
+}
+
+/// One ray against an isopolygon: the distance if the ray passes inside within
+/// `[t_min, t_max]`. The same arithmetic as [`PolygonFromOrigin`] (so the same answers, bit
+/// for bit), ordered for one ray: the plane distance first, which rejects most polygons
+/// (behind the origin or beyond the best hit so far) before any edge test, then the edges,
+/// stopping at the first that fails.
+#[inline]
+pub fn intersect_one(
+    poly: &Isopolygon,
+    origin: Vec3,
+    dir: Vec3,
+    t_min: f32,
+    t_max: f32,
+) -> Option<f32> {
+    let n = poly.count;
+    let rel = poly.points.map(|p| p - origin);
+    let normal = if n == 3 {
+        (rel[1] - rel[0]).cross(rel[2] - rel[0])
+    } else {
+        (rel[2] - rel[0]).cross(rel[3] - rel[1])
+    };
+    let numerator = normal.dot(rel[0]);
+    let t = numerator / normal.dot(dir);
+    if !(t >= t_min && t <= t_max && t.is_finite()) {
+        return None;
+    }
+    let sign = if numerator < 0.0 { -1.0 } else { 1.0 };
+    for i in 0..n {
+        let j = if i + 1 == n { 0 } else { i + 1 };
+        if (rel[i].cross(rel[j]) * sign).dot(dir) < 0.0 {
+            return None;
+        }
+    }
+    Some(t)
+}
+
+/// The (constant) gradient of the linear field over a tet, and six times its signed volume.
+#[inline]
+pub fn gradient(corners: [Vec4; 4]) -> (Vec3, f32) {
+    let p0 = corners[0].xyz();
+    let e1 = corners[1].xyz() - p0;
+    let e2 = corners[2].xyz() - p0;
+    let e3 = corners[3].xyz() - p0;
+    let c23 = e2.cross(e3);
+    let c31 = e3.cross(e1);
+    let c12 = e1.cross(e2);
+    let det = e1.dot(c23);
+    let s0 = corners[0].w;
+    let g =
+        (c23 * (corners[1].w - s0) + c31 * (corners[2].w - s0) + c12 * (corners[3].w - s0)) / det;
+    (g, det)
+}
+
+/// Barycentric coordinates of `p` in the tet, clamped to the tet and renormalised.
+#[inline]
+pub fn barycentric(corners: [Vec4; 4], p: Vec3) -> [f32; 4] {
+    let [a, b, c, d] = corners.map(|v| v.xyz());
+    let vol = |p0: Vec3, p1: Vec3, p2: Vec3, p3: Vec3| (p1 - p0).cross(p2 - p0).dot(p3 - p0);
+    let total = vol(a, b, c, d);
+    let l = [
+        vol(p, b, c, d) / total,
+        vol(a, p, c, d) / total,
+        vol(a, b, p, d) / total,
+        vol(a, b, c, p) / total,
+    ]
+    .map(|x| if x.is_finite() { x.max(0.0) } else { 0.0 });
+    let sum: f32 = l.iter().sum();
+    if sum > 0.0 {
+        l.map(|x| x / sum)
+    } else {
+        [0.25; 4]
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geom::rng::SplitMix64;
+
+    #[test]
+    fn the_case_table_is_marching_tets() {
+        for (case, &(count, edges)) in CASES.iter().enumerate() {
+            let above = |c: usize| case & (1 << c) != 0;
+            let crossing: Vec<usize> = (0..6)
+                .filter(|&e| above(EDGES[e].0) != above(EDGES[e].1))
+                .collect();
+            assert_eq!(count as usize, crossing.len(), "case {case}");
+            let listed: Vec<usize> = edges[..count as usize]
+                .iter()
+                .map(|&e| e as usize)
+                .collect();
+            let mut sorted = listed.clone();
+            sorted.sort_unstable();
+            assert_eq!(sorted, crossing, "case {case}: every crossing edge once");
+            // Consecutive polygon vertices lie on a common face: their edges span 3 corners.
+            for i in 0..listed.len() {
+                let (a, b) = EDGES[listed[i]];
+                let (c, d) = EDGES[listed[(i + 1) % listed.len()]];
+                let mut corners = vec![a, b, c, d];
+                corners.sort_unstable();
+                corners.dedup();
+                assert_eq!(corners.len(), 3, "case {case}: edge {i} crosses a face");
+            }
+        }
+    }
+
+    fn random_tet(rng: &mut SplitMix64) -> [Vec4; 4] {
+        [0; 4].map(|_| {
+            Vec4::new(
+                rng.range(-1.0, 1.0),
+                rng.range(-1.0, 1.0),
+                rng.range(-1.0, 1.0),
+                rng.range(-1.0, 1.0),
+            )
+        })
+    }
+
+    #[test]
+    fn isopolygons_are_planar_convex_and_on_the_isosurface() {
+        let mut rng = SplitMix64(7);
+        let mut seen = [0usize; 5];
+        for _ in 0..2000 {
+            let corners = random_tet(&mut rng);
+            let iso = rng.range(-0.8, 0.8);
+            let Some(poly) = extract([0, 1, 2, 3], corners, iso) else {
+                continue;
+            };
+            seen[poly.count] += 1;
+            let (g, det) = gradient(corners);
+            if det.abs() < 1e-3 {
+                continue;
+            }
+            let p = &poly.points[..poly.count];
+            for q in p {
+                // The linear field is the isovalue at every polygon vertex.
+                let f = corners[0].w + g.dot(*q - corners[0].xyz());
+                assert!((f - iso).abs() < 1e-3 * (1.0 + g.length()), "{f} vs {iso}");
+            }
+            // Convex: every turn has the same sense about the gradient.
+            let turns: Vec<f32> = (0..p.len())
+                .map(|i| {
+                    let a = p[(i + 1) % p.len()] - p[i];
+                    let b = p[(i + 2) % p.len()] - p[(i + 1) % p.len()];
+                    a.cross(b).dot(g)
+                })
+                .collect();
+            let scale: f32 = turns.iter().map(|t| t.abs()).fold(0.0, f32::max);
+            assert!(
+                turns.iter().all(|&t| t >= -1e-4 * scale)
+                    || turns.iter().all(|&t| t <= 1e-4 * scale),
+                "{turns:?}"
+            );
+        }
+        assert!(
+            seen[3] > 100 && seen[4] > 100,
+            "both shapes tested: {seen:?}"
+        );
+    }
+
+    #[test]
+    fn ray_isopolygon_test_matches_the_plane_and_inside_test() {
+        let mut rng = SplitMix64(11);
+        let mut hits = 0;
+        for _ in 0..4000 {
+            let corners = random_tet(&mut rng);
+            let Some(poly) = extract([0, 1, 2, 3], corners, 0.0) else {
+                continue;
+            };
+            let origin = 3.0 * rng.in_unit_ball() + Vec3::new(0.0, 0.0, 3.0);
+            let target = 0.6 * rng.in_unit_ball();
+            let dir = (target - origin).normalize();
+            let got = PolygonFromOrigin::new(&poly, origin).intersect(dir);
+            // Independent answer in f64: the plane of the linear field, then barycentric
+            // coordinates of the hit within the tet.
+            let c = corners.map(|v| v.as_dvec4());
+            let p0 = c[0].truncate();
+            let e = [1, 2, 3].map(|i| c[i].truncate() - p0);
+            let det = e[0].dot(e[1].cross(e[2]));
+            if det.abs() < 1e-3 {
+                continue;
+            }
+            let g = (e[1].cross(e[2]) * (c[1].w - c[0].w)
+                + e[2].cross(e[0]) * (c[2].w - c[0].w)
+                + e[0].cross(e[1]) * (c[3].w - c[0].w))
+                / det;
+            let (o, d) = (origin.as_dvec3(), dir.as_dvec3());
+            let t = -(c[0].w + g.dot(o - p0)) / g.dot(d);
+            let h = o + d * t;
+            let vol = |a: glam::DVec3, b: glam::DVec3, cc: glam::DVec3, dd: glam::DVec3| {
+                (b - a).cross(cc - a).dot(dd - a)
+            };
+            let [a, b, cc, dd] = c.map(|v| v.truncate());
+            let l = [
+                vol(h, b, cc, dd),
+                vol(a, h, cc, dd),
+                vol(a, b, h, dd),
+                vol(a, b, cc, h),
+            ]
+            .map(|x| x / vol(a, b, cc, dd));
+            let margin = l.iter().copied().fold(f64::INFINITY, f64::min);
+            let inside = t > 0.0 && margin >= 0.0;
+            match got {
+                Some(tf) => {
+                    if margin > -1e-4 {
+                        hits += 1;
+                        assert!((tf as f64 - t).abs() < 1e-4, "t {tf} vs {t}");
+                    } else {
+                        panic!("hit outside the tet: margin {margin}");
+                    }
+                }
+                None => assert!(!(inside && margin > 1e-4), "missed, margin {margin}"),
+            }
+        }
+        assert!(hits > 200, "{hits} hits tested");
+    }
+
+    #[test]
+    fn the_single_ray_test_is_the_packet_test() {
+        let mut rng = SplitMix64(21);
+        let mut hits = 0;
+        for _ in 0..4000 {
+            let corners = random_tet(&mut rng);
+            let Some(poly) = extract([0, 1, 2, 3], corners, 0.0) else {
+                continue;
+            };
+            let origin = 3.0 * rng.in_unit_ball();
+            let dir = (0.6 * rng.in_unit_ball() - origin).normalize();
+            let (t_min, t_max) = (rng.range(0.0, 1.0), rng.range(1.0, 6.0));
+            let packet = PolygonFromOrigin::new(&poly, origin)
+                .intersect(dir)
+                .filter(|&t| t >= t_min && t <= t_max);
+            assert_eq!(intersect_one(&poly, origin, dir, t_min, t_max), packet);
+            hits += packet.is_some() as usize;
+        }
+        assert!(hits > 200, "{hits}");
+    }
+
+    #[test]
+    fn frustum_verdicts_agree_with_every_ray() {
+        let mut rng = SplitMix64(5);
+        let (mut misses, mut full) = (0, 0);
+        for _ in 0..3000 {
+            let corners = random_tet(&mut rng);
+            let Some(poly) = extract([0, 1, 2, 3], corners, 0.0) else {
+                continue;
+            };
+            let origin = Vec3::new(0.0, 0.0, 4.0);
+            let centre = 0.8 * rng.in_unit_ball();
+            let half = rng.range(0.01, 0.4);
+            let grid = |u: f32, v: f32| {
+                (centre + Vec3::new(half * (2.0 * u - 1.0), half * (2.0 * v - 1.0), 0.0) - origin)
+                    .normalize()
+            };
+            let tile = [
+                grid(0.0, 0.0),
+                grid(1.0, 0.0),
+                grid(0.0, 1.0),
+                grid(1.0, 1.0),
+            ];
+            let prep = PolygonFromOrigin::new(&poly, origin);
+            let verdict = prep.frustum(&tile);
+            for i in 0..=8 {
+                for j in 0..=8 {
+                    let d = grid(i as f32 / 8.0, j as f32 / 8.0);
+                    let hit = prep.intersect(d).is_some_and(|t| t > 0.0);
+                    match verdict {
+                        FrustumTest::Miss => assert!(!hit),
+                        FrustumTest::Hit => assert!(hit),
+                        FrustumTest::Partial => {}
+                    }
+                }
+            }
+            misses += (verdict == FrustumTest::Miss) as usize;
+            full += (verdict == FrustumTest::Hit) as usize;
+        }
+        assert!(
+            misses > 100 && full > 20,
+            "misses {misses}, full hits {full}"
+        );
+    }
+
+    #[test]
+    fn shared_edges_are_watertight() {
+        // Two tets sharing face (1, 2, 3); a ray through the shared isopolygon edge must hit
+        // one of them whatever the rounding.
+        let p = [
+            Vec4::new(0.0, 0.0, 0.0, -1.0),
+            Vec4::new(1.0, 0.0, 0.0, 1.0),
+            Vec4::new(0.0, 1.0, 0.0, -1.0),
+            Vec4::new(0.0, 0.0, 1.0, 1.0),
+            Vec4::new(1.0, 1.0, 1.0, -1.0),
+        ];
+        let tet_a = [0u32, 1, 2, 3];
+        let tet_b = [4u32, 3, 2, 1];
+        let pa = extract(tet_a, tet_a.map(|i| p[i as usize]), 0.1).expect("crosses");
+        let pb = extract(tet_b, tet_b.map(|i| p[i as usize]), 0.1).expect("crosses");
+        let origin = Vec3::new(0.3, 0.4, 3.0);
+        let (a, b) = (
+            PolygonFromOrigin::new(&pa, origin),
+            PolygonFromOrigin::new(&pb, origin),
+        );
+        let mut rng = SplitMix64(3);
+        let shared: Vec<Vec3> = pa.points[..pa.count]
+            .iter()
+            .copied()
+            .filter(|q| pb.points[..pb.count].contains(q))
+            .collect();
+        assert_eq!(shared.len(), 2, "the polygons share an edge bit for bit");
+        for _ in 0..2000 {
+            let s = rng.next_f32();
+            let target = shared[0].lerp(shared[1], s);
+            let dir = (target - origin).normalize();
+            assert!(
+                a.intersect(dir).is_some() || b.intersect(dir).is_some(),
+                "a ray through the shared edge at {s} fell through"
+            );
+        }
+    }
+}

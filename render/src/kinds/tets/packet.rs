@@ -1,0 +1,384 @@
+//! Packet traversal: many rays from one origin through the implicit BVH together.
+//!
+//! How it works (tetrahedral-isosurface-ray-tracing.txt §5.2, after Wald et al.'s dynamic BVH
+//! traversal), for a packet whose rays share an origin (a tile of primary rays):
+//! 1. Implicit culling: a child is pushed only if its scalar range spans an isovalue and the
+//!    clip box does not swallow it; every pushed node is "active".
+//! 2. Speculative first-active descent: the node is tested against the packet's first
+//!    active ray only; if that ray hits it, the whole packet descends without more tests.
+//! 3. Frustum test: otherwise an interval-arithmetic test over the packet's direction ranges
+//!    (Reshetov et al.) rejects the node when no ray of the packet can hit it.
+//! 4. First-active tracking: otherwise rays after the first active one are tested in turn
+//!    until one hits; the rays skipped are inactive below this node (the node's box bounds
+//!    every box below it, so they cannot hit anything there).
+//! 5. Leaves: per tet and isovalue the isorange test, then one isopolygon extraction and one
+//!    set-up of its edge planes for the whole packet ([`PolygonFromOrigin`]); the corner-ray
+//!    frustum test (§4.3) skips the packet (full miss) or the edge tests (full hit); else each
+//!    active ray pays a few dot products.
+//!
+//! One addition for packets that are tiles of a camera's pixel grid ([`RayPacket::tile`]):
+//! the frustum tests are sharpened to the pixels a node or an isopolygon covers. Its corners
+//! projected onto the image bound (widened by a pixel) the rays that can meet it, so step 4
+//! searches only those rays and step 5 tests only those (or skips the polygon when none).
+//! This is the corner-ray idea of §4.3 applied to sub-rectangles of the tile; it matters when
+//! a node or polygon covers a few of the 256 pixels, which is most of the time.
+//!
+//! Every test is conservative and the per-ray arithmetic is the single-ray path's, so a
+//! packet returns, ray for ray, exactly what [`super::traverse`] returns.
+
+use crate::camera::PrimaryRays;
+use crate::kinds::tets::bvh::{Bvh, Node};
+use crate::kinds::tets::counters::TetCounters;
+use crate::kinds::tets::march::{extract, FrustumTest, PolygonFromOrigin};
+use crate::kinds::tets::traverse::{slab, Stack, TetHit, TetQuery};
+use glam::{Vec3, Vec4, Vec4Swizzles};
+
+/// Rays from one origin. `corners` are four rays such that every ray of the packet is a
+/// positive combination of them (the corner pixels of a tile, see [`RayPacket::tile`]).
+#[derive(Clone, Copy, Debug)]
+pub struct RayPacket<'a> {
+    pub origin: Vec3,
+    /// Unit directions.
+    pub dirs: &'a [Vec3],
+    pub corners: [Vec3; 4],
+    /// The pixel grid, when the packet is a tile of one (row-major `dirs`).
+    pub grid: Option<TileGrid>,
+}
+
+/// The pixels of a tile: `width × height` from `(x0, y0)` of a camera's image.
+#[derive(Clone, Copy, Debug)]
+pub struct TileGrid {
+    rays: PrimaryRays,
+    x0: u32,
+    y0: u32,
+    width: u32,
+    height: u32,
+}
+
+/// The tile pixels whose rays may meet a convex shape.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Cover {
+    /// No bound (a corner is not in front of the eye).
+    Unknown,
+    /// No pixel of the tile.
+    Empty,
+    /// Tile-relative columns `c0..=c1` and rows `r0..=r1`.
+    Rect { c0: u32, c1: u32, r0: u32, r1: u32 },
+}
+
+impl TileGrid {
+    /// The pixels of the projection of the convex hull of `points`, widened by one pixel
+    /// (far beyond rounding) and clipped to the tile.
+    #[inline]
+    fn cover(&self, points: impl Iterator<Item = Vec3>) -> Cover {
+        let (mut lo_x, mut lo_y) = (f32::INFINITY, f32::INFINITY);
+        let (mut hi_x, mut hi_y) = (f32::NEG_INFINITY, f32::NEG_INFINITY);
+        for p in points {
+            let Some((x, y)) = self.rays.pixel_of(p) else {
+                return Cover::Unknown;
+            };
+            lo_x = lo_x.min(x);
+            lo_y = lo_y.min(y);
+            hi_x = hi_x.max(x);
+            hi_y = hi_y.max(y);
+        }
+        let (x0, y0) = (self.x0 as f32, self.y0 as f32);
+        let (x1, y1) = (x0 + self.width as f32 - 1.0, y0 + self.height as f32 - 1.0);
+        let (lo_x, lo_y) = ((lo_x - 1.0).max(x0), (lo_y - 1.0).max(y0));
+        let (hi_x, hi_y) = ((hi_x + 1.0).min(x1), (hi_y + 1.0).min(y1));
+        if !(lo_x <= hi_x && lo_y <= hi_y) {
+            return Cover::Empty;
+        }
+        Cover::Rect {
+            c0: (lo_x.ceil() - x0) as u32,
+            c1: (hi_x.floor() - x0) as u32,
+            r0: (lo_y.ceil() - y0) as u32,
+            r1: (hi_y.floor() - y0) as u32,
+        }
+    }
+}
+
+impl Cover {
+    /// Ray indices (row-major in a tile `width` wide) in the cover, from `from` on; all of
+    /// `from..n` when there is no bound.
+    #[inline]
+    fn rays(self, width: u32, from: usize, n: usize) -> impl Iterator<Item = usize> {
+        let (rect, all) = match self {
+            Cover::Rect { c0, c1, r0, r1 } => (Some((c0, c1, r0, r1)), 0..0),
+            Cover::Empty => (None, 0..0),
+            Cover::Unknown => (None, from..n),
+        };
+        let w = width as usize;
+        let in_rect = rect.into_iter().flat_map(move |(c0, c1, r0, r1)| {
+            let first_row = (from / w).max(r0 as usize);
+            (first_row..=r1 as usize).flat_map(move |r| {
+                (c0 as usize..=c1 as usize)
+                    .map(move |c| r * w + c)
+                    .filter(move |&i| i >= from)
+            })
+        });
+        all.chain(in_rect)
+    }
+}
+
+impl<'a> RayPacket<'a> {
+    /// The rays through pixels `x0..x1` × `y0..y1` (row-major) of `rays`, written to `dirs`.
+    pub fn tile(
+        rays: &crate::camera::PrimaryRays,
+        (x0, y0, x1, y1): (u32, u32, u32, u32),
+        dirs: &'a mut Vec<Vec3>,
+    ) -> RayPacket<'a> {
+        dirs.clear();
+        for y in y0..y1 {
+            for x in x0..x1 {
+                dirs.push(rays.through_pixel(x, y).dir);
+            }
+        }
+        // Directions are affine in the pixel position, so the four corner pixels' rays span
+        // every ray of the tile.
+        let corners = [(x0, y0), (x1 - 1, y0), (x0, y1 - 1), (x1 - 1, y1 - 1)]
+            .map(|(x, y)| rays.through_pixel(x, y).dir);
+        RayPacket {
+            origin: rays.through_pixel(x0, y0).origin,
+            dirs,
+            corners,
+            grid: Some(TileGrid {
+                rays: *rays,
+                x0,
+                y0,
+                width: x1 - x0,
+                height: y1 - y0,
+            }),
+        }
+    }
+}
+
+/// Per-packet buffers, reused between packets.
+#[derive(Debug, Default)]
+pub struct PacketScratch {
+    inv: Vec<Vec3>,
+    best: Vec<TetHit>,
+}
+
+/// Direction ranges for the interval-arithmetic frustum test; an axis along which the
+/// packet's directions change sign (or reach zero) gives no bound.
+struct Frustum {
+    origin: Vec3,
+    inv_lo: Vec3,
+    inv_hi: Vec3,
+    /// Per axis: +1 all directions positive, -1 all negative, 0 mixed.
+    sign: [i8; 3],
+}
+
+impl Frustum {
+    fn new(origin: Vec3, inv: &[Vec3]) -> Frustum {
+        let mut inv_lo = Vec3::splat(f32::INFINITY);
+        let mut inv_hi = Vec3::splat(f32::NEG_INFINITY);
+        for r in inv {
+            inv_lo = inv_lo.min(*r);
+            inv_hi = inv_hi.max(*r);
+        }
+        let sign = [0, 1, 2].map(|k| {
+            if inv_lo[k] > 0.0 && inv_hi[k].is_finite() {
+                1
+            } else if inv_hi[k] < 0.0 && inv_lo[k].is_finite() {
+                -1
+            } else {
+                0
+            }
+        });
+        Frustum {
+            origin,
+            inv_lo,
+            inv_hi,
+            sign,
+        }
+    }
+
+    /// True when no ray of the packet meets `node` within `[t_min, t_max]`: the largest
+    /// possible entry exceeds the smallest possible exit. Rounded products are monotonic in
+    /// the reciprocal, so this never contradicts a ray's own slab test.
+    #[inline]
+    fn misses(&self, node: &Node, t_min: f32, t_max: f32) -> bool {
+        let mut entry = t_min;
+        let mut exit = t_max;
+        let lo = node.lo.xyz() - self.origin;
+        let hi = node.hi.xyz() - self.origin;
+        for k in 0..3 {
+            let (near, far) = match self.sign[k] {
+                1 => (lo[k], hi[k]),
+                -1 => (hi[k], lo[k]),
+                _ => continue,
+            };
+            let (a, b) = (near * self.inv_lo[k], near * self.inv_hi[k]);
+            let (c, d) = (far * self.inv_lo[k], far * self.inv_hi[k]);
+            entry = entry.max(a.min(b));
+            exit = exit.min(c.max(d));
+        }
+        entry > exit
+    }
+}
+
+/// The nearest hit of every ray of `packet` in `[t_min, t_max]`, into `out`.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn first_hits(
+    bvh: &Bvh,
+    verts: &[Vec4],
+    packet: &RayPacket<'_>,
+    t_min: f32,
+    t_max: f32,
+    q: &TetQuery,
+    scratch: &mut PacketScratch,
+    out: &mut [Option<TetHit>],
+    c: &mut TetCounters,
+) {
+    let n = packet.dirs.len();
+    c.rays += n as u64;
+    scratch.inv.clear();
+    scratch.inv.extend(packet.dirs.iter().map(|d| d.recip()));
+    scratch.best.clear();
+    scratch.best.resize(n, TetHit::none(t_max));
+    out.iter_mut().for_each(|o| *o = None);
+    if n == 0 {
+        return;
+    }
+    let (inv, best) = (&scratch.inv, &mut scratch.best);
+    let origin = packet.origin;
+    let frustum = Frustum::new(origin, inv);
+    let nodes = &bvh.nodes;
+    let mut far_best = t_max;
+    let mut stack = Stack::new((0u32, 0u32));
+    if q.admits(&nodes[0], c) {
+        stack.push((0, 0));
+    }
+    while let Some((index, first_active)) = stack.pop() {
+        let node = &nodes[index as usize];
+        c.nodes += 1;
+        let mut fa = first_active as usize;
+        let hits = |r: usize, c: &mut TetCounters, best: &[TetHit]| {
+            c.ray_box_tests += 1;
+            slab(node, origin, inv[r], t_min, best[r].t).is_some()
+        };
+        if !hits(fa, c, best) {
+            c.frustum_box_tests += 1;
+            if frustum.misses(node, t_min, far_best) {
+                continue;
+            }
+            let cover = match &packet.grid {
+                Some(grid) => {
+                    c.frustum_box_tests += 1;
+                    grid.cover(box_corners(node))
+                }
+                None => Cover::Unknown,
+            };
+            let width = packet.grid.map_or(1, |g| g.width);
+            match cover.rays(width, fa + 1, n).find(|&r| hits(r, c, best)) {
+                Some(r) => fa = r,
+                None => continue,
+            }
+        }
+        if node.is_leaf() {
+            let mut improved = false;
+            let first = node.first as usize;
+            for k in first..first + node.count as usize {
+                let ids = bvh.leaf_tets[k];
+                let corners = ids.map(|v| verts[v as usize]);
+                for (s, &iso) in q.isovalues().iter().enumerate() {
+                    let Some(poly) = extract(ids, corners, iso) else {
+                        continue;
+                    };
+                    c.extractions += 1;
+                    let cover = match &packet.grid {
+                        Some(grid) => grid.cover(poly.points[..poly.count].iter().copied()),
+                        None => Cover::Unknown,
+                    };
+                    if cover == Cover::Empty {
+                        c.polygons_culled += 1;
+                        continue;
+                    }
+                    // The corner test is four ray–isopolygon tests (for a 2×2 packet it is
+                    // the whole packet's).
+                    c.polygon_tests += 4;
+                    let prep = PolygonFromOrigin::new(&poly, origin);
+                    let verdict = prep.frustum(&packet.corners);
+                    let tet = bvh.leaf_ids[k];
+                    let tested = match verdict {
+                        FrustumTest::Miss => {
+                            c.polygons_culled += 1;
+                            continue;
+                        }
+                        FrustumTest::Hit => {
+                            c.polygons_full += 1;
+                            Cover::Unknown
+                        }
+                        FrustumTest::Partial => cover,
+                    };
+                    let width = packet.grid.map_or(1, |g| g.width);
+                    for r in tested.rays(width, fa, n) {
+                        let dir = packet.dirs[r];
+                        let t = match verdict {
+                            FrustumTest::Hit => prep.distance(dir),
+                            _ => {
+                                c.polygon_tests += 1;
+                                prep.intersect(dir)
+                            }
+                        };
+                        let Some(t) = t else { continue };
+                        if t >= t_min && best[r].beaten_by(t, tet) && !q.clipped(origin + t * dir) {
+                            best[r] = TetHit {
+                                t,
+                                tet,
+                                surface: s as u8,
+                            };
+                            improved = true;
+                        }
+                    }
+                }
+            }
+            if improved {
+                far_best = best.iter().fold(t_min, |m, b| m.max(b.t));
+            }
+            continue;
+        }
+        let (a, b) = (node.first, node.first + 1);
+        let admit_a = q.admits(&nodes[a as usize], c);
+        let admit_b = q.admits(&nodes[b as usize], c);
+        let fa32 = fa as u32;
+        match (admit_a, admit_b) {
+            (true, true) => {
+                // Nearer child first along the first active ray.
+                let ca = nodes[a as usize].lo + nodes[a as usize].hi;
+                let cb = nodes[b as usize].lo + nodes[b as usize].hi;
+                if (cb - ca).xyz().dot(packet.dirs[fa]) >= 0.0 {
+                    stack.push((b, fa32));
+                    stack.push((a, fa32));
+                } else {
+                    stack.push((a, fa32));
+                    stack.push((b, fa32));
+                }
+            }
+            (true, false) => stack.push((a, fa32)),
+            (false, true) => stack.push((b, fa32)),
+            (false, false) => {}
+        }
+    }
+    for (o, b) in out.iter_mut().zip(best.iter()) {
+        if b.found() {
+            c.hits += 1;
+            *o = Some(*b);
+        }
+    }
+}
+
+/// The eight corners of a node's box.
+#[inline]
+fn box_corners(node: &Node) -> impl Iterator<Item = Vec3> {
+    let (lo, hi) = (node.lo.xyz(), node.hi.xyz());
+    (0..8).map(move |i| {
+        Vec3::new(
+            if i & 1 != 0 { hi.x } else { lo.x },
+            if i & 2 != 0 { hi.y } else { lo.y },
+            if i & 4 != 0 { hi.z } else { lo.z },
+        )
+    })
+}
