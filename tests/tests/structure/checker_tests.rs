@@ -56,6 +56,11 @@ fn lexer_keeps_strings_comments_and_lifetimes_out_of_code() {
     );
     let close = lexed.tokens.len() - 1;
     assert_eq!(lexed.partner[close].map(|j| lexed.tokens[j].line), Some(1));
+    assert_eq!(
+        (lexed.tokens[close].depth, last.depth),
+        (0, 1),
+        "brace depth"
+    );
     assert!(
         lex("fn f() { \"}\" ").is_err(),
         "an unclosed brace is an error"
