@@ -6,3 +6,4 @@ mod deploy;
 mod e2e;
 mod golden;
 mod scene_json;
+mod structure;
