@@ -12,9 +12,9 @@
 //! stored steps share one cache bounded in bytes across all scenes (`--cache-bytes`), least
 //! recently used first out.
 
-use crate::kind::SceneSetup;
+use crate::kinds::SceneSetup;
 use crate::store::{Retention, Store, StoredScene, StoredStep};
-use isoray_protocol::api::{SceneInfo, SceneKind};
+use isoray_protocol::api::SceneInfo;
 use isoray_protocol::SceneSummary;
 use isoray_render::scenes::DemoScene;
 use isoray_render::{Camera, Lighting, PreparedScene, Scene};
@@ -77,7 +77,7 @@ impl SceneRegistry {
 
     /// The demos, plus the store the configuration names. A store that cannot be opened is
     /// logged and the server runs with its demos only.
-    pub fn from_config(config: &crate::Config) -> SceneRegistry {
+    pub fn from_config(config: &crate::config::Config) -> SceneRegistry {
         let dir = if config.demos_only {
             None
         } else {
@@ -321,10 +321,7 @@ impl SceneEntry {
             } => SceneInfo {
                 id: self.id.clone(),
                 name: demo.name().to_string(),
-                kind: match demo {
-                    DemoScene::TetGyroid => SceneKind::Tets,
-                    _ => SceneKind::Metaballs,
-                },
+                kind: crate::kinds::demo_kind(*demo),
                 description: demo.description().to_string(),
                 animated: true,
                 source: "demo".into(),

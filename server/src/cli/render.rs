@@ -9,13 +9,12 @@ use isoray_protocol::api::{ApiCamera, CreateScene, JsonStep};
 use isoray_protocol::effects::EffectChanges;
 use isoray_render::scenes::DemoScene;
 use isoray_render::{Backend, Camera, Scene, View};
-use isoray_server::api::convert;
+use isoray_server::body::BodyReader;
 use isoray_server::effects::{self, EffectLimits};
-use isoray_server::kind::SceneSetup;
+use isoray_server::kinds::convert;
+use isoray_server::kinds::SceneSetup;
 use isoray_server::store::format::{verify_payload, StepHeader, HEADER_LEN};
-use isoray_server::store::ingest::{
-    ingest_json, ingest_npy, ingest_raw, BodyReader, IngestLimits, Target,
-};
+use isoray_server::store::ingest::{ingest_json, ingest_npy, ingest_raw, IngestLimits, Target};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
@@ -119,7 +118,7 @@ pub fn run(args: RenderArgs) -> Result<(), String> {
             load(args.spec.as_deref(), step)?
         }
     };
-    let error = |e: isoray_server::api::error::ApiError| {
+    let error = |e: isoray_server::kinds::error::KindError| {
         format!(
             "{}{}",
             e.field.map(|f| format!("{f}: ")).unwrap_or_default(),
@@ -240,7 +239,7 @@ fn load(spec_path: Option<&Path>, step_path: &Path) -> Result<Loaded, String> {
             temp_path: std::env::temp_dir().join(format!(
                 ".tmp-isoray-render-{}-{}.step",
                 std::process::id(),
-                isoray_server::api::auth::random_hex(8)
+                isoray_server::random::random_hex(8)
             )),
             index: 0,
             time: 0.0,
