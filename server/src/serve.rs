@@ -8,7 +8,7 @@
 use crate::api::access::check_stream_view;
 use crate::error::AppError;
 use crate::state::AppState;
-use crate::{metrics, placement, session, web};
+use crate::{metrics, placement, web};
 use axum::extract::ws::rejection::WebSocketUpgradeRejection;
 use axum::extract::ws::WebSocketUpgrade;
 use axum::extract::{Path, State};
@@ -79,12 +79,14 @@ async fn stream(
     })?;
     let ws = ws.max_message_size(MAX_CLIENT_MESSAGE_BYTES);
     Ok(match state.admit_session() {
-        Some(ticket) => ws.on_upgrade(move |socket| session::run(socket, state, entry, ticket)),
+        Some(ticket) => {
+            ws.on_upgrade(move |socket| crate::session::socket::run(socket, state, entry, ticket))
+        }
         None => {
             let limit = state.config().max_sessions;
             tracing::warn!(limit, "session refused: server full");
             ::metrics::counter!(metrics::SESSIONS_REFUSED).increment(1);
-            ws.on_upgrade(move |socket| session::refuse(socket, limit))
+            ws.on_upgrade(move |socket| crate::session::socket::refuse(socket, limit))
         }
     })
 }

@@ -3,7 +3,7 @@
 
 use crate::api::auth::{bearer, require, token_hash, RateLimiter};
 use crate::error::AppError;
-use crate::scenes::SceneEntry;
+use crate::scenes::entry::SceneEntry;
 use crate::state::AppState;
 use crate::store::StoredScene;
 use axum::extract::connect_info::ConnectInfo;

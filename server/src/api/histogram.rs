@@ -131,8 +131,7 @@ pub async fn histogram(
         (f64::from(lo), f64::from(hi))
     });
     let live_time = app.scenes().live_time();
-    let (tx, rx) = tokio::sync::oneshot::channel();
-    app.backend().spawn(move || {
+    let job = app.jobs().run(move || {
         let (state, time) = match entry.stored_scene() {
             Some(scene) => {
                 let step = match q.time {
@@ -149,11 +148,9 @@ pub async fn histogram(
         };
         let geometry = &state.prepared.scene().geometry;
         let histogram = crate::kinds::histogram_of(geometry, lo as f32, hi as f32, q.bins);
-        let _ = tx.send((histogram, time));
+        (histogram, time)
     });
-    let (h, time) = rx
-        .await
-        .map_err(|_| AppError::internal("the render pool dropped the job"))?;
+    let (h, time) = job.await.map_err(AppError::internal)?;
     Ok(Json(FieldHistogram {
         lo,
         hi,

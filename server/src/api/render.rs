@@ -3,6 +3,7 @@
 use crate::api::access::{check_view, scene_of};
 use crate::api::request::read_json;
 use crate::error::AppError;
+use crate::frame::{self, FrameRequest};
 use crate::kinds::convert;
 use crate::state::AppState;
 use axum::body::Body;
@@ -10,6 +11,7 @@ use axum::extract::{Path, State};
 use axum::http::{header, HeaderMap};
 use axum::response::{IntoResponse, Response};
 use isoray_protocol::api::{ApiErrorBody, ImageFormat, RenderRequest};
+use isoray_protocol::Codec;
 use isoray_render::View;
 
 /// Default image size of a one-shot render.
@@ -108,25 +110,22 @@ pub async fn render(
         isovalue,
     };
     let format = req.format;
-    let (tx, rx) = tokio::sync::oneshot::channel();
     let job_app = app.clone();
-    app.backend().spawn(move || {
+    let job = app.jobs().run(move || {
         let state = match (&step, entry.stored_scene()) {
             (_, Some(_)) => entry.prepared_step(step.as_deref()),
             (_, None) => entry.prepared_at(time, false, None),
         };
-        let (fb, _) = job_app
-            .backend()
-            .render_effects(&state.prepared, &view, &fx);
-        let encoded = match format {
-            ImageFormat::Png => crate::encode::png(&fb),
-            ImageFormat::Jpeg => crate::encode::jpeg(&fb, quality),
+        let codec = match format {
+            ImageFormat::Png => Codec::Png,
+            ImageFormat::Jpeg => Codec::Jpeg,
         };
-        let _ = tx.send(encoded);
+        let request = FrameRequest::image(view, &fx, codec, quality);
+        frame::render(job_app.backend(), &state, &request, None).map(|f| f.payload)
     });
-    let image = rx
+    let image = job
         .await
-        .map_err(|_| AppError::internal("the render pool dropped the job"))?
+        .map_err(AppError::internal)?
         .map_err(AppError::internal)?;
     let content_type = match format {
         ImageFormat::Png => "image/png",

@@ -12,7 +12,6 @@ use crate::body::BodyReader;
 use crate::error::AppError;
 use crate::kinds::tets::mesh::mesh_from_json;
 use crate::kinds::tets::mesh_body::{read_binary_mesh, too_many_tets, MeshLimits};
-use crate::kinds::KindSetup;
 use crate::state::AppState;
 use axum::body::Body;
 use axum::extract::rejection::PathRejection;
@@ -66,21 +65,18 @@ pub async fn put_mesh(
     let entry = scene_of(&app, &id)?;
     let scene = stored_of(&entry)?;
     check_write(&app, &headers, &scene)?;
-    let setup = match &scene.setup.kind {
-        KindSetup::Tets(setup) => setup,
-        KindSetup::Metaballs(_) => {
-            return Err(AppError::new(
-                StatusCode::CONFLICT,
-                "not_a_tet_scene",
-                format!(
-                    "scene `{id}` is of kind `{}`; only tet scenes have a mesh",
-                    scene.meta.kind.as_str()
-                ),
-            )
-            .field("id"))
-        }
+    let Some(slot) = scene.setup.mesh_slot() else {
+        return Err(AppError::new(
+            StatusCode::CONFLICT,
+            "not_a_tet_scene",
+            format!(
+                "scene `{id}` is of kind `{}`; only tet scenes have a mesh",
+                scene.meta.kind.as_str()
+            ),
+        )
+        .field("id"));
     };
-    let slot = Arc::clone(&setup.mesh);
+    let slot = Arc::clone(slot);
     let format = push_format(&headers)?;
     let config = app.config();
     let limits = MeshLimits {

@@ -5,7 +5,9 @@
 use crate::effects::EffectLimits;
 use crate::kinds::error::KindError;
 use glam::Vec3;
-use isoray_protocol::api::{ApiCamera, LightKind, LightSpec, LightingSpec, MaterialSpec};
+use isoray_protocol::api::{
+    ApiCamera, IsosurfaceSpec, LightKind, LightSpec, LightingSpec, MaterialSpec,
+};
 use isoray_render::shade::{ClipBox, Floor, Isosurface, Light, Material, MaterialGroup, Volume};
 use isoray_render::{Camera, Lighting};
 
@@ -289,30 +291,7 @@ pub fn lighting(spec: &LightingSpec, limits: &EffectLimits) -> Result<Lighting, 
         l.clip_box = Some(ClipBox { min, max });
     }
     if let Some(surfaces) = &spec.isosurfaces {
-        if surfaces.len() > MAX_ISOSURFACES {
-            return Err(invalid(
-                "lighting.isosurfaces".into(),
-                format!("at most {MAX_ISOSURFACES} further isosurfaces"),
-            ));
-        }
-        l.isosurfaces = surfaces
-            .iter()
-            .enumerate()
-            .map(|(i, s)| {
-                let field = format!("lighting.isosurfaces[{i}]");
-                let isovalue = finite(s.isovalue, &format!("{field}.isovalue"))?;
-                if isovalue <= 0.0 {
-                    return Err(invalid(
-                        format!("{field}.isovalue"),
-                        format!("{field}.isovalue must be positive"),
-                    ));
-                }
-                Ok(Isosurface {
-                    isovalue,
-                    material: material_index(s.material, count, format!("{field}.material"))?,
-                })
-            })
-            .collect::<Result<_, KindError>>()?;
+        l.isosurfaces = isosurfaces(surfaces, count)?;
     }
     if let Some(volume) = &spec.volume {
         let density = range(
@@ -350,4 +329,33 @@ pub fn lighting(spec: &LightingSpec, limits: &EffectLimits) -> Result<Lighting, 
         })?;
     }
     Ok(l)
+}
+
+/// Further isosurfaces (`lighting.isosurfaces`), each with a positive isovalue and a material
+/// among the `count` declared.
+fn isosurfaces(surfaces: &[IsosurfaceSpec], count: usize) -> Result<Vec<Isosurface>, KindError> {
+    if surfaces.len() > MAX_ISOSURFACES {
+        return Err(invalid(
+            "lighting.isosurfaces".into(),
+            format!("at most {MAX_ISOSURFACES} further isosurfaces"),
+        ));
+    }
+    surfaces
+        .iter()
+        .enumerate()
+        .map(|(i, s)| {
+            let field = format!("lighting.isosurfaces[{i}]");
+            let isovalue = finite(s.isovalue, &format!("{field}.isovalue"))?;
+            if isovalue <= 0.0 {
+                return Err(invalid(
+                    format!("{field}.isovalue"),
+                    format!("{field}.isovalue must be positive"),
+                ));
+            }
+            Ok(Isosurface {
+                isovalue,
+                material: material_index(s.material, count, format!("{field}.material"))?,
+            })
+        })
+        .collect()
 }

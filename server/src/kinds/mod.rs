@@ -27,13 +27,14 @@ use crate::kinds::histogram::Histogram;
 use crate::kinds::metaballs::histogram::field_histogram;
 use crate::kinds::metaballs::setup::{self as ball_setup, BallDefaults};
 use crate::kinds::tets::histogram::vertex_histogram;
-use crate::kinds::tets::setup::{self as tet_setup, TetSetup};
+use crate::kinds::tets::setup::{self as tet_setup, MeshSlot, TetSetup};
 use crate::kinds::tets::step as tet_step;
 use glam::Vec3;
 use isoray_protocol::api::{CreateScene, SceneKind};
 use isoray_render::scene::Geometry;
 use isoray_render::scenes::DemoScene;
 use isoray_render::{Camera, Lighting, Scene};
+use std::sync::Arc;
 
 /// The columns of a step array for one kind, and the checks its values get beyond finiteness.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -241,6 +242,14 @@ impl SceneSetup {
         Scene {
             geometry,
             lighting: self.lighting.clone(),
+        }
+    }
+
+    /// The slot of the static mesh, for a kind that has one (tets); `None` for the others.
+    pub fn mesh_slot(&self) -> Option<&Arc<MeshSlot>> {
+        match &self.kind {
+            KindSetup::Tets(t) => Some(&t.mesh),
+            KindSetup::Metaballs(_) => None,
         }
     }
 
