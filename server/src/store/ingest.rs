@@ -12,6 +12,7 @@
 
 use crate::body::{BodyAbort, BodyError, BodyReader};
 use crate::kinds::error::KindError;
+use crate::kinds::metaballs::step as ball_step;
 use crate::kinds::tets::step::raw_from_json;
 use crate::kinds::StepLayout;
 use crate::npy;
@@ -527,64 +528,17 @@ pub fn ingest_raw(
     writer.finish(rows, target.index, target.time)
 }
 
-/// Converts a parsed JSON step to rows and writes it.
+/// Converts a parsed JSON metaball step to rows (the kind's checks name the JSON field) and
+/// writes it.
 pub fn ingest_json(
     step: &JsonStep,
     limits: &IngestLimits,
     target: Target,
 ) -> Result<WrittenStep, IngestError> {
+    let columns = ball_step::json_columns(step)?;
     let rows = step.positions.len();
-    let columns: usize = if step.colors.is_some() {
-        8
-    } else if step.strengths.is_some() {
-        5
-    } else if step.radii.is_some() {
-        4
-    } else {
-        3
-    };
-    let lengths = [
-        ("radii", step.radii.as_ref().map(Vec::len)),
-        ("strengths", step.strengths.as_ref().map(Vec::len)),
-        ("colors", step.colors.as_ref().map(Vec::len)),
-    ];
-    for (name, len) in lengths {
-        if let Some(len) = len.filter(|&l| l != rows) {
-            return Err(IngestError::invalid(
-                "bad_shape",
-                format!("{name} has {len} entries but positions has {rows}"),
-            )
-            .at_field(name));
-        }
-    }
-    if columns == 8 && (step.radii.is_none() || step.strengths.is_none()) {
-        return Err(IngestError::invalid(
-            "bad_shape",
-            "colors need radii and strengths too (rows are x y z radius strength r g b)",
-        )
-        .at_field("colors"));
-    }
-    if columns == 5 && step.radii.is_none() {
-        return Err(
-            IngestError::invalid("bad_shape", "strengths need radii too").at_field("strengths"),
-        );
-    }
     let columns_u32 = check_shape(rows as u64, columns as u64, limits)?;
-    let mut values = Vec::with_capacity(rows * columns);
-    for i in 0..rows {
-        let mut row = [0f64; 8];
-        row[..3].copy_from_slice(&step.positions[i]);
-        if let Some(r) = &step.radii {
-            row[3] = r[i];
-        }
-        if let Some(s) = &step.strengths {
-            row[4] = s[i];
-        }
-        if let Some(c) = &step.colors {
-            row[5..8].copy_from_slice(&c[i]);
-        }
-        values.extend(row[..columns].iter().map(|&v| v as f32));
-    }
+    let values = ball_step::json_rows(step, columns);
     check_rows(limits.layout, &values, columns, 0, |_| 0).map_err(|mut e| {
         // Name the JSON field rather than a row/column pair.
         if let Some(field) = e.field.take() {
@@ -594,12 +548,7 @@ pub fn ingest_json(
                 .filter_map(|s| s.parse().ok())
                 .collect();
             if let [row, col] = nums[..] {
-                e.field = Some(match col {
-                    0..=2 => format!("positions[{row}][{col}]"),
-                    3 => format!("radii[{row}]"),
-                    4 => format!("strengths[{row}]"),
-                    _ => format!("colors[{row}][{}]", col - 5),
-                });
+                e.field = Some(ball_step::json_field(row, col));
                 e.message = format!(
                     "{} {}",
                     e.field.as_deref().unwrap_or_default(),
