@@ -22,7 +22,7 @@ impl EffectLimits {
         max_passes: 4096,
     };
 
-    pub fn from_config(config: &crate::Config) -> EffectLimits {
+    pub fn from_config(config: &crate::config::Config) -> EffectLimits {
         EffectLimits {
             max_depth: config.max_ray_depth,
             max_samples: config.max_samples,

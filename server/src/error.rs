@@ -1,37 +1,121 @@
-//! The server's one HTTP error type: a status, a stable code and a message for the user.
-//! Internals never reach the response body; they are logged once, here.
+//! The server's one HTTP error type, for the REST API and the stream route alike: a status, a
+//! stable code, a message for people, and the field or byte offset where the request went
+//! wrong. The body is `ApiErrorBody` (`{code, message, field?, offset?}`); without a field or
+//! offset it is `{code, message}`, as the stream route has always answered. Server-side
+//! failures are logged once, here, and their details stay out of the response.
+//!
+//! The domain's errors come in through `From`: a kind's spec or data check
+//! ([`KindError`](crate::kinds::error::KindError)) and a push's ([`IngestError`]).
 
+use crate::kinds::error::{KindError, KindErrorKind};
+use crate::store::ingest::{IngestError, IngestErrorKind};
 use axum::http::StatusCode;
 use axum::response::{IntoResponse, Response};
 use axum::Json;
-use isoray_protocol::ErrorMessage;
+use isoray_protocol::api::ApiErrorBody;
 
 #[derive(Debug)]
 pub struct AppError {
     pub status: StatusCode,
     pub code: &'static str,
     pub message: String,
+    pub field: Option<String>,
+    pub offset: Option<u64>,
 }
 
 impl AppError {
-    pub fn not_found(message: impl Into<String>) -> AppError {
+    pub fn new(status: StatusCode, code: &'static str, message: impl Into<String>) -> AppError {
         AppError {
-            status: StatusCode::NOT_FOUND,
-            code: "not_found",
+            status,
+            code,
             message: message.into(),
+            field: None,
+            offset: None,
+        }
+    }
+
+    pub fn bad_request(code: &'static str, message: impl Into<String>) -> AppError {
+        AppError::new(StatusCode::BAD_REQUEST, code, message)
+    }
+
+    pub fn field(mut self, field: impl Into<String>) -> AppError {
+        self.field = Some(field.into());
+        self
+    }
+
+    pub fn offset(mut self, offset: u64) -> AppError {
+        self.offset = Some(offset);
+        self
+    }
+
+    pub fn not_found(message: impl Into<String>) -> AppError {
+        AppError::new(StatusCode::NOT_FOUND, "not_found", message)
+    }
+
+    /// A failure of the server itself; `detail` is logged, not sent.
+    pub fn internal(detail: impl std::fmt::Display) -> AppError {
+        AppError::new(
+            StatusCode::INTERNAL_SERVER_ERROR,
+            "internal",
+            format!("internal error: {detail}"),
+        )
+    }
+
+    /// The same error with another message.
+    pub fn with_message(mut self, message: String) -> AppError {
+        self.message = message;
+        self
+    }
+}
+
+impl From<IngestError> for AppError {
+    fn from(e: IngestError) -> AppError {
+        let status = match e.kind {
+            IngestErrorKind::Invalid => StatusCode::BAD_REQUEST,
+            IngestErrorKind::TooLarge => StatusCode::PAYLOAD_TOO_LARGE,
+            IngestErrorKind::Timeout => StatusCode::REQUEST_TIMEOUT,
+            IngestErrorKind::Io => StatusCode::INTERNAL_SERVER_ERROR,
+        };
+        AppError {
+            status,
+            code: e.code,
+            message: e.message,
+            field: e.field,
+            offset: e.offset,
+        }
+    }
+}
+
+impl From<KindError> for AppError {
+    fn from(e: KindError) -> AppError {
+        let status = match e.kind {
+            KindErrorKind::Invalid => StatusCode::BAD_REQUEST,
+            KindErrorKind::Unsupported => StatusCode::UNPROCESSABLE_ENTITY,
+            KindErrorKind::NotReady => StatusCode::CONFLICT,
+        };
+        AppError {
+            status,
+            code: e.code,
+            message: e.message,
+            field: e.field,
+            offset: e.offset,
         }
     }
 }
 
 impl IntoResponse for AppError {
     fn into_response(self) -> Response {
-        if self.status.is_server_error() {
-            tracing::error!(code = self.code, message = %self.message, "request failed");
-        }
-        let body = ErrorMessage {
+        let message = if self.status.is_server_error() {
+            tracing::error!(code = self.code, message = %self.message, "API request failed");
+            "the server failed to handle this request; see its log".to_string()
+        } else {
+            self.message
+        };
+        let body = ApiErrorBody {
             code: self.code.to_string(),
-            message: self.message,
-            input_id: None,
+            message,
+            field: self.field,
+            offset: self.offset,
         };
         (self.status, Json(body)).into_response()
     }

@@ -14,7 +14,7 @@ fn main() -> std::process::ExitCode {
     // command line still starts the server exactly as before.
     let command = std::env::args_os().nth(1);
     let outcome = match command.as_ref().and_then(|c| c.to_str()) {
-        Some("push") => Some(cli::push::run(cli::push::PushArgs::parse_from(
+        Some("push") => Some(cli::push::run(cli::push_args::PushArgs::parse_from(
             std::env::args_os().skip(1),
         ))),
         Some("render") => Some(cli::render::run(cli::render::RenderArgs::parse_from(

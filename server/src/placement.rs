@@ -11,7 +11,7 @@
 //! A request that reaches a shard other than the one its id names was misrouted by the load
 //! balancer; it is answered `421 Misdirected Request` naming both shards, not a bare 404.
 
-use crate::api::auth::random_hex;
+use crate::random::random_hex;
 
 /// Separates the shard name from the random part of a scene id. Shard names never contain
 /// it (they are DNS labels, like Kubernetes pod names), and it is URL-safe.

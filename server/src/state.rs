@@ -1,10 +1,11 @@
-//! State shared by every request: configuration, the render pool, the scenes, the sessions,
-//! and the shutdown signal.
+//! State shared by every request: configuration, the render pool and its fair scheduler,
+//! the job pool, the scenes, the sessions, and the shutdown signal.
 
 use crate::config::Config;
-use crate::scenes::SceneRegistry;
+use crate::jobs::{self, JobPool};
+use crate::scenes::registry::SceneRegistry;
 use crate::schedule::RenderScheduler;
-use crate::session::SessionStats;
+use crate::session::stats::SessionStats;
 use isoray_render::Backend;
 use std::collections::BTreeMap;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -20,6 +21,7 @@ pub struct AppState {
 struct Inner {
     config: Config,
     backend: Arc<Backend>,
+    jobs: JobPool,
     scheduler: Arc<RenderScheduler>,
     scenes: SceneRegistry,
     sessions: SessionTable,
@@ -32,6 +34,7 @@ impl AppState {
         config.validate()?;
         crate::metrics::handle();
         let backend = Arc::new(Backend::cpu(config.threads).map_err(|e| e.to_string())?);
+        let jobs = JobPool::new(jobs::threads_for(backend.threads()))?;
         let scheduler = RenderScheduler::new(Arc::clone(&backend));
         let scenes = SceneRegistry::from_config(&config);
         Ok(AppState {
@@ -39,6 +42,7 @@ impl AppState {
                 scenes,
                 config,
                 backend,
+                jobs,
                 scheduler,
                 sessions: SessionTable::default(),
                 shutdown: watch::Sender::new(false),
@@ -52,6 +56,11 @@ impl AppState {
 
     pub fn backend(&self) -> &Backend {
         &self.inner.backend
+    }
+
+    /// The pool for one-shot renders and histograms (not sessions' frames).
+    pub fn jobs(&self) -> &JobPool {
+        &self.inner.jobs
     }
 
     /// The fair gatekeeper of the render pool: sessions submit their frames here.

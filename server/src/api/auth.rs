@@ -5,22 +5,13 @@
 //! creation; the store keeps only their SHA-256, compared in constant time. Scene ids are
 //! 128-bit random hex, so they cannot be guessed or enumerated.
 
-use super::error::ApiError;
+use crate::error::AppError;
 use axum::http::{HeaderMap, StatusCode};
 use sha2::{Digest, Sha256};
 use std::collections::HashMap;
 use std::net::IpAddr;
 use std::sync::Mutex;
 use std::time::Instant;
-
-/// `bytes` random bytes from the OS, as lowercase hex.
-pub fn random_hex(bytes: usize) -> String {
-    let mut buf = vec![0u8; bytes];
-    // The OS generator failing means the machine cannot make secrets at all; there is no
-    // safe fallback for a token.
-    getrandom::fill(&mut buf).expect("the operating system's random generator works");
-    buf.iter().map(|b| format!("{b:02x}")).collect()
-}
 
 /// Hex SHA-256 of a token, as stored.
 pub fn token_hash(token: &str) -> String {
@@ -49,9 +40,9 @@ pub fn require(
     presented: Option<&str>,
     accepted_hashes: &[&str],
     what: &str,
-) -> Result<(), ApiError> {
+) -> Result<(), AppError> {
     let Some(token) = presented else {
-        return Err(ApiError::new(
+        return Err(AppError::new(
             StatusCode::UNAUTHORIZED,
             "missing_token",
             format!("{what} needs a token: send `Authorization: Bearer <token>`"),
@@ -65,7 +56,7 @@ pub fn require(
     {
         Ok(())
     } else {
-        Err(ApiError::new(
+        Err(AppError::new(
             StatusCode::FORBIDDEN,
             "invalid_token",
             format!("the token does not allow {what}"),
@@ -94,7 +85,7 @@ impl RateLimiter {
     }
 
     /// Takes one write from `client`'s bucket, or says how long to wait.
-    pub fn check(&self, client: Option<IpAddr>) -> Result<(), ApiError> {
+    pub fn check(&self, client: Option<IpAddr>) -> Result<(), AppError> {
         let now = Instant::now();
         let mut buckets = self.buckets.lock().unwrap_or_else(|e| e.into_inner());
         if buckets.len() >= MAX_BUCKETS {
@@ -113,7 +104,7 @@ impl RateLimiter {
             Ok(())
         } else {
             let wait = (1.0 - *tokens) / self.rate_per_sec;
-            Err(ApiError::new(
+            Err(AppError::new(
                 StatusCode::TOO_MANY_REQUESTS,
                 "rate_limited",
                 format!(
@@ -129,6 +120,7 @@ impl RateLimiter {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::random::random_hex;
 
     #[test]
     fn tokens_are_checked_by_hash() {

@@ -2,146 +2,20 @@
 //! the browser draws behind the isovalue slider (as ParaView and VisIt do beside their
 //! contour values), so a user sees where the field has mass before moving the surface there.
 //!
-//! How it works, for metaballs: a regular grid over the scene's bounds, at most [`MAX_GRID`] points per axis;
-//! every metaball adds `q · f(s)` to the grid points inside its support (a splat, so the cost
-//! is the balls' support volume in cells, not balls × points). Points that no support reaches
-//! are left out: they are empty space, not field. The grid shrinks when the splat would cost
-//! more than [`MAX_SPLAT_CELLS`]. For a tetrahedral mesh, whose field is given at its
-//! vertices: those values. Runs on the render pool.
+//! Each kind samples its own field (`kinds::histogram` dispatches: a grid splat for metaballs,
+//! the vertex values of a tet mesh); this handler parses the query, picks the state and runs
+//! the job on the job pool (`crate::jobs`), off the async runtime.
 
-use super::error::ApiError;
-use super::{check_view, scene_of};
-use crate::AppState;
+use crate::api::access::{check_view, scene_of};
+use crate::error::AppError;
+use crate::state::AppState;
 use axum::extract::{Path, RawQuery, State};
 use axum::http::HeaderMap;
 use axum::Json;
-use glam::Vec3;
 use isoray_protocol::api::{ApiErrorBody, FieldHistogram};
-use isoray_render::metaball::MetaballScene;
-use isoray_render::scene::Geometry;
 
-/// Grid points along the longest side of the scene's bounds.
-pub const MAX_GRID: u32 = 64;
-/// Largest number of (ball, grid point) pairs one histogram evaluates.
-pub const MAX_SPLAT_CELLS: f64 = 5.0e7;
 const DEFAULT_BINS: usize = 64;
 const MAX_BINS: usize = 1024;
-
-/// The field's values at the grid points inside any support, binned over `[lo, hi)`.
-pub fn field_histogram(scene: &MetaballScene, lo: f32, hi: f32, bins: usize) -> Histogram {
-    let mut out = Histogram {
-        counts: vec![0; bins],
-        below: 0,
-        above: 0,
-        samples: 0,
-        grid: [0; 3],
-        evaluations: 0,
-    };
-    let Some((min, max)) = scene.bounds() else {
-        return out;
-    };
-    let extent = (max - min).max(Vec3::splat(1e-6));
-    let mut cell = extent.max_element() / MAX_GRID as f32;
-    // Splat cost: each ball touches about (2R / cell)³ grid points.
-    let cost = |cell: f32| -> f64 {
-        scene
-            .balls
-            .iter()
-            .map(|b| (2.0 * f64::from(b.radius) / f64::from(cell) + 1.0).powi(3))
-            .sum()
-    };
-    let estimate = cost(cell);
-    if estimate > MAX_SPLAT_CELLS {
-        cell *= (estimate / MAX_SPLAT_CELLS).cbrt() as f32;
-        while cost(cell) > MAX_SPLAT_CELLS {
-            cell *= 1.1;
-        }
-    }
-    let dims = (extent / cell)
-        .ceil()
-        .max(Vec3::ONE)
-        .as_uvec3()
-        .min(glam::UVec3::splat(MAX_GRID));
-    out.grid = dims.to_array();
-    let (nx, ny, nz) = (dims.x as usize, dims.y as usize, dims.z as usize);
-    // Grid point (i, j, k) sits at the centre of its cell.
-    let point = |i: usize, j: usize, k: usize| {
-        min + Vec3::new(i as f32 + 0.5, j as f32 + 0.5, k as f32 + 0.5) * cell
-    };
-    let mut field = vec![0f32; nx * ny * nz];
-    let mut inside = vec![false; nx * ny * nz];
-    let index_range = |c: f32, r: f32, lo: f32, n: usize| {
-        let first = (((c - r - lo) / cell) - 0.5).floor().max(0.0) as usize;
-        let last = ((((c + r - lo) / cell) - 0.5).ceil().max(0.0) as usize).min(n - 1);
-        first..=last
-    };
-    for ball in &scene.balls {
-        let (c, r) = (ball.center, ball.radius);
-        for k in index_range(c.z, r, min.z, nz) {
-            for j in index_range(c.y, r, min.y, ny) {
-                for i in index_range(c.x, r, min.x, nx) {
-                    out.evaluations += 1;
-                    let s = ball.s_at(point(i, j, k));
-                    if s < 1.0 {
-                        let at = (k * ny + j) * nx + i;
-                        field[at] += ball.strength * scene.kernel.value(s);
-                        inside[at] = true;
-                    }
-                }
-            }
-        }
-    }
-    let values = field
-        .iter()
-        .zip(&inside)
-        .filter(|(_, &i)| i)
-        .map(|(&v, _)| v);
-    bin_values(&mut out, values, lo, hi);
-    out
-}
-
-/// A tetrahedral mesh's scalar field: its values at the mesh's vertices, binned (the point
-/// data histogram ParaView shows); `grid` is `[vertices, 1, 1]`.
-pub fn vertex_histogram(scalars: &[f32], lo: f32, hi: f32, bins: usize) -> Histogram {
-    let mut out = Histogram {
-        counts: vec![0; bins],
-        below: 0,
-        above: 0,
-        samples: 0,
-        grid: [u32::try_from(scalars.len()).unwrap_or(u32::MAX), 1, 1],
-        evaluations: scalars.len() as u64,
-    };
-    bin_values(&mut out, scalars.iter().copied(), lo, hi);
-    out
-}
-
-fn bin_values(out: &mut Histogram, values: impl Iterator<Item = f32>, lo: f32, hi: f32) {
-    let bins = out.counts.len();
-    let width = (hi - lo) / bins as f32;
-    for v in values {
-        out.samples += 1;
-        if v < lo {
-            out.below += 1;
-        } else if v >= hi {
-            out.above += 1;
-        } else {
-            let bin = (((v - lo) / width) as usize).min(bins - 1);
-            out.counts[bin] += 1;
-        }
-    }
-}
-
-/// What [`field_histogram`] counted.
-#[derive(Clone, Debug, PartialEq)]
-pub struct Histogram {
-    pub counts: Vec<u64>,
-    pub below: u64,
-    pub above: u64,
-    pub samples: u64,
-    pub grid: [u32; 3],
-    /// Values computed: (ball, grid point) pairs for metaballs, at most [`MAX_SPLAT_CELLS`].
-    pub evaluations: u64,
-}
 
 /// The query: `time` (seconds; absent: the live state), `bins`, and the range `lo`, `hi`
 /// (default: the scene's isovalue slider).
@@ -151,7 +25,7 @@ struct Query {
     range: Option<(f64, f64)>,
 }
 
-fn parse_query(query: &str) -> Result<Query, ApiError> {
+fn parse_query(query: &str) -> Result<Query, AppError> {
     let mut q = Query {
         time: None,
         bins: DEFAULT_BINS,
@@ -165,7 +39,7 @@ fn parse_query(query: &str) -> Result<Query, ApiError> {
                 .ok()
                 .filter(|x| x.is_finite())
                 .ok_or_else(|| {
-                    ApiError::bad_request(
+                    AppError::bad_request(
                         "invalid_query",
                         format!("{name}=`{v}` is not a finite number"),
                     )
@@ -176,7 +50,7 @@ fn parse_query(query: &str) -> Result<Query, ApiError> {
             "time" => {
                 let t = number("time")?;
                 if !(0.0..=1.0e9).contains(&t) {
-                    return Err(ApiError::bad_request(
+                    return Err(AppError::bad_request(
                         "invalid_value",
                         format!("time {t} must be in [0, 1e9]"),
                     )
@@ -190,7 +64,7 @@ fn parse_query(query: &str) -> Result<Query, ApiError> {
                     .ok()
                     .filter(|b| (1..=MAX_BINS).contains(b))
                     .ok_or_else(|| {
-                        ApiError::bad_request(
+                        AppError::bad_request(
                             "invalid_value",
                             format!("bins=`{v}` must be an integer in 1..={MAX_BINS}"),
                         )
@@ -200,7 +74,7 @@ fn parse_query(query: &str) -> Result<Query, ApiError> {
             "lo" => lo = Some(number("lo")?),
             "hi" => hi = Some(number("hi")?),
             other => {
-                return Err(ApiError::bad_request(
+                return Err(AppError::bad_request(
                     "invalid_query",
                     format!("unknown query parameter `{other}` (time, bins, lo, hi)"),
                 )
@@ -212,13 +86,13 @@ fn parse_query(query: &str) -> Result<Query, ApiError> {
         (None, None) => {}
         (Some(lo), Some(hi)) if lo < hi => q.range = Some((lo, hi)),
         (Some(_), Some(_)) => {
-            return Err(ApiError::bad_request("invalid_value", "lo must be below hi").field("lo"))
+            return Err(AppError::bad_request("invalid_value", "lo must be below hi").field("lo"))
         }
         (None, Some(_)) => {
-            return Err(ApiError::bad_request("invalid_query", "hi needs lo").field("lo"))
+            return Err(AppError::bad_request("invalid_query", "hi needs lo").field("lo"))
         }
         (Some(_), None) => {
-            return Err(ApiError::bad_request("invalid_query", "lo needs hi").field("hi"))
+            return Err(AppError::bad_request("invalid_query", "lo needs hi").field("hi"))
         }
     }
     Ok(q)
@@ -243,12 +117,12 @@ fn parse_query(query: &str) -> Result<Query, ApiError> {
         (status = 404, description = "Not found", body = ApiErrorBody)
     )
 )]
-pub(super) async fn histogram(
+pub async fn histogram(
     State(app): State<AppState>,
     headers: HeaderMap,
     Path(id): Path<String>,
     RawQuery(query): RawQuery,
-) -> Result<Json<FieldHistogram>, ApiError> {
+) -> Result<Json<FieldHistogram>, AppError> {
     let entry = scene_of(&app, &id)?;
     check_view(&app, &headers, Some(&entry))?;
     let q = parse_query(query.as_deref().unwrap_or(""))?;
@@ -257,8 +131,7 @@ pub(super) async fn histogram(
         (f64::from(lo), f64::from(hi))
     });
     let live_time = app.scenes().live_time();
-    let (tx, rx) = tokio::sync::oneshot::channel();
-    app.backend().spawn(move || {
+    let job = app.jobs().run(move || {
         let (state, time) = match entry.stored_scene() {
             Some(scene) => {
                 let step = match q.time {
@@ -273,15 +146,11 @@ pub(super) async fn histogram(
                 (entry.prepared_at(time, false, None), time)
             }
         };
-        let histogram = match &state.prepared.scene().geometry {
-            Geometry::Metaballs(m) => field_histogram(m, lo as f32, hi as f32, q.bins),
-            Geometry::Tets(t) => vertex_histogram(t.scalars(), lo as f32, hi as f32, q.bins),
-        };
-        let _ = tx.send((histogram, time));
+        let geometry = &state.prepared.scene().geometry;
+        let histogram = crate::kinds::histogram_of(geometry, lo as f32, hi as f32, q.bins);
+        (histogram, time)
     });
-    let (h, time) = rx
-        .await
-        .map_err(|_| ApiError::internal("the render pool dropped the job"))?;
+    let (h, time) = job.await.map_err(AppError::internal)?;
     Ok(Json(FieldHistogram {
         lo,
         hi,
@@ -297,79 +166,6 @@ pub(super) async fn histogram(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use isoray_render::metaball::{Kernel, Metaball};
-
-    /// One ball: the grid points where the field is at least `t` fill the sphere of radius
-    /// `R · sqrt(s(t))`, so their count is that sphere's volume in cells.
-    #[test]
-    fn one_ball_matches_the_sphere_volumes() {
-        let radius = 2.0;
-        let scene = MetaballScene::new(
-            Kernel::Wyvill,
-            vec![Metaball::sphere(Vec3::ZERO, radius, 1.0, Vec3::ONE)],
-        );
-        let bins = 100;
-        let h = field_histogram(&scene, 0.0, 1.0, bins);
-        assert_eq!(h.grid, [MAX_GRID; 3]);
-        let cell = 2.0 * radius as f64 / MAX_GRID as f64;
-        let ball_cells = |r: f64| 4.0 / 3.0 * std::f64::consts::PI * r.powi(3) / cell.powi(3);
-        let total = ball_cells(radius as f64);
-        assert!(
-            (h.samples as f64 - total).abs() < 0.02 * total,
-            "{} samples inside the support, expected about {total:.0}",
-            h.samples
-        );
-        for t in [0.1f32, 0.3, 0.5, 0.8] {
-            let at_least: u64 = h.counts[(t * bins as f32).round() as usize..].iter().sum();
-            let r_t = radius as f64 * f64::from(Kernel::Wyvill.s_at_value(t)).sqrt();
-            let expected = ball_cells(r_t);
-            assert!(
-                (at_least as f64 - expected).abs() < 0.03 * expected + 50.0,
-                "field ≥ {t}: {at_least} points, expected about {expected:.0}"
-            );
-        }
-        assert_eq!(h.samples, h.below + h.above + h.counts.iter().sum::<u64>());
-    }
-
-    #[test]
-    fn overlapping_balls_add_and_empty_scenes_are_empty() {
-        let two = MetaballScene::new(
-            Kernel::Wyvill,
-            vec![
-                Metaball::sphere(Vec3::ZERO, 1.0, 1.0, Vec3::ONE),
-                Metaball::sphere(Vec3::ZERO, 1.0, 1.0, Vec3::ONE),
-            ],
-        );
-        let h = field_histogram(&two, 0.0, 2.0, 2);
-        // Doubled strength: values above 1 exist (near the centre), none at or above 2.
-        assert!(h.counts[1] > 0 && h.above == 0, "{h:?}");
-        let empty = MetaballScene::new(Kernel::Wyvill, Vec::new());
-        let h = field_histogram(&empty, 0.0, 1.0, 8);
-        assert_eq!((h.samples, h.counts), (0, vec![0; 8]));
-    }
-
-    #[test]
-    fn many_large_balls_shrink_the_grid_to_the_budget() {
-        let balls = (0..20_000)
-            .map(|i| Metaball::sphere(Vec3::new(i as f32 * 1e-4, 0.0, 0.0), 1.0, 1.0, Vec3::ONE))
-            .collect();
-        let h = field_histogram(&MetaballScene::new(Kernel::Wyvill, balls), 0.0, 1.0, 4);
-        let points: u32 = h.grid.iter().product();
-        assert!(points < MAX_GRID.pow(3), "grid {:?}", h.grid);
-        assert!(
-            h.evaluations as f64 <= MAX_SPLAT_CELLS && h.evaluations > 1_000_000,
-            "{} evaluations on grid {:?}",
-            h.evaluations,
-            h.grid
-        );
-    }
-
-    #[test]
-    fn vertex_values_are_binned_with_the_outliers_counted() {
-        let h = vertex_histogram(&[0.0, 0.1, 0.26, 0.5, 0.99, 1.0, -3.0], 0.0, 1.0, 4);
-        assert_eq!(h.counts, vec![2, 1, 1, 1]);
-        assert_eq!((h.below, h.above, h.samples), (1, 1, 7));
-    }
 
     #[test]
     fn bad_queries_name_the_parameter() {

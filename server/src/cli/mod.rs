@@ -2,5 +2,6 @@
 //! server) and `isoray render` (one image of a scene, offline).
 
 pub mod push;
+pub mod push_args;
 pub mod push_vtu;
 pub mod render;

@@ -3,50 +3,9 @@
 //! disk, never read whole into memory; the server validates it and answers per step. A VTK
 //! series (`.vtu` files, or a `.pvd` collection) is a tet scene: see `push_vtu`.
 
-use clap::Parser;
+use super::push_args::{create_scene, put_step, step_path, PushArgs};
 use isoray_server::api::client::{Body, Client};
-use std::path::PathBuf;
 use std::time::Instant;
-
-/// Push `.npy` files to an isoray server as the time steps of a scene.
-///
-/// Files are pushed in the order given, as steps `--start`, `--start + 1`, ... Without
-/// `--scene`, a metaball scene is created first (from `--spec`, a JSON file with the body of
-/// `POST /api/v1/scenes`, or `{"kind": "metaballs"}`), and its id and write token are printed.
-/// A VTK series (`.vtu` files of tetrahedra, or a `.pvd` collection of them) makes a tet
-/// scene: the first file's mesh, then one step per file from a point scalar array.
-#[derive(Debug, Parser)]
-#[command(name = "isoray push")]
-pub struct PushArgs {
-    /// The server's base URL.
-    #[arg(long, env = "ISORAY_SERVER", default_value = "http://127.0.0.1:8080")]
-    pub server: String,
-    /// The scene to push to (default: create one).
-    #[arg(long)]
-    pub scene: Option<String>,
-    /// The scene's write token (or the server's admin token). Needed with `--scene`.
-    #[arg(long, env = "ISORAY_TOKEN", hide_env_values = true)]
-    pub token: Option<String>,
-    /// Scene description for a new scene: a JSON file like the body of `POST /api/v1/scenes`.
-    #[arg(long, conflicts_with = "scene")]
-    pub spec: Option<PathBuf>,
-    /// Index of the first file's step.
-    #[arg(long, default_value_t = 0)]
-    pub start: u64,
-    /// Simulation time between consecutive steps (default: each step's time is its index).
-    #[arg(long)]
-    pub time_step: Option<f64>,
-    /// Overwrite steps that exist with different content.
-    #[arg(long)]
-    pub replace: bool,
-    /// The point array of a `.vtu` series to push (default: the first with one component).
-    #[arg(long)]
-    pub array: Option<String>,
-    /// The step files: `.npy` (float32 or float64, shape (rows, columns)), raw arrays with
-    /// the 16-byte `ISRA` header (any other extension), or a VTK series (`.vtu` or `.pvd`).
-    #[arg(required = true)]
-    pub files: Vec<PathBuf>,
-}
 
 /// Runs the command; the error is what to print.
 pub fn run(args: PushArgs) -> Result<(), String> {
@@ -127,88 +86,6 @@ pub fn run(args: PushArgs) -> Result<(), String> {
     Ok(())
 }
 
-/// Creates the scene to push to; prints and returns its id and write token.
-/// `/api/v1/scenes/{scene}/steps/{index}` with its `time` and `replace` query.
-pub(super) fn step_path(scene: &str, index: u64, time: Option<f64>, replace: bool) -> String {
-    let mut query = Vec::new();
-    if let Some(t) = time {
-        query.push(format!("time={t}"));
-    }
-    if replace {
-        query.push("replace=true".into());
-    }
-    format!(
-        "/api/v1/scenes/{scene}/steps/{index}{}{}",
-        if query.is_empty() { "" } else { "?" },
-        query.join("&")
-    )
-}
-
-/// PUTs one step and returns the server's answer; errors start with `what`.
-pub(super) fn put_step(
-    client: &Client,
-    path: &str,
-    auth: &str,
-    content_type: &str,
-    body: Body<'_>,
-    what: &str,
-) -> Result<serde_json::Value, String> {
-    let r = client
-        .request(
-            "PUT",
-            path,
-            &[("Content-Type", content_type), ("Authorization", auth)],
-            body,
-        )
-        .map_err(|e| format!("{what}: {e}"))?;
-    if !(r.status == 200 || r.status == 201) {
-        return Err(format!(
-            "{what}: the server answered {}: {}",
-            r.status,
-            r.text()
-        ));
-    }
-    r.json().map_err(|e| e.to_string())
-}
-
 fn create(client: &Client, args: &PushArgs) -> Result<(String, String), String> {
     create_scene(client, args, br#"{"kind":"metaballs"}"#)
-}
-
-/// Creates a scene from `--spec`, or from `default` without one; prints and returns its id
-/// and write token.
-pub fn create_scene(
-    client: &Client,
-    args: &PushArgs,
-    default: &[u8],
-) -> Result<(String, String), String> {
-    let spec = match &args.spec {
-        Some(path) => std::fs::read(path).map_err(|e| format!("{}: {e}", path.display()))?,
-        None => default.to_vec(),
-    };
-    let auth = args.token.as_ref().map(|t| format!("Bearer {t}"));
-    let mut headers = vec![("Content-Type", "application/json")];
-    if let Some(a) = &auth {
-        headers.push(("Authorization", a));
-    }
-    let r = client
-        .request("POST", "/api/v1/scenes", &headers, Body::Bytes(&spec))
-        .map_err(|e| e.to_string())?;
-    if r.status != 201 {
-        return Err(format!(
-            "creating the scene: the server answered {}: {}",
-            r.status,
-            r.text()
-        ));
-    }
-    let created: serde_json::Value = r.json().map_err(|e| e.to_string())?;
-    let (Some(id), Some(token)) = (
-        created["scene"]["id"].as_str(),
-        created["write_token"].as_str(),
-    ) else {
-        return Err(format!("unexpected answer: {}", r.text()));
-    };
-    println!("created scene {id}");
-    println!("write token {token} (shown once; keep it to push more steps)");
-    Ok((id.to_string(), token.to_string()))
 }

@@ -9,7 +9,7 @@
 //! convention are reordered (corners 1 and 2 swapped) and counted, since the server refuses
 //! inverted tets.
 
-use super::push::{put_step, step_path, PushArgs};
+use super::push_args::{create_scene, put_step, step_path, PushArgs};
 use isoray_server::api::client::{npy_header, npy_header_f32, Body, Client};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -276,7 +276,7 @@ pub fn run(args: &PushArgs) -> Result<(), String> {
             } else {
                 r#"{"kind":"tets"}"#.to_string()
             };
-            super::push::create_scene(&client, args, default.as_bytes())?
+            create_scene(&client, args, default.as_bytes())?
         }
     };
     let auth = format!("Bearer {token}");

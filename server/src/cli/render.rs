@@ -7,15 +7,17 @@
 use clap::Parser;
 use isoray_protocol::api::{ApiCamera, CreateScene, JsonStep};
 use isoray_protocol::effects::EffectChanges;
+use isoray_protocol::Codec;
 use isoray_render::scenes::DemoScene;
 use isoray_render::{Backend, Camera, Scene, View};
-use isoray_server::api::convert;
+use isoray_server::body::BodyReader;
 use isoray_server::effects::{self, EffectLimits};
-use isoray_server::kind::SceneSetup;
+use isoray_server::frame::{self, FrameRequest};
+use isoray_server::kinds::convert;
+use isoray_server::kinds::SceneSetup;
+use isoray_server::scenes::prepared::PreparedState;
 use isoray_server::store::format::{verify_payload, StepHeader, HEADER_LEN};
-use isoray_server::store::ingest::{
-    ingest_json, ingest_npy, ingest_raw, BodyReader, IngestLimits, Target,
-};
+use isoray_server::store::ingest::{ingest_json, ingest_npy, ingest_raw, IngestLimits, Target};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
@@ -119,7 +121,7 @@ pub fn run(args: RenderArgs) -> Result<(), String> {
             load(args.spec.as_deref(), step)?
         }
     };
-    let error = |e: isoray_server::api::error::ApiError| {
+    let error = |e: isoray_server::kinds::error::KindError| {
         format!(
             "{}{}",
             e.field.map(|f| format!("{f}: ")).unwrap_or_default(),
@@ -175,19 +177,26 @@ pub fn run(args: RenderArgs) -> Result<(), String> {
         return Err(format!("--quality {} must be in 1..=100", args.quality));
     }
     let backend = Backend::cpu(args.threads).map_err(|e| e.to_string())?;
-    let prepared = Arc::new(loaded.scene).prepare();
+    let state = PreparedState {
+        prepared: Arc::new(loaded.scene).prepare(),
+        update_us: 0,
+        build_us: 0,
+        step_time: None,
+    };
     let view = View {
         width: args.width,
         height: args.height,
         camera,
         isovalue,
     };
-    let (fb, _) = backend.render_effects(&prepared, &view, &fx);
-    let bytes = match format {
-        Format::Png => isoray_server::encode::png(&fb),
-        Format::Jpeg => isoray_server::encode::jpeg(&fb, args.quality),
-    }
-    .map_err(|e| e.to_string())?;
+    let codec = match format {
+        Format::Png => Codec::Png,
+        Format::Jpeg => Codec::Jpeg,
+    };
+    let request = FrameRequest::image(view, &fx, codec, args.quality);
+    let bytes = frame::render(&backend, &state, &request, None)
+        .map_err(|e| e.to_string())?
+        .payload;
     std::fs::write(&args.output, bytes).map_err(|e| format!("{}: {e}", args.output.display()))?;
     println!(
         "wrote {} ({}×{})",
@@ -240,7 +249,7 @@ fn load(spec_path: Option<&Path>, step_path: &Path) -> Result<Loaded, String> {
             temp_path: std::env::temp_dir().join(format!(
                 ".tmp-isoray-render-{}-{}.step",
                 std::process::id(),
-                isoray_server::api::auth::random_hex(8)
+                isoray_server::random::random_hex(8)
             )),
             index: 0,
             time: 0.0,

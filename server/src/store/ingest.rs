@@ -10,12 +10,16 @@
 //! so a rejected push leaves the store as it was. Every error names the field (`shape`,
 //! `descr`, `positions[3][1]`, …) or the byte offset in the body where the input went wrong.
 
-use super::format::{StepHeader, HEADER_LEN};
-use crate::kind::StepLayout;
-use axum::body::Bytes;
-use isoray_protocol::api::{JsonStep, RAW_STEP_HEADER_LEN, RAW_STEP_MAGIC};
+use crate::body::{BodyAbort, BodyError, BodyReader};
+use crate::kinds::error::KindError;
+use crate::kinds::metaballs::step as ball_step;
+use crate::kinds::tets::step::raw_from_json;
+use crate::kinds::StepLayout;
+use crate::npy;
+use crate::store::format::{StepHeader, HEADER_LEN};
+use isoray_protocol::api::{JsonStep, JsonTetStep, RAW_STEP_HEADER_LEN, RAW_STEP_MAGIC};
 use std::fs::File;
-use std::io::{Read, Seek, SeekFrom, Write};
+use std::io::{Seek, SeekFrom, Write};
 use std::path::{Path, PathBuf};
 use xxhash_rust::xxh3::Xxh3;
 
@@ -77,124 +81,57 @@ impl IngestError {
     }
 }
 
-/// What the async side tells the reader when it stops forwarding the body early.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, thiserror::Error)]
-pub enum BodyAbort {
-    #[error("the body exceeds the limit of {0} bytes")]
-    TooLarge(u64),
-    #[error("the body did not arrive within the time limit")]
-    Timeout,
-    #[error("the connection failed while reading the body: {0}")]
-    Broken(&'static str),
-}
-
-/// A `Read` over body chunks sent from the async runtime. Counts the bytes it has returned.
-pub struct BodyReader {
-    rx: tokio::sync::mpsc::Receiver<Result<Bytes, BodyAbort>>,
-    buf: Bytes,
-    offset: u64,
-    abort: Option<BodyAbort>,
-}
-
-impl BodyReader {
-    pub fn new(rx: tokio::sync::mpsc::Receiver<Result<Bytes, BodyAbort>>) -> BodyReader {
-        BodyReader {
-            rx,
-            buf: Bytes::new(),
-            offset: 0,
-            abort: None,
-        }
-    }
-
-    /// A reader over bytes already in memory (JSON bodies, tests).
-    pub fn from_bytes(bytes: Bytes) -> BodyReader {
-        let (_tx, rx) = tokio::sync::mpsc::channel(1);
-        BodyReader {
-            rx,
-            buf: bytes,
-            offset: 0,
-            abort: None,
-        }
-    }
-
-    /// Reads exactly `out.len()` bytes, or reports where the body ended.
-    fn fill(&mut self, out: &mut [u8], what: &str) -> Result<(), IngestError> {
-        let mut got = 0;
-        while got < out.len() {
-            let n = self.read(&mut out[got..]).map_err(|e| self.read_error(e))?;
-            if n == 0 {
-                return Err(IngestError::invalid(
-                    "truncated",
-                    format!(
-                        "the body ends at byte offset {} inside {what}; {} more bytes were expected",
-                        self.offset,
-                        out.len() - got
-                    ),
-                )
-                .at_offset(self.offset));
+/// How a body read failure reads in a push.
+impl From<BodyError> for IngestError {
+    fn from(e: BodyError) -> IngestError {
+        let message = e.to_string();
+        match e {
+            BodyError::Truncated { offset, .. } => {
+                IngestError::invalid("truncated", message).at_offset(offset)
             }
-            got += n;
-        }
-        Ok(())
-    }
-
-    fn read_error(&self, e: std::io::Error) -> IngestError {
-        match self.abort {
-            Some(BodyAbort::TooLarge(limit)) => IngestError {
+            BodyError::Trailing { offset, .. } => {
+                IngestError::invalid("trailing_bytes", message).at_offset(offset)
+            }
+            BodyError::Read {
+                abort: Some(BodyAbort::TooLarge(limit)),
+                ..
+            } => IngestError {
                 kind: IngestErrorKind::TooLarge,
                 code: "body_too_large",
                 message: format!("the body exceeds the limit of {limit} bytes"),
                 field: None,
                 offset: Some(limit),
             },
-            Some(BodyAbort::Timeout) => IngestError {
+            BodyError::Read {
+                abort: Some(BodyAbort::Timeout),
+                offset,
+                ..
+            } => IngestError {
                 kind: IngestErrorKind::Timeout,
                 code: "timeout",
                 message: "the body did not arrive within the time limit".into(),
                 field: None,
-                offset: Some(self.offset),
+                offset: Some(offset),
             },
-            _ => IngestError::invalid("body_read_failed", format!("reading the body failed: {e}"))
-                .at_offset(self.offset),
-        }
-    }
-
-    /// Fails if any byte follows the declared data.
-    fn expect_end(&mut self) -> Result<(), IngestError> {
-        let mut one = [0u8; 1];
-        match self.read(&mut one).map_err(|e| self.read_error(e))? {
-            0 => Ok(()),
-            _ => Err(IngestError::invalid(
-                "trailing_bytes",
-                format!(
-                    "the body continues past the declared array at byte offset {}",
-                    self.offset - 1
-                ),
+            BodyError::Read { offset, error, .. } => IngestError::invalid(
+                "body_read_failed",
+                format!("reading the body failed: {error}"),
             )
-            .at_offset(self.offset - 1)),
+            .at_offset(offset),
         }
     }
 }
 
-impl Read for BodyReader {
-    fn read(&mut self, out: &mut [u8]) -> std::io::Result<usize> {
-        while self.buf.is_empty() {
-            if self.abort.is_some() {
-                return Err(std::io::Error::other("body aborted"));
-            }
-            match self.rx.blocking_recv() {
-                Some(Ok(chunk)) => self.buf = chunk,
-                Some(Err(abort)) => {
-                    self.abort = Some(abort);
-                    return Err(std::io::Error::other(abort));
-                }
-                None => return Ok(0),
-            }
+/// What a kind's step check found, as a push error.
+impl From<KindError> for IngestError {
+    fn from(e: KindError) -> IngestError {
+        IngestError {
+            kind: IngestErrorKind::Invalid,
+            code: e.code,
+            message: e.message,
+            field: e.field,
+            offset: e.offset,
         }
-        let n = out.len().min(self.buf.len());
-        out[..n].copy_from_slice(&self.buf.split_to(n));
-        self.offset += n as u64;
-        Ok(n)
     }
 }
 
@@ -422,7 +359,7 @@ fn copy_values(
     while row < rows {
         let n = (rows - row).min(rows_per_batch) as usize;
         let batch = &mut raw[..n * row_bytes];
-        let batch_offset = body.offset;
+        let batch_offset = body.offset();
         body.fill(batch, "the array data")?;
         values.clear();
         match dtype {
@@ -492,7 +429,7 @@ pub fn ingest_npy(
         )
         .at_offset(8));
     }
-    let header_offset = body.offset;
+    let header_offset = body.offset();
     let mut header = vec![0u8; header_len];
     body.fill(&mut header, "the .npy header")?;
     let header = String::from_utf8_lossy(&header);
@@ -511,43 +448,14 @@ pub fn ingest_npy(
     let columns = check_shape(rows, columns, limits)?;
     let mut writer = StepWriter::create(target.temp_path, columns)?;
     copy_values(limits.layout, &mut body, dtype, rows, columns, &mut writer)?;
-    body.expect_end()?;
+    body.expect_end("the declared array")?;
     writer.finish(rows, target.index, target.time)
-}
-
-/// The text after `'key':` in a `.npy` header's Python dict literal.
-pub(crate) fn npy_dict_value<'a>(header: &'a str, key: &str) -> Option<&'a str> {
-    let at = header.find(&format!("'{key}'"))?;
-    let rest = &header[at + key.len() + 2..];
-    Some(
-        rest.trim_start()
-            .strip_prefix(':')
-            .unwrap_or(rest)
-            .trim_start(),
-    )
-}
-
-/// The dimensions of a `.npy` header's `shape` value, `(a, b, ...)`.
-pub(crate) fn npy_shape(shape: &str) -> Result<Vec<u64>, IngestError> {
-    let inner = shape
-        .strip_prefix('(')
-        .and_then(|s| s.split(')').next())
-        .ok_or_else(|| IngestError::invalid("bad_npy", "unreadable shape").at_field("shape"))?;
-    inner
-        .split(',')
-        .map(str::trim)
-        .filter(|s| !s.is_empty())
-        .map(|s| s.trim_end_matches('L').parse::<u64>())
-        .collect::<Result<Vec<_>, _>>()
-        .map_err(|_| {
-            IngestError::invalid("bad_npy", format!("unreadable shape ({inner})")).at_field("shape")
-        })
 }
 
 /// Picks `descr`, `fortran_order` and `shape` out of the header's Python dict literal.
 fn parse_npy_header(header: &str) -> Result<(Dtype, Vec<u64>), IngestError> {
     let value_of = |key: &str| -> Result<&str, IngestError> {
-        npy_dict_value(header, key).ok_or_else(|| {
+        npy::dict_value(header, key).ok_or_else(|| {
             IngestError::invalid("bad_npy", format!(".npy header has no '{key}'")).at_field(key)
         })
     };
@@ -571,7 +479,9 @@ fn parse_npy_header(header: &str) -> Result<(Dtype, Vec<u64>), IngestError> {
         )
         .at_field("fortran_order"));
     }
-    Ok((dtype, npy_shape(value_of("shape")?)?))
+    let shape = npy::shape(value_of("shape")?)
+        .map_err(|why| IngestError::invalid("bad_npy", why).at_field("shape"))?;
+    Ok((dtype, shape))
 }
 
 /// Reads a raw body: the 16-byte header of [`RAW_STEP_MAGIC`], then the values.
@@ -614,68 +524,21 @@ pub fn ingest_raw(
     let columns = check_shape(rows, columns, limits).map_err(|e| e.at_offset(6))?;
     let mut writer = StepWriter::create(target.temp_path, columns)?;
     copy_values(limits.layout, &mut body, dtype, rows, columns, &mut writer)?;
-    body.expect_end()?;
+    body.expect_end("the declared array")?;
     writer.finish(rows, target.index, target.time)
 }
 
-/// Converts a parsed JSON step to rows and writes it.
+/// Converts a parsed JSON metaball step to rows (the kind's checks name the JSON field) and
+/// writes it.
 pub fn ingest_json(
     step: &JsonStep,
     limits: &IngestLimits,
     target: Target,
 ) -> Result<WrittenStep, IngestError> {
+    let columns = ball_step::json_columns(step)?;
     let rows = step.positions.len();
-    let columns: usize = if step.colors.is_some() {
-        8
-    } else if step.strengths.is_some() {
-        5
-    } else if step.radii.is_some() {
-        4
-    } else {
-        3
-    };
-    let lengths = [
-        ("radii", step.radii.as_ref().map(Vec::len)),
-        ("strengths", step.strengths.as_ref().map(Vec::len)),
-        ("colors", step.colors.as_ref().map(Vec::len)),
-    ];
-    for (name, len) in lengths {
-        if let Some(len) = len.filter(|&l| l != rows) {
-            return Err(IngestError::invalid(
-                "bad_shape",
-                format!("{name} has {len} entries but positions has {rows}"),
-            )
-            .at_field(name));
-        }
-    }
-    if columns == 8 && (step.radii.is_none() || step.strengths.is_none()) {
-        return Err(IngestError::invalid(
-            "bad_shape",
-            "colors need radii and strengths too (rows are x y z radius strength r g b)",
-        )
-        .at_field("colors"));
-    }
-    if columns == 5 && step.radii.is_none() {
-        return Err(
-            IngestError::invalid("bad_shape", "strengths need radii too").at_field("strengths"),
-        );
-    }
     let columns_u32 = check_shape(rows as u64, columns as u64, limits)?;
-    let mut values = Vec::with_capacity(rows * columns);
-    for i in 0..rows {
-        let mut row = [0f64; 8];
-        row[..3].copy_from_slice(&step.positions[i]);
-        if let Some(r) = &step.radii {
-            row[3] = r[i];
-        }
-        if let Some(s) = &step.strengths {
-            row[4] = s[i];
-        }
-        if let Some(c) = &step.colors {
-            row[5..8].copy_from_slice(&c[i]);
-        }
-        values.extend(row[..columns].iter().map(|&v| v as f32));
-    }
+    let values = ball_step::json_rows(step, columns);
     check_rows(limits.layout, &values, columns, 0, |_| 0).map_err(|mut e| {
         // Name the JSON field rather than a row/column pair.
         if let Some(field) = e.field.take() {
@@ -685,12 +548,7 @@ pub fn ingest_json(
                 .filter_map(|s| s.parse().ok())
                 .collect();
             if let [row, col] = nums[..] {
-                e.field = Some(match col {
-                    0..=2 => format!("positions[{row}][{col}]"),
-                    3 => format!("radii[{row}]"),
-                    4 => format!("strengths[{row}]"),
-                    _ => format!("colors[{row}][{}]", col - 5),
-                });
+                e.field = Some(ball_step::json_field(row, col));
                 e.message = format!(
                     "{} {}",
                     e.field.as_deref().unwrap_or_default(),
@@ -712,6 +570,27 @@ pub fn ingest_json(
         writer.write_rows(chunk)?;
     }
     writer.finish(rows as u64, target.index, target.time)
+}
+
+/// A tet step sent as JSON: checked value by value by its kind (naming `scalars[i]`), then
+/// written like a raw `(V, 1)` array.
+pub fn ingest_json_tets(
+    step: &JsonTetStep,
+    limits: &IngestLimits,
+    target: Target,
+) -> Result<WrittenStep, IngestError> {
+    let vertices = match limits.layout {
+        StepLayout::Tets { vertices } => vertices,
+        StepLayout::Metaballs => {
+            return Err(IngestError::invalid(
+                "bad_shape",
+                "scalars: a metaball step is rows of balls, not scalars",
+            )
+            .at_field("scalars"))
+        }
+    };
+    let raw = raw_from_json(step, vertices)?;
+    ingest_raw(BodyReader::from_bytes(raw.into()), limits, target)
 }
 
 #[cfg(test)]
@@ -810,5 +689,49 @@ mod tests {
         )
         .expect_err("six columns");
         assert_eq!(e.field.as_deref(), Some("shape"));
+    }
+
+    #[test]
+    fn json_steps_name_the_bad_scalar() {
+        let dir = tempfile::tempdir().expect("temp dir");
+        let limits = IngestLimits {
+            layout: StepLayout::Tets { vertices: Some(3) },
+            max_rows: 100,
+            max_step_bytes: 1 << 20,
+        };
+        let target = |name: &str| Target {
+            temp_path: dir.path().join(name),
+            index: 0,
+            time: 0.0,
+        };
+        let ok = ingest_json_tets(
+            &JsonTetStep {
+                scalars: vec![0.0, 1.0, 2.0],
+            },
+            &limits,
+            target("a"),
+        )
+        .expect("valid");
+        assert_eq!((ok.header.rows, ok.header.columns), (3, 1));
+        let e = ingest_json_tets(
+            &JsonTetStep {
+                scalars: vec![0.0, 1e300, 2.0],
+            },
+            &limits,
+            target("b"),
+        )
+        .expect_err("too big for f32");
+        assert_eq!(e.field.as_deref(), Some("scalars[1]"));
+        let e = ingest_json_tets(
+            &JsonTetStep {
+                scalars: vec![0.0, 1.0],
+            },
+            &limits,
+            target("c"),
+        )
+        .expect_err("one short");
+        assert_eq!(e.field.as_deref(), Some("scalars"));
+        assert!(e.message.contains("3 vertices"), "{}", e.message);
+        assert!(!dir.path().join("b").exists() && !dir.path().join("c").exists());
     }
 }

@@ -17,7 +17,7 @@
 //! Written as `.tmp-mesh.bin`, fsynced, renamed to `mesh.bin`, directory fsynced: after a
 //! crash the mesh is wholly there or absent (a leftover temporary file is removed on load).
 
-use crate::kind::{KindSetup, SceneSetup};
+use crate::kinds::SceneSetup;
 use glam::Vec3;
 use isoray_render::tet::TetMesh;
 use std::io::Write;
@@ -148,11 +148,12 @@ pub fn read(dir: &Path) -> Result<Option<TetMesh>, String> {
 /// Gives a loaded tet scene its stored mesh, if it has one; a damaged mesh file is renamed
 /// to `.corrupt` and logged, and the scene stays without a mesh (its steps show nothing).
 pub fn attach(dir: &Path, setup: &SceneSetup) {
-    let KindSetup::Tets(t) = &setup.kind else {
+    // Only kinds with a static mesh (tets) have one on disk.
+    let Some(slot) = setup.mesh_slot() else {
         return;
     };
     match read(dir) {
-        Ok(Some(mesh)) => t.mesh.set(Arc::new(mesh)),
+        Ok(Some(mesh)) => slot.set(Arc::new(mesh)),
         Ok(None) => {}
         Err(e) => {
             tracing::error!(dir = %dir.display(), error = %e, "tet mesh failed verification; renamed to .corrupt and not served");

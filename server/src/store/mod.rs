@@ -32,7 +32,7 @@ pub mod format;
 pub mod ingest;
 pub mod mesh;
 
-use crate::kind::SceneSetup;
+use crate::kinds::SceneSetup;
 use filebuffer::FileBuffer;
 use format::{checksum_hex, verify_payload, StepHeader, HEADER_LEN};
 use ingest::WrittenStep;
@@ -341,7 +341,7 @@ impl Store {
     pub fn temp_step_path(&self, scene: &StoredScene) -> PathBuf {
         scene
             .steps_dir()
-            .join(format!(".tmp-{}.step", crate::api::auth::random_hex(8)))
+            .join(format!(".tmp-{}.step", crate::random::random_hex(8)))
     }
 
     /// Puts a written step in place (or finds it already there), then applies retention.
@@ -462,7 +462,7 @@ impl Store {
         let trash = self
             .root
             .join("trash")
-            .join(format!("{id}-{}", crate::api::auth::random_hex(4)));
+            .join(format!("{id}-{}", crate::random::random_hex(4)));
         std::fs::rename(&scene.dir, &trash)?;
         sync_dir(&self.root.join("scenes"))?;
         remove_all(&trash);

@@ -1,22 +1,38 @@
-//! Scene kinds served from pushed data, in one closed set matched in this file: what a scene's
-//! creation request holds for its kind, the layout of its step arrays, and how a stored step
-//! becomes an engine scene.
+//! Scene kinds served from pushed data, in one closed set whose dispatch is in this file:
+//! what a scene's creation request holds for its kind, the layout of its step arrays, how a
+//! stored step becomes an engine scene, and the histogram of a kind's field. Each kind's own
+//! code is in its folder (`metaballs/`, `tets/`); this file only matches and delegates.
 //!
-//! A new primitive kind (tetrahedral meshes, surfels) joins by adding a variant to
-//! [`KindSetup`] and [`StepLayout`] and an arm to each match below: the REST API, the ingest
-//! parsers, the store and the scene registry reach the kind only through these types. Static
-//! data that is checked once at creation (a tet mesh's connectivity, say: "a tet referencing a
-//! missing vertex" is refused by [`SceneSetup::from_spec`]) lives in the kind's setup; what
-//! changes per step is a `rows × columns` f32 array whose columns the layout names and checks.
+//! A new primitive kind (surfels) joins by adding a folder beside `metaballs/` and `tets/`, a
+//! variant to [`KindSetup`] and [`StepLayout`] and an arm to each match below: the REST API,
+//! the ingest parsers, the store and the scene registry reach the kind only through these
+//! types. Static data that is checked once at creation (a tet mesh's connectivity, say: "a
+//! tet referencing a missing vertex" is refused by [`SceneSetup::from_spec`]) lives in the
+//! kind's setup; what changes per step is a `rows × columns` f32 array whose columns the
+//! layout names and checks.
+//!
+//! Layering: `kinds` imports neither the HTTP layer (`api`, `error`) nor the store; its
+//! checks return [`KindError`], which the HTTP layer maps to its one error type.
 
-use crate::api::convert::{camera, finite, lighting, vec3};
-use crate::api::error::ApiError;
-use crate::api::tets::{mesh_from_spec, MeshSlot, TetSetup};
+pub mod convert;
+pub mod error;
+pub mod histogram;
+pub mod metaballs;
+pub mod tets;
+
 use crate::effects::EffectLimits;
+use crate::kinds::convert::{camera, finite, lighting};
+use crate::kinds::error::{KindError, KindErrorKind};
+use crate::kinds::histogram::Histogram;
+use crate::kinds::metaballs::histogram::field_histogram;
+use crate::kinds::metaballs::setup::{self as ball_setup, BallDefaults};
+use crate::kinds::tets::histogram::vertex_histogram;
+use crate::kinds::tets::setup::{self as tet_setup, MeshSlot, TetSetup};
+use crate::kinds::tets::step as tet_step;
 use glam::Vec3;
 use isoray_protocol::api::{CreateScene, SceneKind};
-use isoray_render::metaball::{Kernel, Metaball, MetaballScene};
 use isoray_render::scene::Geometry;
+use isoray_render::scenes::DemoScene;
 use isoray_render::{Camera, Lighting, Scene};
 use std::sync::Arc;
 
@@ -29,10 +45,6 @@ pub enum StepLayout {
     /// mesh is there).
     Tets { vertices: Option<u64> },
 }
-
-/// Metaball step column counts: positions, + radius, + strength, + linear RGB.
-const METABALL_COLUMNS: [u32; 4] = [3, 4, 5, 8];
-const METABALL_COLUMN_NAMES: [&str; 8] = ["x", "y", "z", "radius", "strength", "r", "g", "b"];
 
 impl StepLayout {
     /// The layout of `kind`'s steps, or `None` while the engine cannot trace that kind.
@@ -47,7 +59,7 @@ impl StepLayout {
     /// Column counts a step of this kind may have.
     pub fn allowed_columns(self) -> &'static [u32] {
         match self {
-            StepLayout::Metaballs => &METABALL_COLUMNS,
+            StepLayout::Metaballs => &ball_setup::COLUMNS,
             StepLayout::Tets { .. } => &[1],
         }
     }
@@ -55,18 +67,16 @@ impl StepLayout {
     /// What the columns hold, for error messages.
     pub fn columns_help(self) -> &'static str {
         match self {
-            StepLayout::Metaballs => {
-                "a metaball step has 3 (x y z), 4 (+ radius), 5 (+ strength) or 8 (+ r g b) columns"
-            }
-            StepLayout::Tets { .. } => "a tet step has 1 column: the scalar at each mesh vertex",
+            StepLayout::Metaballs => ball_setup::COLUMNS_HELP,
+            StepLayout::Tets { .. } => tet_step::COLUMNS_HELP,
         }
     }
 
     /// The name of column `col`.
     pub fn column_name(self, col: usize) -> &'static str {
         match self {
-            StepLayout::Metaballs => METABALL_COLUMN_NAMES.get(col).copied().unwrap_or("?"),
-            StepLayout::Tets { .. } => "scalar",
+            StepLayout::Metaballs => ball_setup::column_name(col),
+            StepLayout::Tets { .. } => tet_step::COLUMN_NAME,
         }
     }
 
@@ -74,12 +84,7 @@ impl StepLayout {
     /// (it vectorises); on `false` the caller finds the culprit with [`StepLayout::check_value`].
     pub fn rows_valid(self, values: &[f32], columns: usize) -> bool {
         match self {
-            StepLayout::Metaballs => {
-                columns < 4
-                    || values
-                        .chunks_exact(columns)
-                        .fold(true, |ok, row| ok & (row[3] > 0.0))
-            }
+            StepLayout::Metaballs => ball_setup::rows_valid(values, columns),
             // Any finite scalar will do.
             StepLayout::Tets { .. } => true,
         }
@@ -90,35 +95,17 @@ impl StepLayout {
     pub fn check_rows(self, rows: u64) -> Option<String> {
         match self {
             StepLayout::Metaballs => None,
-            StepLayout::Tets { vertices: None } => {
-                Some("the scene has no mesh yet; send it with PUT .../mesh first".into())
-            }
-            StepLayout::Tets {
-                vertices: Some(n),
-            } => (rows != n).then(|| {
-                format!("{rows} rows, but the mesh has {n} vertices: a tet step has one scalar per vertex")
-            }),
+            StepLayout::Tets { vertices } => tet_step::check_rows(vertices, rows),
         }
     }
 
     /// Why the finite value `v` in column `col` is not allowed, if it is not.
     pub fn check_value(self, col: usize, v: f32) -> Option<String> {
         match self {
-            StepLayout::Metaballs => {
-                (col == 3 && v <= 0.0).then(|| format!("is {v}; a radius must be positive"))
-            }
+            StepLayout::Metaballs => ball_setup::check_value(col, v),
             StepLayout::Tets { .. } => None,
         }
     }
-}
-
-/// Per-ball values for columns a metaball step leaves out.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct BallDefaults {
-    pub kernel: Kernel,
-    pub radius: f32,
-    pub strength: f32,
-    pub color: Vec3,
 }
 
 /// The static, validated part of a scene, by kind.
@@ -141,36 +128,14 @@ pub struct SceneSetup {
     pub kind: KindSetup,
 }
 
-/// Kernel names accepted in `metaballs.kernel`.
-const KERNEL_NAMES: &str = "wyvill, quartic, tutorial, power1, power2, power3, power4";
-
-fn kernel(name: &str) -> Result<Kernel, ApiError> {
-    Ok(match name {
-        "wyvill" => Kernel::Wyvill,
-        "quartic" => Kernel::Quartic,
-        "tutorial" => Kernel::Tutorial,
-        "power1" => Kernel::Power { alpha: 1 },
-        "power2" => Kernel::Power { alpha: 2 },
-        "power3" => Kernel::Power { alpha: 3 },
-        "power4" => Kernel::Power { alpha: 4 },
-        other => {
-            return Err(ApiError::bad_request(
-                "invalid_value",
-                format!("kernel `{other}` is not known; the engine has {KERNEL_NAMES}"),
-            )
-            .field("metaballs.kernel"))
-        }
-    })
-}
-
 impl SceneSetup {
     /// Validates a creation request and converts it, with effect quality checked against
     /// `limits` (the server's configured ones, or [`EffectLimits::ENGINE`]); every error names
     /// its field.
-    pub fn from_spec(spec: &CreateScene, limits: &EffectLimits) -> Result<SceneSetup, ApiError> {
+    pub fn from_spec(spec: &CreateScene, limits: &EffectLimits) -> Result<SceneSetup, KindError> {
         let Some(layout) = StepLayout::of(spec.kind) else {
-            return Err(ApiError::new(
-                axum::http::StatusCode::UNPROCESSABLE_ENTITY,
+            return Err(KindError::new(
+                KindErrorKind::Unsupported,
                 "unsupported_kind",
                 format!(
                     "kind `{}` is not supported yet: this server's engine traces `metaballs` only",
@@ -190,11 +155,13 @@ impl SceneSetup {
         };
         let isovalue = finite(spec.isovalue.unwrap_or(0.5), "isovalue")?;
         // A metaball field is positive; a tet scene's scalar may take any sign.
-        let positive = layout == StepLayout::Metaballs;
+        let positive = match layout {
+            StepLayout::Metaballs => true,
+            StepLayout::Tets { .. } => false,
+        };
         if positive && isovalue <= 0.0 {
             return Err(
-                ApiError::bad_request("invalid_value", "isovalue must be positive")
-                    .field("isovalue"),
+                KindError::invalid("invalid_value", "isovalue must be positive").field("isovalue"),
             );
         }
         let slider = match spec.isovalue_slider {
@@ -205,7 +172,7 @@ impl SceneSetup {
                 );
                 if !(lo < hi && (!positive || 0.0 < lo)) {
                     let rule = if positive { "0 < lo < hi" } else { "lo < hi" };
-                    return Err(ApiError::bad_request(
+                    return Err(KindError::invalid(
                         "invalid_value",
                         format!("isovalue_slider must be [lo, hi] with {rule}"),
                     )
@@ -217,51 +184,13 @@ impl SceneSetup {
         };
         let lighting = lighting(&spec.lighting.clone().unwrap_or_default(), limits)?;
         let kind = match layout {
-            StepLayout::Metaballs => {
-                let d = spec.metaballs.clone().unwrap_or_default();
-                let radius = finite(d.radius, "metaballs.radius")?;
-                if radius <= 0.0 {
-                    return Err(ApiError::bad_request(
-                        "invalid_value",
-                        "metaballs.radius must be positive",
-                    )
-                    .field("metaballs.radius"));
-                }
-                KindSetup::Metaballs(BallDefaults {
-                    kernel: kernel(&d.kernel)?,
-                    radius,
-                    strength: finite(d.strength, "metaballs.strength")?,
-                    color: vec3(d.color, "metaballs.color")?,
-                })
-            }
-            StepLayout::Tets { .. } => {
-                let t = spec.tets.clone().unwrap_or_default();
-                let color_range = match t.color_range {
-                    Some([lo, hi]) => {
-                        let (lo, hi) = (
-                            finite(lo, "tets.color_range[0]")?,
-                            finite(hi, "tets.color_range[1]")?,
-                        );
-                        if lo == hi {
-                            return Err(ApiError::bad_request(
-                                "invalid_value",
-                                "tets.color_range must be two different values",
-                            )
-                            .field("tets.color_range"));
-                        }
-                        (lo, hi)
-                    }
-                    None => slider,
-                };
-                let mesh = MeshSlot::default();
-                if let Some(data) = &t.mesh {
-                    mesh.set(Arc::new(mesh_from_spec(data)?));
-                }
-                KindSetup::Tets(TetSetup {
-                    mesh: Arc::new(mesh),
-                    color_range,
-                })
-            }
+            StepLayout::Metaballs => KindSetup::Metaballs(ball_setup::setup_from_spec(
+                &spec.metaballs.clone().unwrap_or_default(),
+            )?),
+            StepLayout::Tets { .. } => KindSetup::Tets(tet_setup::setup_from_spec(
+                &spec.tets.clone().unwrap_or_default(),
+                slider,
+            )?),
         };
         Ok(SceneSetup {
             camera,
@@ -305,12 +234,8 @@ impl SceneSetup {
     pub fn scene(&self, step: Option<(u32, &[u8])>) -> Scene {
         let geometry = match &self.kind {
             KindSetup::Metaballs(d) => {
-                let balls = step.map_or_else(Vec::new, |(columns, payload)| {
-                    balls_from_rows(columns as usize, payload, d)
-                });
-                let mut m = MetaballScene::new(d.kernel, balls);
-                m.min_isovalue = self.slider.0.min(self.isovalue);
-                Geometry::Metaballs(m)
+                let min_isovalue = self.slider.0.min(self.isovalue);
+                Geometry::Metaballs(ball_setup::scene(d, step, min_isovalue))
             }
             KindSetup::Tets(t) => Geometry::Tets(t.scene(step)),
         };
@@ -320,42 +245,69 @@ impl SceneSetup {
         }
     }
 
+    /// The slot of the static mesh, for a kind that has one (tets); `None` for the others.
+    pub fn mesh_slot(&self) -> Option<&Arc<MeshSlot>> {
+        match &self.kind {
+            KindSetup::Tets(t) => Some(&t.mesh),
+            KindSetup::Metaballs(_) => None,
+        }
+    }
+
     /// Memory a prepared step of `rows` rows takes, roughly, for the prepared-state cache.
     pub fn prepared_bytes(&self, rows: u64) -> u64 {
         match &self.kind {
-            // The balls plus about as much again for the acceleration structure.
-            KindSetup::Metaballs(_) => rows * 2 * std::mem::size_of::<Metaball>() as u64,
+            KindSetup::Metaballs(_) => ball_setup::prepared_bytes(rows),
             KindSetup::Tets(t) => t.prepared_bytes(),
         }
     }
 }
 
-/// Engine balls from a metaball step's f32 rows.
-fn balls_from_rows(columns: usize, payload: &[u8], d: &BallDefaults) -> Vec<Metaball> {
-    let mut row = [0f32; 8];
-    payload
-        .chunks_exact(columns.max(1) * 4)
-        .map(|bytes| {
-            for (v, b) in row.iter_mut().zip(bytes.chunks_exact(4)) {
-                *v = f32::from_le_bytes([b[0], b[1], b[2], b[3]]);
-            }
-            Metaball::sphere(
-                Vec3::new(row[0], row[1], row[2]),
-                if columns >= 4 { row[3] } else { d.radius },
-                if columns >= 5 { row[4] } else { d.strength },
-                if columns >= 8 {
-                    Vec3::new(row[5], row[6], row[7])
-                } else {
-                    d.color
-                },
-            )
-        })
-        .collect()
+/// Whether a scene takes steps yet: a tet scene needs its mesh first
+/// ([`KindErrorKind::NotReady`], a 409); a metaball scene always does.
+pub fn check_ready(setup: &SceneSetup) -> Result<(), KindError> {
+    match &setup.kind {
+        KindSetup::Tets(t) if t.mesh.get().is_none() => Err(KindError::new(
+            KindErrorKind::NotReady,
+            "no_mesh",
+            "this tet scene has no mesh yet: send it with PUT /api/v1/scenes/{id}/mesh, then its steps",
+        )
+        .field("mesh")),
+        KindSetup::Tets(_) | KindSetup::Metaballs(_) => Ok(()),
+    }
+}
+
+/// The histogram of a scene's field over `[lo, hi)` in `bins` bins, by kind: the metaball
+/// field sampled on a grid, or a tet mesh's scalars at its vertices.
+pub fn histogram_of(geometry: &Geometry, lo: f32, hi: f32, bins: usize) -> Histogram {
+    match geometry {
+        Geometry::Metaballs(m) => field_histogram(m, lo, hi, bins),
+        Geometry::Tets(t) => vertex_histogram(t.scalars(), lo, hi, bins),
+    }
+}
+
+/// The kind of a built-in demo's primitives; every demo is named, so a new demo (or kind)
+/// is a compile error here rather than a metaball scene by default.
+pub fn demo_kind(demo: DemoScene) -> SceneKind {
+    match demo {
+        DemoScene::TetGyroid => SceneKind::Tets,
+        DemoScene::Blobs
+        | DemoScene::Scattered30k
+        | DemoScene::Scattered100k
+        | DemoScene::Scattered1k
+        | DemoScene::Tornado4k
+        | DemoScene::Tornado128k
+        | DemoScene::Molecule
+        | DemoScene::Pool
+        | DemoScene::Glass
+        | DemoScene::Clouds
+        | DemoScene::Shells => SceneKind::Metaballs,
+    }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use isoray_render::metaball::Kernel;
 
     fn spec(json: &str) -> CreateScene {
         serde_json::from_str(json).expect("valid JSON")
@@ -462,10 +414,8 @@ mod tests {
         assert_eq!(bare.layout(), StepLayout::Tets { vertices: None });
         assert!(bare.layout().check_rows(5).is_some());
         assert_eq!(
-            crate::api::tets::check_ready(&bare)
-                .expect_err("no mesh")
-                .status,
-            axum::http::StatusCode::CONFLICT
+            check_ready(&bare).expect_err("no mesh").kind,
+            KindErrorKind::NotReady
         );
     }
 

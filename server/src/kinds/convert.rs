@@ -1,22 +1,24 @@
 //! From API types to engine types, validating at the boundary: every non-finite or
 //! out-of-range value is refused with the field that holds it. What depends on the scene's
-//! kind is in `crate::kind`.
+//! kind is in the kind's own module beside this one.
 
-use super::error::ApiError;
 use crate::effects::EffectLimits;
+use crate::kinds::error::KindError;
 use glam::Vec3;
-use isoray_protocol::api::{ApiCamera, LightKind, LightSpec, LightingSpec, MaterialSpec};
+use isoray_protocol::api::{
+    ApiCamera, IsosurfaceSpec, LightKind, LightSpec, LightingSpec, MaterialSpec,
+};
 use isoray_render::shade::{ClipBox, Floor, Isosurface, Light, Material, MaterialGroup, Volume};
 use isoray_render::{Camera, Lighting};
 
 /// Largest coordinate accepted: keeps values exact enough in f32.
 const MAX_COORDINATE: f64 = 1.0e6;
 
-pub fn finite(v: f64, field: &str) -> Result<f32, ApiError> {
+pub fn finite(v: f64, field: &str) -> Result<f32, KindError> {
     if v.is_finite() && v.abs() <= MAX_COORDINATE {
         Ok(v as f32)
     } else {
-        Err(ApiError::bad_request(
+        Err(KindError::invalid(
             "invalid_value",
             format!("{field} is {v}; it must be a finite number of magnitude at most 1e6"),
         )
@@ -24,7 +26,7 @@ pub fn finite(v: f64, field: &str) -> Result<f32, ApiError> {
     }
 }
 
-pub fn vec3(v: [f64; 3], field: &str) -> Result<Vec3, ApiError> {
+pub fn vec3(v: [f64; 3], field: &str) -> Result<Vec3, KindError> {
     Ok(Vec3::new(
         finite(v[0], &format!("{field}[0]"))?,
         finite(v[1], &format!("{field}[1]"))?,
@@ -33,21 +35,21 @@ pub fn vec3(v: [f64; 3], field: &str) -> Result<Vec3, ApiError> {
 }
 
 /// A camera with a usable basis.
-pub fn camera(c: &ApiCamera, field: &str) -> Result<Camera, ApiError> {
+pub fn camera(c: &ApiCamera, field: &str) -> Result<Camera, KindError> {
     let eye = vec3(c.eye, &format!("{field}.eye"))?;
     let target = vec3(c.target, &format!("{field}.target"))?;
     let up = vec3(c.up, &format!("{field}.up"))?;
     let fov = finite(c.fov_y_deg, &format!("{field}.fov_y_deg"))?;
     let forward = target - eye;
     if forward.length() < 1e-6 || forward.normalize().cross(up).length() < 1e-6 {
-        return Err(ApiError::bad_request(
+        return Err(KindError::invalid(
             "invalid_value",
             format!("{field}: eye and target must differ and up must not be parallel to the view"),
         )
         .field(field));
     }
     if !(1.0..=170.0).contains(&fov) {
-        return Err(ApiError::bad_request(
+        return Err(KindError::invalid(
             "invalid_value",
             format!("{field}.fov_y_deg {fov} must be in [1, 170]"),
         )
@@ -61,11 +63,11 @@ pub fn camera(c: &ApiCamera, field: &str) -> Result<Camera, ApiError> {
     })
 }
 
-fn range(v: f64, lo: f64, hi: f64, field: &str) -> Result<f32, ApiError> {
+fn range(v: f64, lo: f64, hi: f64, field: &str) -> Result<f32, KindError> {
     if v.is_finite() && (lo..=hi).contains(&v) {
         Ok(v as f32)
     } else {
-        Err(ApiError::bad_request(
+        Err(KindError::invalid(
             "invalid_value",
             format!("{field} is {v}; it must be a number in [{lo}, {hi}]"),
         )
@@ -74,7 +76,7 @@ fn range(v: f64, lo: f64, hi: f64, field: &str) -> Result<f32, ApiError> {
 }
 
 /// A linear-light colour, each channel in `[0, hi]`.
-fn color(v: [f64; 3], hi: f64, field: &str) -> Result<Vec3, ApiError> {
+fn color(v: [f64; 3], hi: f64, field: &str) -> Result<Vec3, KindError> {
     Ok(Vec3::new(
         range(v[0], 0.0, hi, &format!("{field}[0]"))?,
         range(v[1], 0.0, hi, &format!("{field}[1]"))?,
@@ -82,8 +84,8 @@ fn color(v: [f64; 3], hi: f64, field: &str) -> Result<Vec3, ApiError> {
     ))
 }
 
-fn invalid(field: String, message: String) -> ApiError {
-    ApiError::bad_request("invalid_value", message).field(field)
+fn invalid(field: String, message: String) -> KindError {
+    KindError::invalid("invalid_value", message).field(field)
 }
 
 /// Most lights, materials, groups and isosurfaces a scene may declare.
@@ -92,7 +94,7 @@ const MAX_MATERIALS: usize = 64;
 const MAX_GROUPS: usize = 1024;
 const MAX_ISOSURFACES: usize = 4;
 
-fn light(spec: &LightSpec, field: &str) -> Result<Light, ApiError> {
+fn light(spec: &LightSpec, field: &str) -> Result<Light, KindError> {
     let intensity = range(
         spec.intensity,
         0.0,
@@ -175,7 +177,7 @@ fn light(spec: &LightSpec, field: &str) -> Result<Light, ApiError> {
     })
 }
 
-fn material(spec: &MaterialSpec, field: &str) -> Result<Material, ApiError> {
+fn material(spec: &MaterialSpec, field: &str) -> Result<Material, KindError> {
     let f = |name: &str| format!("{field}.{name}");
     Ok(Material {
         diffuse: color(spec.diffuse, 1.0, &f("diffuse"))?,
@@ -188,7 +190,7 @@ fn material(spec: &MaterialSpec, field: &str) -> Result<Material, ApiError> {
     })
 }
 
-fn material_index(index: u16, count: usize, field: String) -> Result<u16, ApiError> {
+fn material_index(index: u16, count: usize, field: String) -> Result<u16, KindError> {
     if (index as usize) < count {
         Ok(index)
     } else {
@@ -199,7 +201,7 @@ fn material_index(index: u16, count: usize, field: String) -> Result<u16, ApiErr
     }
 }
 
-pub fn lighting(spec: &LightingSpec, limits: &EffectLimits) -> Result<Lighting, ApiError> {
+pub fn lighting(spec: &LightingSpec, limits: &EffectLimits) -> Result<Lighting, KindError> {
     let mut l = Lighting::default();
     if let Some(lights) = &spec.lights {
         if lights.len() > MAX_LIGHTS {
@@ -264,7 +266,7 @@ pub fn lighting(spec: &LightingSpec, limits: &EffectLimits) -> Result<Lighting, 
                     )?,
                 })
             })
-            .collect::<Result<_, ApiError>>()?;
+            .collect::<Result<_, KindError>>()?;
     }
     if let Some(floor) = &spec.floor {
         l.floor = Some(Floor {
@@ -289,30 +291,7 @@ pub fn lighting(spec: &LightingSpec, limits: &EffectLimits) -> Result<Lighting, 
         l.clip_box = Some(ClipBox { min, max });
     }
     if let Some(surfaces) = &spec.isosurfaces {
-        if surfaces.len() > MAX_ISOSURFACES {
-            return Err(invalid(
-                "lighting.isosurfaces".into(),
-                format!("at most {MAX_ISOSURFACES} further isosurfaces"),
-            ));
-        }
-        l.isosurfaces = surfaces
-            .iter()
-            .enumerate()
-            .map(|(i, s)| {
-                let field = format!("lighting.isosurfaces[{i}]");
-                let isovalue = finite(s.isovalue, &format!("{field}.isovalue"))?;
-                if isovalue <= 0.0 {
-                    return Err(invalid(
-                        format!("{field}.isovalue"),
-                        format!("{field}.isovalue must be positive"),
-                    ));
-                }
-                Ok(Isosurface {
-                    isovalue,
-                    material: material_index(s.material, count, format!("{field}.material"))?,
-                })
-            })
-            .collect::<Result<_, ApiError>>()?;
+        l.isosurfaces = isosurfaces(surfaces, count)?;
     }
     if let Some(volume) = &spec.volume {
         let density = range(
@@ -350,4 +329,33 @@ pub fn lighting(spec: &LightingSpec, limits: &EffectLimits) -> Result<Lighting, 
         })?;
     }
     Ok(l)
+}
+
+/// Further isosurfaces (`lighting.isosurfaces`), each with a positive isovalue and a material
+/// among the `count` declared.
+fn isosurfaces(surfaces: &[IsosurfaceSpec], count: usize) -> Result<Vec<Isosurface>, KindError> {
+    if surfaces.len() > MAX_ISOSURFACES {
+        return Err(invalid(
+            "lighting.isosurfaces".into(),
+            format!("at most {MAX_ISOSURFACES} further isosurfaces"),
+        ));
+    }
+    surfaces
+        .iter()
+        .enumerate()
+        .map(|(i, s)| {
+            let field = format!("lighting.isosurfaces[{i}]");
+            let isovalue = finite(s.isovalue, &format!("{field}.isovalue"))?;
+            if isovalue <= 0.0 {
+                return Err(invalid(
+                    format!("{field}.isovalue"),
+                    format!("{field}.isovalue must be positive"),
+                ));
+            }
+            Ok(Isosurface {
+                isovalue,
+                material: material_index(s.material, count, format!("{field}.material"))?,
+            })
+        })
+        .collect()
 }

@@ -1,0 +1,146 @@
+//! Who asks and for what: the scene a path names (or why it is not here), the view, write
+//! and create checks, the client's address, and what the handlers share.
+
+use crate::api::auth::{bearer, require, token_hash, RateLimiter};
+use crate::error::AppError;
+use crate::scenes::entry::SceneEntry;
+use crate::state::AppState;
+use crate::store::StoredScene;
+use axum::extract::connect_info::ConnectInfo;
+use axum::extract::rejection::PathRejection;
+use axum::extract::FromRequestParts;
+use axum::http::request::Parts;
+use axum::http::{HeaderMap, StatusCode};
+use std::net::{IpAddr, SocketAddr};
+use std::sync::Arc;
+
+/// What the API handlers share besides the app state.
+pub struct ApiShared {
+    pub writes: RateLimiter,
+    pub openapi_json: String,
+}
+
+/// The client's address, when the server was started with connection info.
+pub struct ClientAddr(pub Option<IpAddr>);
+
+impl<S: Send + Sync> FromRequestParts<S> for ClientAddr {
+    type Rejection = std::convert::Infallible;
+
+    async fn from_request_parts(parts: &mut Parts, _: &S) -> Result<ClientAddr, Self::Rejection> {
+        Ok(ClientAddr(
+            parts
+                .extensions
+                .get::<ConnectInfo<SocketAddr>>()
+                .map(|c| c.0.ip()),
+        ))
+    }
+}
+
+pub fn scene_of(app: &AppState, id: &str) -> Result<Arc<SceneEntry>, AppError> {
+    app.scenes().get(id).ok_or_else(|| {
+        match crate::placement::misrouted(app.config().shard.as_deref(), id) {
+            Some(why) => AppError::new(StatusCode::MISDIRECTED_REQUEST, "misrouted", why),
+            None => AppError::not_found(format!("no scene with id `{id}`")),
+        }
+        .field("id")
+    })
+}
+
+pub fn stored_of(entry: &SceneEntry) -> Result<Arc<StoredScene>, AppError> {
+    entry.stored_scene().cloned().ok_or_else(|| {
+        AppError::new(
+            StatusCode::CONFLICT,
+            "built_in_scene",
+            format!(
+                "scene `{}` is a built-in demo; create a scene to push steps",
+                entry.id()
+            ),
+        )
+        .field("id")
+    })
+}
+
+/// Viewing needs the view token (or a write/admin token) when `--view-token` is set.
+pub fn check_view(
+    app: &AppState,
+    headers: &HeaderMap,
+    entry: Option<&SceneEntry>,
+) -> Result<(), AppError> {
+    check_view_token(app, bearer(headers), entry)
+}
+
+/// [`check_view`] for the websocket stream, whose token may also come as `?token=...`
+/// (a browser cannot set headers on a websocket).
+pub fn check_stream_view(
+    app: &AppState,
+    headers: &HeaderMap,
+    query: Option<&str>,
+    entry: &SceneEntry,
+) -> Result<(), AppError> {
+    let from_query = query.and_then(|q| q.split('&').find_map(|p| p.strip_prefix("token=")));
+    check_view_token(app, bearer(headers).or(from_query), Some(entry))
+}
+
+fn check_view_token(
+    app: &AppState,
+    presented: Option<&str>,
+    entry: Option<&SceneEntry>,
+) -> Result<(), AppError> {
+    let Some(view) = &app.config().view_token else {
+        return Ok(());
+    };
+    let mut accepted = vec![token_hash(view)];
+    if let Some(admin) = &app.config().admin_token {
+        accepted.push(token_hash(admin));
+    }
+    if let Some(scene) = entry.and_then(|e| e.stored_scene()) {
+        accepted.push(scene.meta.write_token_sha256.clone());
+    }
+    let refs: Vec<&str> = accepted.iter().map(String::as_str).collect();
+    require(presented, &refs, "viewing")
+}
+
+pub fn check_write(
+    app: &AppState,
+    headers: &HeaderMap,
+    scene: &StoredScene,
+) -> Result<(), AppError> {
+    let admin = app.config().admin_token.as_deref().map(token_hash);
+    let mut accepted = vec![scene.meta.write_token_sha256.as_str()];
+    if let Some(a) = &admin {
+        accepted.push(a);
+    }
+    require(bearer(headers), &accepted, "writing to this scene")
+}
+
+/// With `--admin-token`, only the admin may create scenes; without it anyone may (the write
+/// rate limit still applies).
+pub fn check_create(app: &AppState, headers: &HeaderMap) -> Result<(), AppError> {
+    match app.config().admin_token.as_deref() {
+        Some(admin) => require(bearer(headers), &[&token_hash(admin)], "creating scenes"),
+        None => Ok(()),
+    }
+}
+
+pub fn path_error(e: PathRejection) -> AppError {
+    AppError::bad_request("invalid_path", e.body_text())
+}
+
+pub fn parse_index(app: &AppState, raw: &str) -> Result<u64, AppError> {
+    let index: u64 = raw.parse().map_err(|_| {
+        AppError::bad_request(
+            "invalid_index",
+            format!("step index `{raw}` is not a non-negative integer"),
+        )
+        .field("index")
+    })?;
+    let max = app.config().max_step_index;
+    if index > max {
+        return Err(AppError::bad_request(
+            "index_out_of_range",
+            format!("step index {index} is beyond the limit of {max} (--max-step-index)"),
+        )
+        .field("index"));
+    }
+    Ok(index)
+}

@@ -1,0 +1,135 @@
+//! `POST /api/v1/scenes/{id}/render`: one image of a scene, PNG or JPEG.
+
+use crate::api::access::{check_view, scene_of};
+use crate::api::request::read_json;
+use crate::error::AppError;
+use crate::frame::{self, FrameRequest};
+use crate::kinds::convert;
+use crate::state::AppState;
+use axum::body::Body;
+use axum::extract::{Path, State};
+use axum::http::{header, HeaderMap};
+use axum::response::{IntoResponse, Response};
+use isoray_protocol::api::{ApiErrorBody, ImageFormat, RenderRequest};
+use isoray_protocol::Codec;
+use isoray_render::View;
+
+/// Default image size of a one-shot render.
+const DEFAULT_RENDER_SIZE: (u32, u32) = (640, 480);
+
+/// Renders one image of a scene on the render pool: PNG (lossless) or JPEG.
+#[utoipa::path(
+    post,
+    path = "/api/v1/scenes/{id}/render",
+    tag = "scenes",
+    params(("id" = String, Path, description = "Scene id")),
+    request_body = RenderRequest,
+    responses(
+        (status = 200, description = "The image", content(("image/png"), ("image/jpeg"))),
+        (status = 400, description = "Invalid request", body = ApiErrorBody),
+        (status = 404, description = "Not found", body = ApiErrorBody)
+    )
+)]
+pub async fn render(
+    State(app): State<AppState>,
+    headers: HeaderMap,
+    Path(id): Path<String>,
+    body: Body,
+) -> Result<Response, AppError> {
+    let entry = scene_of(&app, &id)?;
+    check_view(&app, &headers, Some(&entry))?;
+    let req: RenderRequest = read_json(&app, body).await?;
+    let max = app.config().max_size;
+    let width = req.width.unwrap_or(DEFAULT_RENDER_SIZE.0);
+    let height = req.height.unwrap_or(DEFAULT_RENDER_SIZE.1);
+    for (field, v) in [("width", width), ("height", height)] {
+        if v == 0 || v > max {
+            return Err(AppError::bad_request(
+                "invalid_value",
+                format!("{field} {v} must be in 1..={max}"),
+            )
+            .field(field));
+        }
+    }
+    let look = entry.demo();
+    let camera = match &req.camera {
+        Some(c) => convert::camera(c, "camera")?,
+        None => look.default_camera(),
+    };
+    let isovalue = match req.isovalue {
+        Some(v) => {
+            let (lo, hi) = entry.isovalue_range();
+            if !(v.is_finite() && v > f64::from(lo) && v < f64::from(hi)) {
+                return Err(AppError::bad_request(
+                    "invalid_value",
+                    format!("isovalue {v} is outside ({lo}, {hi})"),
+                )
+                .field("isovalue"));
+            }
+            v as f32
+        }
+        None => look.default_isovalue(),
+    };
+    let quality = req.quality.unwrap_or(90);
+    if !(1..=100).contains(&quality) {
+        return Err(
+            AppError::bad_request("invalid_value", "quality must be in 1..=100").field("quality"),
+        );
+    }
+    let step = match (entry.stored_scene(), req.step) {
+        (Some(scene), Some(i)) => Some(scene.step(i).ok_or_else(|| {
+            AppError::not_found(format!("scene `{id}` has no step {i}")).field("step")
+        })?),
+        (Some(scene), None) => scene.latest(),
+        (None, Some(_)) => {
+            return Err(AppError::bad_request(
+                "invalid_value",
+                "built-in scenes have no steps; use time",
+            )
+            .field("step"))
+        }
+        (None, None) => None,
+    };
+    let time = req.time.unwrap_or(0.0);
+    if !(time.is_finite() && (0.0..=1.0e9).contains(&time)) {
+        return Err(
+            AppError::bad_request("invalid_value", "time must be in [0, 1e9]").field("time"),
+        );
+    }
+    let limits = crate::effects::EffectLimits::from_config(app.config());
+    let mut fx = crate::effects::clamp(&entry.lighting().effects, &limits);
+    if let Some(changes) = &req.effects {
+        fx = crate::effects::apply(&fx, changes, &limits).map_err(|e| {
+            AppError::bad_request("invalid_value", e.message).field(format!("effects.{}", e.field))
+        })?;
+    }
+    let view = View {
+        width,
+        height,
+        camera,
+        isovalue,
+    };
+    let format = req.format;
+    let job_app = app.clone();
+    let job = app.jobs().run(move || {
+        let state = match (&step, entry.stored_scene()) {
+            (_, Some(_)) => entry.prepared_step(step.as_deref()),
+            (_, None) => entry.prepared_at(time, false, None),
+        };
+        let codec = match format {
+            ImageFormat::Png => Codec::Png,
+            ImageFormat::Jpeg => Codec::Jpeg,
+        };
+        let request = FrameRequest::image(view, &fx, codec, quality);
+        frame::render(job_app.backend(), &state, &request, None).map(|f| f.payload)
+    });
+    let image = job
+        .await
+        .map_err(AppError::internal)?
+        .map_err(AppError::internal)?;
+    let content_type = match format {
+        ImageFormat::Png => "image/png",
+        ImageFormat::Jpeg => "image/jpeg",
+    };
+    Ok(([(header::CONTENT_TYPE, content_type)], image).into_response())
+}

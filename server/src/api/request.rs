@@ -1,0 +1,161 @@
+//! Reading request bodies: JSON within the size and time limits, and binary bodies forwarded
+//! chunk by chunk to a blocking reader (`crate::body::BodyReader`), plus the push formats.
+
+use crate::body::BodyAbort;
+use crate::error::AppError;
+use crate::state::AppState;
+use axum::body::{Body, Bytes};
+use axum::http::{header, HeaderMap, StatusCode};
+use futures_util::StreamExt;
+use isoray_protocol::api::{NPY_MEDIA_TYPE, RAW_MEDIA_TYPE};
+use std::time::Duration;
+
+/// Body chunks queued between the socket and the step writer.
+pub const BODY_QUEUE: usize = 16;
+
+/// The body formats a push accepts.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum PushFormat {
+    Json,
+    Npy,
+    Raw,
+}
+
+pub fn parse_json<T: serde::de::DeserializeOwned>(bytes: &[u8]) -> Result<T, AppError> {
+    let de = &mut serde_json::Deserializer::from_slice(bytes);
+    serde_path_to_error::deserialize(de).map_err(|e| {
+        let path = e.path().to_string();
+        let inner = e.into_inner();
+        // serde_json reports line and column; for a one-line body the column is the offset.
+        let offset = (inner.line() == 1).then(|| inner.column().saturating_sub(1) as u64);
+        let mut err = AppError::bad_request("invalid_json", format!("{path}: {inner}"));
+        if path != "." {
+            err = err.field(path);
+        }
+        match offset {
+            Some(o) if inner.column() > 0 => err.offset(o),
+            _ => err,
+        }
+    })
+}
+
+pub async fn read_json<T: serde::de::DeserializeOwned>(
+    app: &AppState,
+    body: Body,
+) -> Result<T, AppError> {
+    let limit = app.config().max_json_bytes;
+    let timeout = Duration::from_secs(app.config().push_timeout_secs);
+    let read = axum::body::to_bytes(body, usize::try_from(limit).unwrap_or(usize::MAX));
+    let bytes = tokio::time::timeout(timeout, read)
+        .await
+        .map_err(|_| {
+            AppError::new(
+                StatusCode::REQUEST_TIMEOUT,
+                "timeout",
+                format!(
+                    "the body did not arrive within {} s (--push-timeout-secs)",
+                    timeout.as_secs()
+                ),
+            )
+        })?
+        .map_err(|e| {
+            too_large(limit).with_message(format!(
+                "the body could not be read within the limit of {limit} bytes: {e}"
+            ))
+        })?;
+    parse_json(&bytes)
+}
+
+pub fn too_large(limit: u64) -> AppError {
+    AppError::new(
+        StatusCode::PAYLOAD_TOO_LARGE,
+        "body_too_large",
+        format!("the body exceeds the limit of {limit} bytes"),
+    )
+    .offset(limit)
+}
+
+pub async fn blocking<T: Send + 'static>(
+    f: impl FnOnce() -> T + Send + 'static,
+) -> Result<T, AppError> {
+    tokio::task::spawn_blocking(f)
+        .await
+        .map_err(|e| AppError::internal(format!("blocking task failed: {e}")))
+}
+
+/// Forwards the body to the step writer, enforcing the size and time limits. If the writer
+/// stops early (it found an error), the rest of a body whose declared length is within the
+/// limit is read and dropped, so the client sees the answer rather than a reset connection.
+pub async fn forward_body(
+    body: Body,
+    tx: tokio::sync::mpsc::Sender<Result<Bytes, BodyAbort>>,
+    limit: u64,
+    declared: Option<u64>,
+    timeout: Duration,
+) -> u64 {
+    let deadline = tokio::time::Instant::now() + timeout;
+    let mut stream = body.into_data_stream();
+    let mut total = 0u64;
+    let mut writer_open = true;
+    loop {
+        let next = tokio::time::timeout_at(deadline, stream.next()).await;
+        let abort = match next {
+            Err(_) => Some(BodyAbort::Timeout),
+            Ok(None) => break,
+            Ok(Some(Err(_))) => Some(BodyAbort::Broken("the client stopped sending")),
+            Ok(Some(Ok(chunk))) => {
+                total += chunk.len() as u64;
+                if total > limit {
+                    Some(BodyAbort::TooLarge(limit))
+                } else {
+                    if writer_open && tx.send(Ok(chunk)).await.is_err() {
+                        writer_open = false;
+                        if declared.is_none() {
+                            break;
+                        }
+                    }
+                    None
+                }
+            }
+        };
+        if let Some(abort) = abort {
+            let _ = tx.send(Err(abort)).await;
+            break;
+        }
+    }
+    total
+}
+
+pub fn push_format(headers: &HeaderMap) -> Result<PushFormat, AppError> {
+    let ct = headers
+        .get(header::CONTENT_TYPE)
+        .and_then(|v| v.to_str().ok())
+        .unwrap_or("");
+    let media = ct
+        .split(';')
+        .next()
+        .unwrap_or("")
+        .trim()
+        .to_ascii_lowercase();
+    match media.as_str() {
+        "application/json" => Ok(PushFormat::Json),
+        m if m == NPY_MEDIA_TYPE => Ok(PushFormat::Npy),
+        m if m == RAW_MEDIA_TYPE => Ok(PushFormat::Raw),
+        _ => Err(AppError::new(
+            StatusCode::UNSUPPORTED_MEDIA_TYPE,
+            "unsupported_media_type",
+            format!(
+                "Content-Type `{ct}`: a step is application/json, {NPY_MEDIA_TYPE} or {RAW_MEDIA_TYPE}"
+            ),
+        )
+        .field("Content-Type")),
+    }
+}
+
+/// The `Content-Length` a request declares, if any.
+pub fn declared_length(headers: &HeaderMap) -> Option<u64> {
+    headers
+        .get(header::CONTENT_LENGTH)
+        .and_then(|v| v.to_str().ok())
+        .and_then(|v| v.parse::<u64>().ok())
+}

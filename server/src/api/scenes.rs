@@ -1,0 +1,174 @@
+//! Scenes: list, create, get, delete.
+
+use crate::api::access::{
+    check_create, check_view, check_write, scene_of, stored_of, ApiShared, ClientAddr,
+};
+use crate::api::auth::token_hash;
+use crate::api::request::{blocking, read_json};
+use crate::error::AppError;
+use crate::kinds::SceneSetup;
+use crate::state::AppState;
+use crate::store::SceneMeta;
+use axum::body::Body;
+use axum::extract::{Path, State};
+use axum::http::{HeaderMap, StatusCode};
+use axum::{Extension, Json};
+use isoray_protocol::api::{ApiErrorBody, CreateScene, CreatedScene, SceneInfo, SceneInfoList};
+use std::sync::Arc;
+
+/// Every scene: the built-in demos and the pushed ones.
+#[utoipa::path(
+    get,
+    path = "/api/v1/scenes",
+    tag = "scenes",
+    responses(
+        (status = 200, description = "OK", body = SceneInfoList),
+        (status = 401, description = "Token missing", body = ApiErrorBody), (status = 403, description = "Token wrong", body = ApiErrorBody)
+    )
+)]
+pub async fn list_scenes(
+    State(app): State<AppState>,
+    headers: HeaderMap,
+) -> Result<Json<SceneInfoList>, AppError> {
+    check_view(&app, &headers, None)?;
+    Ok(Json(SceneInfoList {
+        scenes: app.scenes().entries().iter().map(|e| e.info()).collect(),
+    }))
+}
+
+/// Creates a scene. The answer carries its write token, shown only this once. With
+/// `--admin-token`, creating needs it; with `--shard`, the id starts with the shard's name.
+#[utoipa::path(
+    post,
+    path = "/api/v1/scenes",
+    tag = "scenes",
+    request_body = CreateScene,
+    security((), ("bearer" = [])),
+    responses(
+        (status = 201, description = "Created", body = CreatedScene),
+        (status = 400, description = "Invalid field", body = ApiErrorBody),
+        (status = 401, description = "Admin token missing (server started with --admin-token)", body = ApiErrorBody),
+        (status = 403, description = "Not the admin token", body = ApiErrorBody),
+        (status = 413, description = "Body too large", body = ApiErrorBody),
+        (status = 422, description = "Kind not supported yet", body = ApiErrorBody),
+        (status = 429, description = "Too many writes", body = ApiErrorBody),
+        (status = 503, description = "No scene store", body = ApiErrorBody)
+    )
+)]
+pub async fn create_scene(
+    State(app): State<AppState>,
+    Extension(shared): Extension<Arc<ApiShared>>,
+    ClientAddr(client): ClientAddr,
+    headers: HeaderMap,
+    body: Body,
+) -> Result<(StatusCode, Json<CreatedScene>), AppError> {
+    shared.writes.check(client)?;
+    check_create(&app, &headers)?;
+    let spec: CreateScene = read_json(&app, body).await?;
+    for (field, text, max) in [
+        ("name", &spec.name, 200),
+        ("description", &spec.description, 4000),
+    ] {
+        if text.as_ref().is_some_and(|t| t.chars().count() > max) {
+            return Err(AppError::bad_request(
+                "invalid_value",
+                format!("{field} is longer than {max} characters"),
+            )
+            .field(field));
+        }
+    }
+    let setup = SceneSetup::from_spec(
+        &spec,
+        &crate::effects::EffectLimits::from_config(app.config()),
+    )?;
+    let store = app.scenes().store().cloned().ok_or_else(|| {
+        AppError::new(
+            StatusCode::SERVICE_UNAVAILABLE,
+            "no_store",
+            "this server has no scene store (--demos-only, or its data directory is unusable)",
+        )
+    })?;
+    let token = crate::random::random_hex(32);
+    let meta = SceneMeta {
+        id: crate::placement::new_scene_id(app.config().shard.as_deref()),
+        kind: spec.kind,
+        spec,
+        write_token_sha256: token_hash(&token),
+        created_unix_secs: std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(0, |d| d.as_secs()),
+    };
+    let scene = blocking(move || store.create_scene(meta, setup))
+        .await?
+        .map_err(AppError::internal)?;
+    let entry = app.scenes().add_stored(scene);
+    tracing::info!(scene = entry.id(), "scene created");
+    Ok((
+        StatusCode::CREATED,
+        Json(CreatedScene {
+            scene: entry.info(),
+            write_token: token,
+        }),
+    ))
+}
+
+/// One scene.
+#[utoipa::path(
+    get,
+    path = "/api/v1/scenes/{id}",
+    tag = "scenes",
+    params(("id" = String, Path, description = "Scene id")),
+    responses(
+        (status = 200, description = "OK", body = SceneInfo),
+        (status = 404, description = "Not found", body = ApiErrorBody),
+        (status = 421, description = "The id names another shard (every scene route may answer this)", body = ApiErrorBody)
+    )
+)]
+pub async fn get_scene(
+    State(app): State<AppState>,
+    headers: HeaderMap,
+    Path(id): Path<String>,
+) -> Result<Json<SceneInfo>, AppError> {
+    let entry = scene_of(&app, &id)?;
+    check_view(&app, &headers, Some(&entry))?;
+    Ok(Json(entry.info()))
+}
+
+/// Deletes a pushed scene and all its steps.
+#[utoipa::path(
+    delete,
+    path = "/api/v1/scenes/{id}",
+    tag = "scenes",
+    params(("id" = String, Path, description = "Scene id")),
+    security(("bearer" = [])),
+    responses(
+        (status = 204, description = "Deleted"),
+        (status = 401, description = "Token missing", body = ApiErrorBody), (status = 403, description = "Token wrong", body = ApiErrorBody),
+        (status = 404, description = "Not found", body = ApiErrorBody), (status = 409, description = "Conflict", body = ApiErrorBody),
+        (status = 429, description = "Too many writes", body = ApiErrorBody)
+    )
+)]
+pub async fn delete_scene(
+    State(app): State<AppState>,
+    Extension(shared): Extension<Arc<ApiShared>>,
+    ClientAddr(client): ClientAddr,
+    headers: HeaderMap,
+    Path(id): Path<String>,
+) -> Result<StatusCode, AppError> {
+    shared.writes.check(client)?;
+    let entry = scene_of(&app, &id)?;
+    let scene = stored_of(&entry)?;
+    check_write(&app, &headers, &scene)?;
+    let store = app
+        .scenes()
+        .store()
+        .cloned()
+        .ok_or_else(|| AppError::internal("stored scene without a store"))?;
+    let scene_id = id.clone();
+    blocking(move || store.delete_scene(&scene_id))
+        .await?
+        .map_err(AppError::internal)?;
+    app.scenes().remove_stored(&id);
+    tracing::info!(scene = %id, "scene deleted");
+    Ok(StatusCode::NO_CONTENT)
+}
