@@ -11,8 +11,8 @@
 
 use crate::common::{median, write_json, Machine};
 use clap::Args;
-use isoray_render::metaball::reference::reference_hit;
-use isoray_render::metaball::{PrepareOptions, RayCounters, RootFinder};
+use isoray_render::kinds::metaballs::reference::reference_hit;
+use isoray_render::kinds::metaballs::{PrepareOptions, RayCounters, RootFinder};
 use isoray_render::scene::Geometry;
 use rayon::prelude::*;
 use serde::Serialize;

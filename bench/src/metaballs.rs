@@ -15,8 +15,10 @@
 
 use crate::common::{median, per, write_json, Machine};
 use clap::Args;
-use isoray_render::metaball::tree::LeafCost;
-use isoray_render::metaball::{AccelKind, BuildOptions, PrepareOptions, RayCounters, RootFinder};
+use isoray_render::kinds::metaballs::tree::LeafCost;
+use isoray_render::kinds::metaballs::{
+    AccelKind, BuildOptions, PrepareOptions, RayCounters, RootFinder,
+};
 use isoray_render::scene::PreparedGeometry;
 use isoray_render::scenes::DemoScene;
 use isoray_render::{PreparedScene, Scene};

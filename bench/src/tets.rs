@@ -21,12 +21,12 @@ use crate::common::{median, per, write_json, Machine};
 use clap::Args;
 use glam::{EulerRot, Quat, Vec3};
 use isoray_render::camera::Camera;
-use isoray_render::shade::Lighting;
-use isoray_render::tet::generate::{buckyball, count_turned, sample, turned_mesh};
-use isoray_render::tet::{
+use isoray_render::kinds::tets::generate::{buckyball, count_turned, sample, turned_mesh};
+use isoray_render::kinds::tets::{
     BuildKind, Normals, PacketScratch, PreparedTets, RayPacket, TetCounters, TetHit, TetMesh,
     TetOptions, TetQuery, TetScene, TimeScheme,
 };
+use isoray_render::shade::Lighting;
 use isoray_render::Ray;
 use rayon::prelude::*;
 use serde::Serialize;

@@ -89,7 +89,7 @@ pub struct EffectsInfo {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct EffectsInput {
-    pub input_id: crate::messages::InputId,
+    pub input_id: crate::version::InputId,
     pub effects: EffectChanges,
 }
 

@@ -11,6 +11,7 @@ pub mod api_tets;
 pub mod effects;
 pub mod frame;
 pub mod messages;
+pub mod version;
 
 pub use frame::{
     Codec, FrameHeader, FrameHeaderError, StageTimings, FLAG_DEPTH, FLAG_KEYFRAME, FLAG_STILL,
@@ -18,3 +19,4 @@ pub use frame::{
 };
 
 pub use messages::*;
+pub use version::{InputId, MAX_INPUT_ID, PROTOCOL_VERSION};

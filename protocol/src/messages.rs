@@ -3,17 +3,8 @@
 //! (session info, scene lists, errors). The crate root re-exports every item here.
 
 use crate::effects;
+use crate::version::InputId;
 use serde::{Deserialize, Serialize};
-
-/// The protocol version this crate describes. Carried in every frame header and in `info`.
-pub const PROTOCOL_VERSION: u16 = 1;
-
-/// Identifier a client attaches to each input so it can match frames to inputs. JSON numbers
-/// are doubles in a browser, so the server accepts integers up to 2^53 only.
-pub type InputId = u64;
-
-/// Largest `input_id` a client may send (the largest integer a JavaScript number holds exactly).
-pub const MAX_INPUT_ID: u64 = (1 << 53) - 1;
 
 /// A message from the client to the server (a JSON text message, tagged by `type`).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]

@@ -6,12 +6,15 @@
 //! same scene, view and settings give the same [`Framebuffer`], whatever the thread count.
 //!
 //! The seams, from the outside in:
-//! - [`CpuBackend`] owns the worker pool and turns a [`PreparedScene`] and a [`View`] into a
-//!   [`Framebuffer`] (`backend` is the one place that knows about threads).
+//! - [`Backend`] (a closed enum; today its one variant is [`CpuBackend`], which owns the worker
+//!   pool) turns a [`PreparedScene`] and a [`View`] into a [`Framebuffer`], a pass at a time
+//!   (`backend` is the one place that knows about threads).
 //! - [`integrator`] follows a camera ray, asks the scene for the first hit and shades it.
 //! - [`PreparedScene`] is a scene plus its acceleration structure, built once per state and
 //!   shared by every view of that state; it answers "first hit along this ray segment".
-//! - [`Scene`] is the closed set of primitive kinds (metaballs and tetrahedral meshes).
+//! - [`Scene`] holds one of the closed set of primitive kinds (`kinds::dispatch::Geometry`:
+//!   metaballs and tetrahedral meshes), each in its own folder under `kinds/` behind one
+//!   contract (`kinds::contract::PreparedKind`).
 
 // `!(a < b)` is the engine's NaN-rejecting comparison: it is true when either side is NaN,
 // which `a >= b` is not. The lint would have us lose that.
@@ -34,12 +37,8 @@ pub mod view;
 
 pub use backend::{Accumulator, Backend, CpuBackend, FrameRays};
 pub use camera::Camera;
-// Temporary aliases for the other crates' paths (`isoray_render::metaball::..`,
-// `isoray_render::tet::..`), until they name `kinds::` themselves.
 pub use effects::{EffectKind, Effects, EffectsPlan, RayCounts, RayKind};
 pub use framebuffer::Framebuffer;
-pub use kinds::metaballs as metaball;
-pub use kinds::tets as tet;
 pub use ray::{Hit, Ray};
 pub use scene::{PreparedScene, Scene, SceneError};
 pub use shade::Lighting;

@@ -35,8 +35,8 @@
 //! `--nocapture`), and assert.
 
 use glam::{Quat, Vec3};
-use isoray_render::metaball::reference::ReferenceRay;
-use isoray_render::metaball::{
+use isoray_render::kinds::metaballs::reference::ReferenceRay;
+use isoray_render::kinds::metaballs::{
     AccelKind, BuildOptions, Kernel, Metaball, MetaballScene, PrepareOptions, PreparedMetaballs,
     RootFinder, Shape,
 };
@@ -498,7 +498,7 @@ const PYMOL_DATA: &str = "/usr/share/pymol/data";
 
 #[test]
 fn real_molecules_from_pymol_data_load_and_render_like_brute_force() {
-    use isoray_render::metaball::pdb::{molecule_scene, parse_pdb, Element};
+    use isoray_render::kinds::metaballs::pdb::{molecule_scene, parse_pdb, Element};
     use isoray_render::Camera;
     // HIV-1 protease with an inhibitor (old format: serial numbers where newer files keep the
     // element), and a larger complex with element columns.

@@ -307,7 +307,7 @@ pub fn demo_kind(demo: DemoScene) -> SceneKind {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use isoray_render::metaball::Kernel;
+    use isoray_render::kinds::metaballs::Kernel;
 
     fn spec(json: &str) -> CreateScene {
         serde_json::from_str(json).expect("valid JSON")

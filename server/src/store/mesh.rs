@@ -19,7 +19,7 @@
 
 use crate::kinds::SceneSetup;
 use glam::Vec3;
-use isoray_render::tet::TetMesh;
+use isoray_render::kinds::tets::TetMesh;
 use std::io::Write;
 use std::path::Path;
 use std::sync::Arc;

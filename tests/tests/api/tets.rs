@@ -6,8 +6,8 @@
 use super::*;
 use crate::e2e::support::{frame_for_input, pixel_stddev, send_json};
 use glam::Vec3;
-use isoray_render::tet::generate::box_mesh;
-use isoray_render::tet::TetMesh;
+use isoray_render::kinds::tets::generate::box_mesh;
+use isoray_render::kinds::tets::TetMesh;
 
 /// Two `.npy` arrays back to back: vertices `(V, 3)` f32, cells `(T, 4)` i64.
 pub(super) fn mesh_npy(vertices: &[Vec3], cells: &[[i64; 4]]) -> Vec<u8> {

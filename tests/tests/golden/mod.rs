@@ -20,11 +20,11 @@ mod reference;
 
 use glam::{DVec3, Vec3};
 use isoray_render::effects::Effects;
-use isoray_render::metaball::{Kernel, Metaball, MetaballScene};
+use isoray_render::kinds::metaballs::{Kernel, Metaball, MetaballScene};
+use isoray_render::kinds::tets::generate::{box_mesh, sample};
+use isoray_render::kinds::tets::TetScene;
 use isoray_render::scene::Geometry;
 use isoray_render::shade::{ClipBox, Floor, Isosurface, Light, Lighting, Material, Volume};
-use isoray_render::tet::generate::{box_mesh, sample};
-use isoray_render::tet::TetScene;
 use isoray_render::{Accumulator, Camera, CpuBackend, Scene, View};
 use reference::{RefLight, RefMaterial, RefScene, RefShape};
 use std::path::PathBuf;

@@ -8,7 +8,7 @@
 
 use crate::kinds::histogram::Histogram;
 use glam::Vec3;
-use isoray_render::metaball::MetaballScene;
+use isoray_render::kinds::metaballs::MetaballScene;
 
 /// Grid points along the longest side of the scene's bounds.
 pub const MAX_GRID: u32 = 64;
@@ -84,7 +84,7 @@ pub fn field_histogram(scene: &MetaballScene, lo: f32, hi: f32, bins: usize) -> 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use isoray_render::metaball::{Kernel, Metaball};
+    use isoray_render::kinds::metaballs::{Kernel, Metaball};
 
     /// One ball: the grid points where the field is at least `t` fill the sphere of radius
     /// `R · sqrt(s(t))`, so their count is that sphere's volume in cells.

@@ -6,7 +6,7 @@ use crate::kinds::convert::{finite, vec3};
 use crate::kinds::error::KindError;
 use glam::Vec3;
 use isoray_protocol::api::MetaballDefaults;
-use isoray_render::metaball::{Kernel, Metaball, MetaballScene};
+use isoray_render::kinds::metaballs::{Kernel, Metaball, MetaballScene};
 
 /// Per-ball values for columns a metaball step leaves out.
 #[derive(Clone, Copy, Debug, PartialEq)]

@@ -6,7 +6,7 @@
 use crate::kinds::error::KindError;
 use glam::Vec3;
 use isoray_protocol::api::TetMeshData;
-use isoray_render::tet::{TetError, TetMesh};
+use isoray_render::kinds::tets::{TetError, TetMesh};
 
 /// A mesh from the JSON of `tets.mesh` in a creation request (fields named under it).
 pub fn mesh_from_spec(data: &TetMeshData) -> Result<TetMesh, KindError> {

@@ -9,7 +9,7 @@ use crate::kinds::tets::mesh::{mesh_error, Offsets};
 use crate::npy;
 use glam::Vec3;
 use isoray_protocol::api::{RAW_STEP_HEADER_LEN, RAW_STEP_MAGIC};
-use isoray_render::tet::{TetError, TetMesh};
+use isoray_render::kinds::tets::{TetError, TetMesh};
 
 /// How a body read failure reads in a mesh upload.
 impl From<BodyError> for KindError {

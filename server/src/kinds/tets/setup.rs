@@ -6,7 +6,7 @@ use crate::kinds::convert::finite;
 use crate::kinds::error::KindError;
 use crate::kinds::tets::mesh::mesh_from_spec;
 use isoray_protocol::api::TetSpec;
-use isoray_render::tet::{TetMesh, TetScene};
+use isoray_render::kinds::tets::{TetMesh, TetScene};
 use std::sync::{Arc, Mutex, MutexGuard, OnceLock};
 
 /// The static part of a tet scene: its mesh once known, and the colour map's range.

@@ -250,18 +250,23 @@ impl PreparedMetaballs {
         }
         let kernel = self.scene.kernel.w_coefficients();
         let degree = self.scene.kernel.w_degree();
-        let tree = match (&self.options.accel, &self.accel) {
-            (AccelKind::Tree(opts), Accel::Tree(tree)) if opts.kind == TreeKind::Fitted => {
-                if opts.depends_on_isovalue() {
-                    match self.relaxed_accel(opts) {
-                        Accel::Tree(t) => Some(t),
-                        _ => None,
-                    }
-                } else {
-                    Some(tree)
+        // Only a Fitted BVH has a tree to walk here (one built for a higher isovalue is
+        // swapped for its relaxed twin); every other mode integrates over all balls.
+        let tree = if let (AccelKind::Tree(opts), Accel::Tree(tree)) =
+            (&self.options.accel, &self.accel)
+        {
+            if opts.kind != TreeKind::Fitted {
+                None
+            } else if opts.depends_on_isovalue() {
+                match self.relaxed_accel(opts) {
+                    Accel::Tree(t) => Some(t),
+                    _ => None,
                 }
+            } else {
+                Some(tree)
             }
-            _ => None,
+        } else {
+            None
         };
         let t_max = t_max.min(1.0e30);
         SCRATCH.with(|cell| {
