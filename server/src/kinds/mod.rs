@@ -413,9 +413,11 @@ mod tests {
             .expect("valid spec");
         assert_eq!(bare.layout(), StepLayout::Tets { vertices: None });
         assert!(bare.layout().check_rows(5).is_some());
+        // The assertion as it was before the kinds left the HTTP layer: through the one
+        // HTTP error type, a missing mesh is a 409.
         assert_eq!(
-            check_ready(&bare).expect_err("no mesh").kind,
-            KindErrorKind::NotReady
+            crate::error::AppError::from(check_ready(&bare).expect_err("no mesh")).status,
+            axum::http::StatusCode::CONFLICT
         );
     }
 
