@@ -34,6 +34,7 @@ pub mod packet;
 pub mod prepared;
 pub mod reference;
 pub mod traverse;
+mod walk;
 
 #[cfg(test)]
 mod scene_tests;

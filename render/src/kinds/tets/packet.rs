@@ -30,7 +30,8 @@ use crate::camera::PrimaryRays;
 use crate::kinds::tets::bvh::{Bvh, Node};
 use crate::kinds::tets::counters::TetCounters;
 use crate::kinds::tets::march::{extract, FrustumTest, PolygonFromOrigin};
-use crate::kinds::tets::traverse::{slab, Stack, TetHit, TetQuery};
+use crate::kinds::tets::traverse::{slab, TetHit, TetQuery};
+use crate::kinds::tets::walk::{walk, Walker};
 use glam::{Vec3, Vec4, Vec4Swizzles};
 
 /// Rays from one origin. `corners` are four rays such that every ray of the packet is a
@@ -243,130 +244,165 @@ pub(crate) fn first_hits(
         return;
     }
     let (inv, best) = (&scratch.inv, &mut scratch.best);
-    let origin = packet.origin;
-    let frustum = Frustum::new(origin, inv);
-    let nodes = &bvh.nodes;
-    let mut far_best = t_max;
-    let mut stack = Stack::new((0u32, 0u32));
-    if q.admits(&nodes[0], c) {
-        stack.push((0, 0));
-    }
-    while let Some((index, first_active)) = stack.pop() {
-        let node = &nodes[index as usize];
-        c.nodes += 1;
-        let mut fa = first_active as usize;
-        let hits = |r: usize, c: &mut TetCounters, best: &[TetHit]| {
-            c.ray_box_tests += 1;
-            slab(node, origin, inv[r], t_min, best[r].t).is_some()
+    if q.admits(&bvh.nodes[0], c) {
+        let mut packet_walk = PacketWalk {
+            bvh,
+            verts,
+            packet,
+            inv,
+            frustum: Frustum::new(packet.origin, inv),
+            t_min,
+            far_best: t_max,
+            q,
+            best,
+            c,
         };
-        if !hits(fa, c, best) {
-            c.frustum_box_tests += 1;
-            if frustum.misses(node, t_min, far_best) {
-                continue;
-            }
-            let cover = match &packet.grid {
-                Some(grid) => {
-                    c.frustum_box_tests += 1;
-                    grid.cover(box_corners(node))
-                }
-                None => Cover::Unknown,
-            };
-            let width = packet.grid.map_or(1, |g| g.width);
-            match cover.rays(width, fa + 1, n).find(|&r| hits(r, c, best)) {
-                Some(r) => fa = r,
-                None => continue,
-            }
-        }
-        if node.is_leaf() {
-            let mut improved = false;
-            let first = node.first as usize;
-            for k in first..first + node.count as usize {
-                let ids = bvh.leaf_tets[k];
-                let corners = ids.map(|v| verts[v as usize]);
-                for (s, &iso) in q.isovalues().iter().enumerate() {
-                    let Some(poly) = extract(ids, corners, iso) else {
-                        continue;
-                    };
-                    c.extractions += 1;
-                    let cover = match &packet.grid {
-                        Some(grid) => grid.cover(poly.points[..poly.count].iter().copied()),
-                        None => Cover::Unknown,
-                    };
-                    if cover == Cover::Empty {
-                        c.polygons_culled += 1;
-                        continue;
-                    }
-                    // The corner test is four ray–isopolygon tests (for a 2×2 packet it is
-                    // the whole packet's).
-                    c.polygon_tests += 4;
-                    let prep = PolygonFromOrigin::new(&poly, origin);
-                    let verdict = prep.frustum(&packet.corners);
-                    let tet = bvh.leaf_ids[k];
-                    let tested = match verdict {
-                        FrustumTest::Miss => {
-                            c.polygons_culled += 1;
-                            continue;
-                        }
-                        FrustumTest::Hit => {
-                            c.polygons_full += 1;
-                            Cover::Unknown
-                        }
-                        FrustumTest::Partial => cover,
-                    };
-                    let width = packet.grid.map_or(1, |g| g.width);
-                    for r in tested.rays(width, fa, n) {
-                        let dir = packet.dirs[r];
-                        let t = match verdict {
-                            FrustumTest::Hit => prep.distance(dir),
-                            _ => {
-                                c.polygon_tests += 1;
-                                prep.intersect(dir)
-                            }
-                        };
-                        let Some(t) = t else { continue };
-                        if t >= t_min && best[r].beaten_by(t, tet) && !q.clipped(origin + t * dir) {
-                            best[r] = TetHit {
-                                t,
-                                tet,
-                                surface: s as u8,
-                            };
-                            improved = true;
-                        }
-                    }
-                }
-            }
-            if improved {
-                far_best = best.iter().fold(t_min, |m, b| m.max(b.t));
-            }
-            continue;
-        }
-        let (a, b) = (node.first, node.first + 1);
-        let admit_a = q.admits(&nodes[a as usize], c);
-        let admit_b = q.admits(&nodes[b as usize], c);
-        let fa32 = fa as u32;
-        match (admit_a, admit_b) {
-            (true, true) => {
-                // Nearer child first along the first active ray.
-                let ca = nodes[a as usize].lo + nodes[a as usize].hi;
-                let cb = nodes[b as usize].lo + nodes[b as usize].hi;
-                if (cb - ca).xyz().dot(packet.dirs[fa]) >= 0.0 {
-                    stack.push((b, fa32));
-                    stack.push((a, fa32));
-                } else {
-                    stack.push((a, fa32));
-                    stack.push((b, fa32));
-                }
-            }
-            (true, false) => stack.push((a, fa32)),
-            (false, true) => stack.push((b, fa32)),
-            (false, false) => {}
-        }
+        walk(bvh, 0, &mut packet_walk);
     }
     for (o, b) in out.iter_mut().zip(best.iter()) {
         if b.found() {
             c.hits += 1;
             *o = Some(*b);
         }
+    }
+}
+
+/// A packet's walk: a node's entry is the packet's first active ray there.
+struct PacketWalk<'a, 'p> {
+    bvh: &'a Bvh,
+    verts: &'a [Vec4],
+    packet: &'a RayPacket<'p>,
+    inv: &'a [Vec3],
+    frustum: Frustum,
+    t_min: f32,
+    /// The farthest of the rays' best distances: no ray can hit beyond it.
+    far_best: f32,
+    q: &'a TetQuery,
+    best: &'a mut [TetHit],
+    c: &'a mut TetCounters,
+}
+
+impl Walker for PacketWalk<'_, '_> {
+    type Entry = u32;
+
+    #[inline]
+    fn enter(&mut self, node: &Node, first_active: u32) -> Option<u32> {
+        self.c.nodes += 1;
+        let (origin, inv, t_min) = (self.packet.origin, self.inv, self.t_min);
+        let hits = |r: usize, c: &mut TetCounters, best: &[TetHit]| {
+            c.ray_box_tests += 1;
+            slab(node, origin, inv[r], t_min, best[r].t).is_some()
+        };
+        let fa = first_active as usize;
+        if hits(fa, self.c, self.best) {
+            return Some(first_active);
+        }
+        self.c.frustum_box_tests += 1;
+        if self.frustum.misses(node, t_min, self.far_best) {
+            return None;
+        }
+        let cover = match &self.packet.grid {
+            Some(grid) => {
+                self.c.frustum_box_tests += 1;
+                grid.cover(box_corners(node))
+            }
+            None => Cover::Unknown,
+        };
+        let width = self.packet.grid.map_or(1, |g| g.width);
+        let n = self.packet.dirs.len();
+        let (c, best) = (&mut *self.c, &*self.best);
+        cover
+            .rays(width, fa + 1, n)
+            .find(|&r| hits(r, c, best))
+            .map(|r| r as u32)
+    }
+
+    #[inline]
+    fn leaf(&mut self, node: &Node, first_active: u32) -> bool {
+        let (bvh, packet, q, c) = (self.bvh, self.packet, self.q, &mut *self.c);
+        let (origin, fa, n) = (packet.origin, first_active as usize, packet.dirs.len());
+        let best = &mut *self.best;
+        let mut improved = false;
+        let first = node.first as usize;
+        for k in first..first + node.count as usize {
+            let ids = bvh.leaf_tets[k];
+            let corners = ids.map(|v| self.verts[v as usize]);
+            for (s, &iso) in q.isovalues().iter().enumerate() {
+                let Some(poly) = extract(ids, corners, iso) else {
+                    continue;
+                };
+                c.extractions += 1;
+                let cover = match &packet.grid {
+                    Some(grid) => grid.cover(poly.points[..poly.count].iter().copied()),
+                    None => Cover::Unknown,
+                };
+                if cover == Cover::Empty {
+                    c.polygons_culled += 1;
+                    continue;
+                }
+                // The corner test is four ray–isopolygon tests (for a 2×2 packet it is
+                // the whole packet's).
+                c.polygon_tests += 4;
+                let prep = PolygonFromOrigin::new(&poly, origin);
+                let verdict = prep.frustum(&packet.corners);
+                let tet = bvh.leaf_ids[k];
+                let tested = match verdict {
+                    FrustumTest::Miss => {
+                        c.polygons_culled += 1;
+                        continue;
+                    }
+                    FrustumTest::Hit => {
+                        c.polygons_full += 1;
+                        Cover::Unknown
+                    }
+                    FrustumTest::Partial => cover,
+                };
+                let width = packet.grid.map_or(1, |g| g.width);
+                for r in tested.rays(width, fa, n) {
+                    let dir = packet.dirs[r];
+                    let t = match verdict {
+                        FrustumTest::Hit => prep.distance(dir),
+                        _ => {
+                            c.polygon_tests += 1;
+                            prep.intersect(dir)
+                        }
+                    };
+                    let Some(t) = t else { continue };
+                    if t >= self.t_min && best[r].beaten_by(t, tet) && !q.clipped(origin + t * dir)
+                    {
+                        best[r] = TetHit {
+                            t,
+                            tet,
+                            surface: s as u8,
+                        };
+                        improved = true;
+                    }
+                }
+            }
+        }
+        if improved {
+            self.far_best = best.iter().fold(self.t_min, |m, b| m.max(b.t));
+        }
+        false
+    }
+
+    #[inline]
+    fn children(
+        &mut self,
+        a: &Node,
+        b: &Node,
+        first_active: u32,
+    ) -> (Option<u32>, Option<u32>, bool) {
+        let admit_a = self.q.admits(a, self.c);
+        let admit_b = self.q.admits(b, self.c);
+        // Nearer child first along the first active ray.
+        let (ca, cb) = (a.lo + a.hi, b.lo + b.hi);
+        let a_first = (cb - ca).xyz().dot(self.packet.dirs[first_active as usize]) >= 0.0;
+        (
+            admit_a.then_some(first_active),
+            admit_b.then_some(first_active),
+            a_first,
+        )
     }
 }
 

@@ -16,6 +16,7 @@ use crate::kinds::tets::bvh::{Bvh, Node};
 use crate::kinds::tets::counters::TetCounters;
 use crate::kinds::tets::march::{extract, intersect_one};
 use crate::kinds::tets::mesh::{TetError, MAX_ISOSURFACES};
+use crate::kinds::tets::walk::{walk, Walker};
 use crate::ray::Ray;
 use glam::{Vec3, Vec4, Vec4Swizzles};
 
@@ -138,45 +139,6 @@ pub(crate) fn slab(
     aabb::slab(node.lo.xyz(), node.hi.xyz(), origin, inv_dir, t_min, t_max).map(|(near, _)| near)
 }
 
-/// A traversal stack that lives on the call stack up to a depth of 64 and spills beyond.
-pub(crate) struct Stack<T: Copy> {
-    inline: [T; 64],
-    len: usize,
-    spill: Vec<T>,
-}
-
-impl<T: Copy> Stack<T> {
-    pub(crate) fn new(fill: T) -> Stack<T> {
-        Stack {
-            inline: [fill; 64],
-            len: 0,
-            spill: Vec::new(),
-        }
-    }
-
-    #[inline]
-    pub(crate) fn push(&mut self, v: T) {
-        if self.len < self.inline.len() {
-            self.inline[self.len] = v;
-            self.len += 1;
-        } else {
-            self.spill.push(v);
-        }
-    }
-
-    #[inline]
-    pub(crate) fn pop(&mut self) -> Option<T> {
-        if let Some(v) = self.spill.pop() {
-            return Some(v);
-        }
-        if self.len == 0 {
-            return None;
-        }
-        self.len -= 1;
-        Some(self.inline[self.len])
-    }
-}
-
 /// The nearest hit in `[t_min, t_max]`, or with `ANY` the first found.
 pub(crate) fn trace<const ANY: bool>(
     bvh: &Bvh,
@@ -188,81 +150,104 @@ pub(crate) fn trace<const ANY: bool>(
     c: &mut TetCounters,
 ) -> Option<TetHit> {
     c.rays += 1;
-    let nodes = &bvh.nodes;
     let inv = ray.dir.recip();
-    let mut best = TetHit::none(t_max);
-    let root = &nodes[0];
+    let root = &bvh.nodes[0];
     if !q.admits(root, c) {
         return None;
     }
     c.ray_box_tests += 1;
     let t_root = slab(root, ray.origin, inv, t_min, t_max)?;
-    let mut stack = Stack::new((0u32, 0.0f32));
-    stack.push((0, t_root));
-    while let Some((index, t_near)) = stack.pop() {
-        if t_near > best.t {
-            continue;
-        }
-        let node = &nodes[index as usize];
-        c.nodes += 1;
-        if node.is_leaf() {
-            let first = node.first as usize;
-            for k in first..first + node.count as usize {
-                let ids = bvh.leaf_tets[k];
-                let corners = ids.map(|v| verts[v as usize]);
-                for (s, &iso) in q.isovalues().iter().enumerate() {
-                    let Some(poly) = extract(ids, corners, iso) else {
-                        continue;
-                    };
-                    c.extractions += 1;
-                    c.polygon_tests += 1;
-                    let Some(t) = intersect_one(&poly, ray.origin, ray.dir, t_min, best.t) else {
-                        continue;
-                    };
-                    let tet = bvh.leaf_ids[k];
-                    if best.beaten_by(t, tet) && !q.clipped(ray.at(t)) {
-                        best = TetHit {
-                            t,
-                            tet,
-                            surface: s as u8,
-                        };
-                        if ANY {
-                            c.hits += 1;
-                            return Some(best);
-                        }
-                    }
-                }
-            }
-            continue;
-        }
-        let (a, b) = (node.first, node.first + 1);
-        let entry = |i: u32, c: &mut TetCounters| {
-            let n = &nodes[i as usize];
-            if !q.admits(n, c) {
-                return None;
-            }
-            c.ray_box_tests += 1;
-            slab(n, ray.origin, inv, t_min, best.t)
-        };
-        match (entry(a, c), entry(b, c)) {
-            (Some(ta), Some(tb)) => {
-                if ta <= tb {
-                    stack.push((b, tb));
-                    stack.push((a, ta));
-                } else {
-                    stack.push((a, ta));
-                    stack.push((b, tb));
-                }
-            }
-            (Some(ta), None) => stack.push((a, ta)),
-            (None, Some(tb)) => stack.push((b, tb)),
-            (None, None) => {}
-        }
-    }
+    let mut ray_walk = RayWalk::<ANY> {
+        bvh,
+        verts,
+        ray,
+        inv,
+        t_min,
+        q,
+        c,
+        best: TetHit::none(t_max),
+    };
+    walk(bvh, t_root, &mut ray_walk);
+    let best = ray_walk.best;
     if best.found() {
         c.hits += 1;
         Some(best)
     } else {
         None
+    }
+}
+
+/// One ray's walk: a node's entry is the ray's distance to its box.
+struct RayWalk<'a, const ANY: bool> {
+    bvh: &'a Bvh,
+    verts: &'a [Vec4],
+    ray: &'a Ray,
+    inv: Vec3,
+    t_min: f32,
+    q: &'a TetQuery,
+    c: &'a mut TetCounters,
+    best: TetHit,
+}
+
+impl<const ANY: bool> Walker for RayWalk<'_, ANY> {
+    type Entry = f32;
+
+    #[inline]
+    fn enter(&mut self, _node: &Node, t_near: f32) -> Option<f32> {
+        if t_near > self.best.t {
+            return None;
+        }
+        self.c.nodes += 1;
+        Some(t_near)
+    }
+
+    #[inline]
+    fn leaf(&mut self, node: &Node, _t_near: f32) -> bool {
+        let (bvh, ray, c) = (self.bvh, self.ray, &mut *self.c);
+        let first = node.first as usize;
+        for k in first..first + node.count as usize {
+            let ids = bvh.leaf_tets[k];
+            let corners = ids.map(|v| self.verts[v as usize]);
+            for (s, &iso) in self.q.isovalues().iter().enumerate() {
+                let Some(poly) = extract(ids, corners, iso) else {
+                    continue;
+                };
+                c.extractions += 1;
+                c.polygon_tests += 1;
+                let Some(t) = intersect_one(&poly, ray.origin, ray.dir, self.t_min, self.best.t)
+                else {
+                    continue;
+                };
+                let tet = bvh.leaf_ids[k];
+                if self.best.beaten_by(t, tet) && !self.q.clipped(ray.at(t)) {
+                    self.best = TetHit {
+                        t,
+                        tet,
+                        surface: s as u8,
+                    };
+                    if ANY {
+                        return true;
+                    }
+                }
+            }
+        }
+        false
+    }
+
+    #[inline]
+    fn children(&mut self, a: &Node, b: &Node, _t_near: f32) -> (Option<f32>, Option<f32>, bool) {
+        let mut entry = |n: &Node| {
+            if !self.q.admits(n, self.c) {
+                return None;
+            }
+            self.c.ray_box_tests += 1;
+            slab(n, self.ray.origin, self.inv, self.t_min, self.best.t)
+        };
+        let (ta, tb) = (entry(a), entry(b));
+        let a_first = match (ta, tb) {
+            (Some(ta), Some(tb)) => ta <= tb,
+            _ => true,
+        };
+        (ta, tb, a_first)
     }
 }
