@@ -207,18 +207,25 @@ impl PreparedMetaballs {
                 accel, ray, t_min, t_max, &params, gathered, scratch, stack, counters,
             )?;
             counters.hits += 1;
-            let position = ray.at(t);
-            let (normal, albedo, primitive) = self
-                .scene
-                .surface_detail(gathered.iter().map(|b| b.ball), position);
-            Some(Hit {
-                t,
-                position,
-                normal,
-                albedo,
-                primitive,
-            })
+            Some(self.hit_at(ray, t, gathered))
         })
+    }
+
+    /// The hit at distance `t` along `ray`, shaded from `gathered`, the balls of the search
+    /// that found it.
+    #[inline]
+    pub(super) fn hit_at(&self, ray: &Ray, t: f32, gathered: &[RayBall<f32>]) -> Hit {
+        let position = ray.at(t);
+        let (normal, albedo, primitive) = self
+            .scene
+            .surface_detail(gathered.iter().map(|b| b.ball), position);
+        Hit {
+            t,
+            position,
+            normal,
+            albedo,
+            primitive,
+        }
     }
 
     /// The hit distance; on return `gathered` holds the balls of the search that hit.

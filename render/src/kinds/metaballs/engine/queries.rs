@@ -148,17 +148,7 @@ impl PreparedMetaballs {
                 }
             };
             counters.hits += 1;
-            let position = ray.at(t);
-            let (normal, albedo, primitive) = self
-                .scene
-                .surface_detail(gathered.iter().map(|b| b.ball), position);
-            Some(Hit {
-                t,
-                position,
-                normal,
-                albedo,
-                primitive,
-            })
+            Some(self.hit_at(ray, t, gathered))
         })
     }
 
