@@ -8,6 +8,7 @@ mod crash;
 mod limits;
 mod openapi;
 mod push_errors;
+mod python_client;
 mod python_example;
 mod restart;
 mod slow_headers;

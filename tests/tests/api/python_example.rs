@@ -1,5 +1,6 @@
 //! The README's Python example against a fresh server: `examples/push_particles.py` creates a
-//! metaball scene and pushes 100 steps of 50,000 particles as `.npy` (NumPy required; CI
+//! metaball scene and pushes 100 steps of 50,000 particles as `.npy` through the Python client
+//! in `clients/python` (NumPy and requests required; CI
 //! installs it), while a websocket viewer opened during the run watches the animation advance.
 
 use super::*;
