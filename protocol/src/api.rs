@@ -254,6 +254,19 @@ pub struct SceneInfo {
     pub last_step: Option<u64>,
     /// Bytes of stored steps on disk.
     pub stored_bytes: u64,
+    /// Axis-aligned bounds of the newest state's primitives (of the state at time 0 for
+    /// demos); `GET /api/v1/scenes/{id}` only, absent for an empty scene. Viewers offer
+    /// clip-box ranges from it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub bounds: Option<SceneBounds>,
+}
+
+/// An axis-aligned box.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
+pub struct SceneBounds {
+    pub min: [f64; 3],
+    pub max: [f64; 3],
 }
 
 /// Body of `GET /api/v1/scenes`.

@@ -49,6 +49,45 @@ pub struct EffectChanges {
     /// Ambient-occlusion rays per pixel and pass, `1..=max_samples`.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub ao_samples: Option<u32>,
+    /// A viewer's own clip box in place of the scene's (`clip_box` switches it); finite, `min`
+    /// below `max` on every axis. Not in a scene description (that has `lighting.clip_box`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub clip: Option<ClipBoxSpec>,
+    /// A viewer's own further isosurfaces in place of the scene's (`isosurfaces` switches
+    /// them), at most 4, each with its colour and opacity; `[]` draws none. Not in a scene
+    /// description (that has `lighting.isosurfaces`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub surfaces: Option<Vec<SurfaceStyleSpec>>,
+    /// Colour every isosurface by its value through a colour map; `{"name": "none"}` returns
+    /// to the scene's own colours. Not in a scene description.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub color_map: Option<ColorMapSpec>,
+}
+
+/// A further isosurface a viewer adds, with its own look.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
+#[serde(deny_unknown_fields)]
+pub struct SurfaceStyleSpec {
+    /// Inside the scene's isovalue range.
+    pub isovalue: f64,
+    /// Linear-light diffuse colour, each channel in `[0, 1]` (a colour map, when set, wins).
+    #[serde(default = "ones")]
+    pub color: [f64; 3],
+    /// `[0, 1]`; below 1 the surface is transparent (with `transparency` on).
+    #[serde(default = "one")]
+    pub opacity: f64,
+}
+
+/// A colour map of the isovalue: `name` is `viridis`, `inferno`, `cool_warm`, `grey` or
+/// `none`; `range` (low below high, finite) defaults to the scene's isovalue slider range.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
+#[serde(deny_unknown_fields)]
+pub struct ColorMapSpec {
+    pub name: String,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub range: Option<[f64; 2]>,
 }
 
 /// A session's effects, in full.

@@ -259,10 +259,12 @@ pub fn shells_lighting() -> Lighting {
             Isosurface {
                 isovalue: 0.15,
                 material: 1,
+                color: None,
             },
             Isosurface {
                 isovalue: 2.0,
                 material: 2,
+                color: None,
             },
         ],
         clip_box: Some(ClipBox {

@@ -46,15 +46,30 @@ pub fn trace_primary(scene: &PreparedScene, ray: &Ray, isovalue: f32) -> (Vec3, 
         scene,
         ray,
         scene.first_hit(ray, 0.0, T_MAX, isovalue).as_ref(),
+        isovalue,
     )
 }
 
 /// [`trace_primary`] once the hit is known (the backend finds a tile's hits together).
 #[inline]
-pub fn shade_primary(scene: &PreparedScene, ray: &Ray, hit: Option<&Hit>) -> (Vec3, f32) {
-    let lighting = &scene.scene().lighting;
+pub fn shade_primary(
+    scene: &PreparedScene,
+    ray: &Ray,
+    hit: Option<&Hit>,
+    isovalue: f32,
+) -> (Vec3, f32) {
+    let lighting = scene.lighting();
     match hit {
-        Some(hit) => (lighting.shade(hit, ray.dir), hit.t),
+        Some(hit) => match &lighting.color_map {
+            None => (lighting.shade(hit, ray.dir), hit.t),
+            Some(map) => {
+                let mapped = Hit {
+                    albedo: map.albedo(isovalue),
+                    ..*hit
+                };
+                (lighting.shade(&mapped, ray.dir), hit.t)
+            }
+        },
         None => (lighting.background(ray.dir.y), f32::INFINITY),
     }
 }
@@ -96,7 +111,7 @@ impl<'a> Tracer<'a> {
     pub fn new(scene: &'a PreparedScene, plan: &'a EffectsPlan, isovalue: f32) -> Tracer<'a> {
         Tracer {
             scene,
-            lighting: &scene.scene().lighting,
+            lighting: scene.lighting(),
             plan,
             isovalue,
             counts: RayCounts::default(),
@@ -205,6 +220,17 @@ impl<'a> Tracer<'a> {
         None
     }
 
+    /// The albedo of `hit` on the isosurface at `isovalue`: the session's colour map of the
+    /// isovalue if it has one, else the surface's `own` colour (a viewer's added surface), else
+    /// the kind's.
+    #[inline]
+    fn albedo(&self, hit: &Hit, isovalue: f32, own: Option<Vec3>) -> Vec3 {
+        match &self.lighting.color_map {
+            None => own.unwrap_or(hit.albedo),
+            Some(map) => map.albedo(isovalue),
+        }
+    }
+
     /// The nearest surface on `[t0, t1]`: every drawn isosurface, and the floor.
     fn closest(&mut self, ray: &Ray, t0: f32, t1: f32) -> Option<SurfaceHit> {
         let mut best: Option<SurfaceHit> = None;
@@ -216,7 +242,7 @@ impl<'a> Tracer<'a> {
                     t: h.t,
                     position: h.position,
                     normal: h.normal,
-                    albedo: h.albedo,
+                    albedo: self.albedo(&h, self.isovalue, None),
                     material: self.lighting.material_of(h.primitive),
                 });
             }
@@ -229,7 +255,7 @@ impl<'a> Tracer<'a> {
                             t: h.t,
                             position: h.position,
                             normal: h.normal,
-                            albedo: h.albedo,
+                            albedo: self.albedo(&h, surface.isovalue, surface.color),
                             material: surface.material,
                         });
                     }

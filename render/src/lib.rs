@@ -22,6 +22,7 @@
 
 pub mod backend;
 pub mod camera;
+pub mod colormap;
 mod demo_effects;
 pub mod effects;
 pub mod framebuffer;

@@ -71,6 +71,7 @@ impl Scene {
         PreparedScene {
             scene: self,
             prepared,
+            lighting: None,
         }
     }
 }
@@ -80,11 +81,30 @@ impl Scene {
 pub struct PreparedScene {
     scene: Arc<Scene>,
     prepared: PreparedGeometry,
+    /// A session's own lighting in place of the scene's (see [`PreparedScene::with_lighting`]).
+    lighting: Option<Arc<Lighting>>,
 }
 
 impl PreparedScene {
     pub fn scene(&self) -> &Scene {
         &self.scene
+    }
+
+    /// How this state is lit and shaded: the scene's [`Lighting`], or the one given to
+    /// [`PreparedScene::with_lighting`]. Tracing reads lighting only from here.
+    pub fn lighting(&self) -> &Lighting {
+        self.lighting.as_deref().unwrap_or(&self.scene.lighting)
+    }
+
+    /// The same prepared state (sharing its acceleration structure) lit by `lighting`
+    /// instead: a session's own clip box, isosurfaces or colour map, without preparing the
+    /// state again. Cheap: two reference counts and the lighting.
+    pub fn with_lighting(&self, lighting: Lighting) -> PreparedScene {
+        PreparedScene {
+            scene: self.scene.clone(),
+            prepared: self.prepared.clone(),
+            lighting: Some(Arc::new(lighting)),
+        }
     }
 
     pub fn geometry(&self) -> &PreparedGeometry {

@@ -9,6 +9,7 @@
 //! light seen whole from above the horizon delivers exactly the irradiance of a point light at
 //! its centre, so unshadowed shading treats both alike; only shadows see the sphere's extent.
 
+use crate::colormap::ColorMap;
 use crate::effects::toggles::Effects;
 pub use crate::geom::clip::ClipBox;
 use crate::ray::Hit;
@@ -172,6 +173,9 @@ impl Floor {
 pub struct Isosurface {
     pub isovalue: f32,
     pub material: u16,
+    /// Linear-light albedo in place of the kind's own colour there (a surface a viewer added
+    /// with its colour); `None`: the kind's colour, as for the scene's own surfaces.
+    pub color: Option<Vec3>,
 }
 
 /// The field rendered as an absorbing, scattering volume instead of its isosurface
@@ -204,6 +208,9 @@ pub struct Lighting {
     pub occlusion_distance: f32,
     /// The effects a viewer starts with.
     pub effects: Effects,
+    /// Colour every isosurface by its value through this map (a session's choice; `None`:
+    /// each kind's own colours).
+    pub color_map: Option<ColorMap>,
 }
 
 impl Default for Lighting {
@@ -224,6 +231,7 @@ impl Default for Lighting {
             volume: None,
             occlusion_distance: 1.0,
             effects: Effects::OFF,
+            color_map: None,
         }
     }
 }

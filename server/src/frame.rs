@@ -10,6 +10,7 @@ use crate::encode::{self, EncodeError};
 use crate::metrics as m;
 use crate::refine::{RefineKey, Refinement};
 use crate::scenes::prepared::{micros, PreparedState};
+use crate::style::Style;
 use axum::body::Bytes;
 use isoray_protocol::{
     Codec, FrameHeader, InputId, StageTimings, FLAG_DEPTH, FLAG_KEYFRAME, FLAG_STILL,
@@ -48,6 +49,8 @@ pub struct H264Plan {
 pub struct FrameRequest<'a> {
     pub view: View,
     pub effects: &'a Effects,
+    /// The viewer's own clip box, isosurfaces and colour map (`None`: the scene's look).
+    pub style: Option<&'a Style>,
     pub pass: Pass<'a>,
     pub codec: Codec,
     /// JPEG quality, 1–100 (JPEG frames only).
@@ -70,6 +73,7 @@ impl<'a> FrameRequest<'a> {
         FrameRequest {
             view,
             effects,
+            style: None,
             pass: Pass::Single,
             codec,
             jpeg_quality,
@@ -102,21 +106,23 @@ pub fn render(
     video: VideoState,
 ) -> Result<Frame, EncodeError> {
     let t0 = Instant::now();
+    // A viewer's style traces the same prepared state under its own lighting.
+    let styled = request
+        .style
+        .and_then(|s| s.lighting(state.prepared.lighting()))
+        .map(|l| state.prepared.with_lighting(l));
+    let prepared = styled.as_ref().unwrap_or(&state.prepared);
     // Effects hook: a single pass traces one pass of the effects; a still frame adds a
     // refinement pass.
     let fb = match request.pass {
         Pass::Single => {
             backend
-                .render_effects(&state.prepared, &request.view, request.effects)
+                .render_effects(prepared, &request.view, request.effects)
                 .0
         }
-        Pass::Refine(refinement, key) => refinement.next_pass(
-            backend,
-            &state.prepared,
-            &request.view,
-            request.effects,
-            key,
-        ),
+        Pass::Refine(refinement, key) => {
+            refinement.next_pass(backend, prepared, &request.view, request.effects, key)
+        }
     };
     let t1 = Instant::now();
     let (payload, video, keyframe) = encode_image(&fb, request, video)?;

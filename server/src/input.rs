@@ -28,6 +28,8 @@ pub struct Settings {
     pub last_input_at: Option<std::time::Instant>,
     /// Effect switches and quality.
     pub effects: Effects,
+    /// The viewer's own clip box, further isosurfaces and colour map.
+    pub style: crate::style::Style,
     /// How frames are sent (`stream` messages).
     pub stream: StreamSettings,
 }
@@ -73,6 +75,8 @@ pub struct Limits {
     pub max_size: u32,
     /// Open interval of meaningful isovalues for the scene.
     pub isovalue_range: (f32, f32),
+    /// The isovalue slider's range (a colour map's default range).
+    pub isovalue_slider: (f32, f32),
     /// Largest effect quality settings.
     pub effects: EffectLimits,
     /// The codecs this server can send.
@@ -258,8 +262,22 @@ pub fn apply(
         }
         ClientMessage::Ack(_) => return Ok(()),
         ClientMessage::Effects(EffectsInput { effects, .. }) => {
-            match crate::effects::apply(&settings.effects, effects, &limits.effects) {
-                Ok(e) => settings.effects = e,
+            // Both checked in full before either changes.
+            let applied = crate::effects::apply(&settings.effects, effects, &limits.effects)
+                .and_then(|e| {
+                    crate::style::apply(
+                        &settings.style,
+                        effects,
+                        limits.isovalue_range,
+                        limits.isovalue_slider,
+                    )
+                    .map(|s| (e, s))
+                });
+            match applied {
+                Ok((e, s)) => {
+                    settings.effects = e;
+                    settings.style = s;
+                }
                 Err(e) => return fail(format!("effects.{}", e.message)),
             }
         }
@@ -339,6 +357,7 @@ mod tests {
             version: 0,
             last_input_at: None,
             effects: Effects::OFF,
+            style: Default::default(),
             stream: StreamSettings::new(&Codec::ALL, 30.0),
         }
     }
@@ -347,6 +366,7 @@ mod tests {
         Limits {
             max_size: 4096,
             isovalue_range: (0.0, 2.0),
+            isovalue_slider: (0.2, 1.8),
             effects: EffectLimits {
                 max_depth: 8,
                 max_samples: 64,

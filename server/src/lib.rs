@@ -29,6 +29,7 @@ pub mod serve;
 pub mod session;
 pub mod state;
 pub mod store;
+pub mod style;
 mod web;
 
 pub use config::Config;

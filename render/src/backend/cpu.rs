@@ -157,7 +157,7 @@ fn render_tiles(scene: &PreparedScene, view: &View) -> Framebuffer {
         // Ray casting reports no counters (the frame's rays are its pixels).
         let mut counters = SceneCounters::default();
         for (ray, hit) in scene.primary_hits(&rays, rect, view.isovalue, T_MAX, &mut counters) {
-            let (color, t) = shade_primary(scene, &ray, hit.as_ref());
+            let (color, t) = shade_primary(scene, &ray, hit.as_ref(), view.isovalue);
             rgb.extend([color.x, color.y, color.z].map(linear_to_srgb8));
             depth.push(t * ray.dir.dot(forward));
         }

@@ -59,6 +59,15 @@ impl Geometry {
         }
     }
 
+    /// Axis-aligned bounds of the primitives (metaballs: every ball's support; tets: the
+    /// step's vertices), or `None` for an empty state.
+    pub fn bounds(&self) -> Option<(glam::Vec3, glam::Vec3)> {
+        match self {
+            Geometry::Metaballs(m) => m.bounds(),
+            Geometry::Tets(t) => t.bounds(),
+        }
+    }
+
     /// Isovalues for which the surface may exist, as an open interval.
     pub fn isovalue_range(&self) -> (f32, f32) {
         match self {

@@ -98,10 +98,15 @@ pub async fn render(
     }
     let limits = crate::effects::EffectLimits::from_config(app.config());
     let mut fx = crate::effects::clamp(&entry.lighting().effects, &limits);
+    let mut style = crate::style::Style::default();
     if let Some(changes) = &req.effects {
-        fx = crate::effects::apply(&fx, changes, &limits).map_err(|e| {
+        let bad = |e: crate::effects::EffectError| {
             AppError::bad_request("invalid_value", e.message).field(format!("effects.{}", e.field))
-        })?;
+        };
+        fx = crate::effects::apply(&fx, changes, &limits).map_err(bad)?;
+        let slider = entry.demo().isovalue_slider();
+        style =
+            crate::style::apply(&style, changes, entry.isovalue_range(), slider).map_err(bad)?;
     }
     let view = View {
         width,
@@ -120,7 +125,10 @@ pub async fn render(
             ImageFormat::Png => Codec::Png,
             ImageFormat::Jpeg => Codec::Jpeg,
         };
-        let request = FrameRequest::image(view, &fx, codec, quality);
+        let request = FrameRequest {
+            style: Some(&style),
+            ..FrameRequest::image(view, &fx, codec, quality)
+        };
         frame::render(job_app.backend(), &state, &request, None).map(|f| f.payload)
     });
     let image = job

@@ -20,9 +20,10 @@ use axum::response::{IntoResponse, Response};
 use axum::{Extension, Router};
 use isoray_protocol::api::{
     ApiCamera, ApiErrorBody, CreateScene, CreatedScene, ImageFormat, JsonStep, JsonTetStep,
-    LightSpec, LightingSpec, MeshInfo, MetaballDefaults, PushResult, RenderRequest, SceneInfo,
-    SceneInfoList, SceneKind, StepInfo, StepList, TetMeshData, TetSpec,
+    LightSpec, LightingSpec, MeshInfo, MetaballDefaults, PushResult, RenderRequest, SceneBounds,
+    SceneInfo, SceneInfoList, SceneKind, StepInfo, StepList, TetMeshData, TetSpec,
 };
+use isoray_protocol::effects::{ClipBoxSpec, ColorMapSpec, SurfaceStyleSpec};
 use std::sync::Arc;
 use utoipa::OpenApi;
 use utoipa_axum::router::OpenApiRouter;
@@ -44,7 +45,9 @@ use utoipa_axum::routes;
     components(schemas(
         ApiErrorBody, CreateScene, CreatedScene, SceneInfo, SceneInfoList, StepInfo, StepList,
         PushResult, JsonStep, RenderRequest, ApiCamera, LightingSpec, LightSpec,
-        MetaballDefaults, SceneKind, ImageFormat, TetSpec, TetMeshData, JsonTetStep, MeshInfo
+        MetaballDefaults, SceneKind, ImageFormat, TetSpec, TetMeshData, JsonTetStep, MeshInfo,
+        // A viewer's look (in `effects` of a render request) and a scene's bounds.
+        SceneBounds, ClipBoxSpec, SurfaceStyleSpec, ColorMapSpec
     )),
     modifiers(&BearerSecurity),
     tags(

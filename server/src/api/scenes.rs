@@ -13,7 +13,9 @@ use axum::body::Body;
 use axum::extract::{Path, State};
 use axum::http::{HeaderMap, StatusCode};
 use axum::{Extension, Json};
-use isoray_protocol::api::{ApiErrorBody, CreateScene, CreatedScene, SceneInfo, SceneInfoList};
+use isoray_protocol::api::{
+    ApiErrorBody, CreateScene, CreatedScene, SceneBounds, SceneInfo, SceneInfoList,
+};
 use std::sync::Arc;
 
 /// Every scene: the built-in demos and the pushed ones.
@@ -131,7 +133,23 @@ pub async fn get_scene(
 ) -> Result<Json<SceneInfo>, AppError> {
     let entry = scene_of(&app, &id)?;
     check_view(&app, &headers, Some(&entry))?;
-    Ok(Json(entry.info()))
+    let mut info = entry.info();
+    // The bounds need the state (prepared, or from the cache): on the job pool.
+    let bounds = app.jobs().run(move || {
+        let state = match entry.stored_scene() {
+            Some(scene) => entry.prepared_step(scene.latest().as_deref()),
+            None => entry.prepared_at(0.0, false, None),
+        };
+        state.prepared.scene().geometry.bounds()
+    });
+    info.bounds = bounds
+        .await
+        .map_err(AppError::internal)?
+        .map(|(min, max)| SceneBounds {
+            min: min.as_dvec3().to_array(),
+            max: max.as_dvec3().to_array(),
+        });
+    Ok(Json(info))
 }
 
 /// Deletes a pushed scene and all its steps.

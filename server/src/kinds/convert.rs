@@ -321,6 +321,12 @@ pub fn lighting(spec: &LightingSpec, limits: &EffectLimits) -> Result<Lighting, 
         }
     }
     if let Some(changes) = &spec.effects {
+        crate::style::refuse_in_scene(changes).map_err(|e| {
+            invalid(
+                format!("lighting.effects.{}", e.field),
+                format!("lighting.effects.{}", e.message),
+            )
+        })?;
         l.effects = crate::effects::apply(&l.effects, changes, limits).map_err(|e| {
             invalid(
                 format!("lighting.effects.{}", e.field),
@@ -355,6 +361,7 @@ fn isosurfaces(surfaces: &[IsosurfaceSpec], count: usize) -> Result<Vec<Isosurfa
             Ok(Isosurface {
                 isovalue,
                 material: material_index(s.material, count, format!("{field}.material"))?,
+                color: None,
             })
         })
         .collect()

@@ -168,6 +168,7 @@ impl SceneEntry {
                 first_step: None,
                 last_step: None,
                 stored_bytes: 0,
+                bounds: None,
             },
             Source::Stored { scene, .. } => {
                 let steps = scene.steps();
@@ -186,6 +187,7 @@ impl SceneEntry {
                     first_step: steps.first().map(|s| s.header.index),
                     last_step: steps.last().map(|s| s.header.index),
                     stored_bytes: steps.iter().map(|s| s.file_bytes).sum(),
+                    bounds: None,
                 }
             }
         }

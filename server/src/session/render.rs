@@ -359,6 +359,7 @@ fn render_frame(
             isovalue: settings.isovalue,
         },
         effects: &settings.effects,
+        style: Some(&settings.style),
         pass,
         codec: plan.codec,
         jpeg_quality: plan.jpeg_quality,

@@ -75,11 +75,13 @@ async fn run_registered(
             &entry.lighting().effects,
             &crate::effects::EffectLimits::from_config(config),
         ),
+        style: Default::default(),
         stream: StreamSettings::initial(config.max_fps),
     };
     let limits = Limits {
         max_size: config.max_size,
         isovalue_range: entry.isovalue_range(),
+        isovalue_slider: demo.isovalue_slider(),
         effects: crate::effects::EffectLimits::from_config(config),
         codecs: offered.clone(),
         max_fps: config.max_fps,

@@ -508,6 +508,7 @@ fn more_cases(kind: Kind) -> Vec<Case> {
         l.isosurfaces.push(Isosurface {
             isovalue: extra,
             material: 2,
+            color: None,
         });
         r.surfaces
             .push((extra as f64, ref_material(&shell), kind.albedo(extra)));

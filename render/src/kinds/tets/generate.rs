@@ -298,6 +298,7 @@ pub fn demo_lighting() -> Lighting {
         isosurfaces: vec![Isosurface {
             isovalue: DEMO_OUTER_ISOVALUE,
             material: 1,
+            color: None,
         }],
         clip_box: Some(ClipBox {
             min: Vec3::ZERO,

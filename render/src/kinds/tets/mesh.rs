@@ -272,6 +272,15 @@ impl TetScene {
         Ok(())
     }
 
+    /// Axis-aligned bounds of this step's vertices (its own positions for a deforming mesh,
+    /// else the rest positions), or `None` without vertices.
+    pub fn bounds(&self) -> Option<(Vec3, Vec3)> {
+        match &self.positions {
+            Some(p) => bounds_of(p),
+            None => self.mesh.bounds(),
+        }
+    }
+
     /// Isovalues with a non-empty surface: strictly inside the scalars' range.
     pub fn isovalue_range(&self) -> (f32, f32) {
         scalar_range(&self.scalars).unwrap_or((0.0, 0.0))

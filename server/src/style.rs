@@ -1,0 +1,322 @@
+//! A viewer's own look of a scene: its clip box, its further isosurfaces (each with a colour
+//! and opacity) and a colour map of the isovalue, set by the `clip`, `surfaces` and
+//! `color_map` fields of an `effects` message (or of a render request) and checked here at the
+//! edge. The scene's lighting is never changed: [`Style::lighting`] gives a copy with the
+//! viewer's choices in it, which the frame traces through
+//! [`isoray_render::PreparedScene::with_lighting`]. A default style changes nothing, so every
+//! image without one stays byte for byte what it was.
+
+use crate::effects::EffectError;
+use glam::Vec3;
+use isoray_protocol::effects::{ClipBoxSpec, ColorMapSpec, EffectChanges, SurfaceStyleSpec};
+use isoray_render::colormap::{ColorMap, ColorMapKind};
+use isoray_render::geom::clip::ClipBox;
+use isoray_render::shade::{Isosurface, Material};
+use isoray_render::Lighting;
+
+/// Most further isosurfaces a viewer may add.
+pub const MAX_SURFACES: usize = 4;
+/// Clip box corners stay within this distance of the origin.
+const MAX_COORD: f64 = 1.0e6;
+
+/// A viewer-added isosurface.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SurfaceLook {
+    pub isovalue: f32,
+    pub color: Vec3,
+    pub opacity: f32,
+}
+
+/// What a viewer chose about the look of a scene; `None` fields keep the scene's own.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Style {
+    pub clip: Option<ClipBox>,
+    pub surfaces: Option<Vec<SurfaceLook>>,
+    pub color_map: Option<ColorMap>,
+}
+
+impl Style {
+    /// Whether the style changes nothing.
+    pub fn is_default(&self) -> bool {
+        *self == Style::default()
+    }
+
+    /// `scene` with this style applied, or `None` when the style changes nothing.
+    pub fn lighting(&self, scene: &Lighting) -> Option<Lighting> {
+        if self.is_default() {
+            return None;
+        }
+        let mut l = scene.clone();
+        if let Some(clip) = self.clip {
+            l.clip_box = Some(clip);
+        }
+        if let Some(surfaces) = &self.surfaces {
+            l.isosurfaces = surfaces
+                .iter()
+                .map(|s| {
+                    // Each added surface gets a material of its own after the scene's: the
+                    // scene has at most 64, so the index fits.
+                    let material = u16::try_from(l.materials.len()).unwrap_or(u16::MAX);
+                    l.materials.push(Material {
+                        opacity: s.opacity,
+                        ..Material::default()
+                    });
+                    Isosurface {
+                        isovalue: s.isovalue,
+                        material,
+                        color: Some(s.color),
+                    }
+                })
+                .collect();
+        }
+        l.color_map = self.color_map;
+        Some(l)
+    }
+}
+
+/// `style` with the `clip`, `surfaces` and `color_map` of `changes` applied, if every value is
+/// valid: isovalues inside the open `isovalue_range`, a colour map's range defaulting to
+/// `slider`. Nothing is applied otherwise.
+pub fn apply(
+    style: &Style,
+    changes: &EffectChanges,
+    isovalue_range: (f32, f32),
+    slider: (f32, f32),
+) -> Result<Style, EffectError> {
+    let mut out = style.clone();
+    if let Some(clip) = &changes.clip {
+        out.clip = Some(clip_box(clip)?);
+    }
+    if let Some(surfaces) = &changes.surfaces {
+        out.surfaces = Some(surface_looks(surfaces, isovalue_range)?);
+    }
+    if let Some(map) = &changes.color_map {
+        out.color_map = color_map(map, slider)?;
+    }
+    Ok(out)
+}
+
+fn error(field: &'static str, message: String) -> EffectError {
+    EffectError { field, message }
+}
+
+fn clip_box(spec: &ClipBoxSpec) -> Result<ClipBox, EffectError> {
+    let corners = spec.min.iter().chain(spec.max.iter());
+    if !corners
+        .clone()
+        .all(|v| v.is_finite() && v.abs() <= MAX_COORD)
+    {
+        return Err(error(
+            "clip",
+            format!("clip corners must be finite and within ±{MAX_COORD}"),
+        ));
+    }
+    // Finite (checked above), so `>=` also refuses equal corners.
+    if (0..3).any(|i| spec.min[i] >= spec.max[i]) {
+        return Err(error(
+            "clip",
+            "clip: min must be below max on every axis".into(),
+        ));
+    }
+    let v = |a: [f64; 3]| Vec3::new(a[0] as f32, a[1] as f32, a[2] as f32);
+    Ok(ClipBox {
+        min: v(spec.min),
+        max: v(spec.max),
+    })
+}
+
+fn surface_looks(
+    surfaces: &[SurfaceStyleSpec],
+    (lo, hi): (f32, f32),
+) -> Result<Vec<SurfaceLook>, EffectError> {
+    if surfaces.len() > MAX_SURFACES {
+        return Err(error(
+            "surfaces",
+            format!(
+                "surfaces: at most {MAX_SURFACES} further isosurfaces, not {}",
+                surfaces.len()
+            ),
+        ));
+    }
+    surfaces
+        .iter()
+        .enumerate()
+        .map(|(i, s)| {
+            let iso = s.isovalue as f32;
+            if !(iso > lo && iso < hi) {
+                return Err(error(
+                    "surfaces",
+                    format!(
+                        "surfaces[{i}].isovalue {} must be inside the scene's isovalue range ({lo}, {hi})",
+                        s.isovalue
+                    ),
+                ));
+            }
+            if !s.color.iter().all(|c| (0.0..=1.0).contains(c)) {
+                return Err(error(
+                    "surfaces",
+                    format!("surfaces[{i}].color channels must be in [0, 1]"),
+                ));
+            }
+            if !(0.0..=1.0).contains(&s.opacity) {
+                return Err(error(
+                    "surfaces",
+                    format!("surfaces[{i}].opacity {} must be in [0, 1]", s.opacity),
+                ));
+            }
+            Ok(SurfaceLook {
+                isovalue: iso,
+                color: Vec3::new(s.color[0] as f32, s.color[1] as f32, s.color[2] as f32),
+                opacity: s.opacity as f32,
+            })
+        })
+        .collect()
+}
+
+fn color_map(spec: &ColorMapSpec, slider: (f32, f32)) -> Result<Option<ColorMap>, EffectError> {
+    if spec.name == "none" {
+        return Ok(None);
+    }
+    let Some(kind) = ColorMapKind::from_name(&spec.name) else {
+        let names: Vec<&str> = ColorMapKind::ALL.iter().map(|k| k.name()).collect();
+        return Err(error(
+            "color_map",
+            format!(
+                "color_map.name `{}` is not one of {} or none",
+                spec.name,
+                names.join(", ")
+            ),
+        ));
+    };
+    let (lo, hi) = match spec.range {
+        None => slider,
+        Some([lo, hi]) => {
+            if !(lo.is_finite()
+                && hi.is_finite()
+                && lo < hi
+                && lo.abs() <= 1e30
+                && hi.abs() <= 1e30)
+            {
+                return Err(error(
+                    "color_map",
+                    "color_map.range must be two finite numbers, low below high".into(),
+                ));
+            }
+            (lo as f32, hi as f32)
+        }
+    };
+    Ok(Some(ColorMap { kind, lo, hi }))
+}
+
+/// Refuses the viewer-only fields in a scene description's `lighting.effects`, naming the
+/// scene's own field for each.
+pub fn refuse_in_scene(changes: &EffectChanges) -> Result<(), EffectError> {
+    if changes.clip.is_some() {
+        return Err(error(
+            "clip",
+            "clip is a viewer's setting; a scene's clip box is lighting.clip_box".into(),
+        ));
+    }
+    if changes.surfaces.is_some() {
+        return Err(error(
+            "surfaces",
+            "surfaces is a viewer's setting; a scene's are lighting.isosurfaces".into(),
+        ));
+    }
+    if changes.color_map.is_some() {
+        return Err(error(
+            "color_map",
+            "color_map is a viewer's setting, not a scene's".into(),
+        ));
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn changes(json: &str) -> EffectChanges {
+        serde_json::from_str(json).expect("parses")
+    }
+
+    #[test]
+    fn a_default_style_leaves_the_lighting_alone() {
+        assert!(Style::default().lighting(&Lighting::default()).is_none());
+    }
+
+    #[test]
+    fn clip_surfaces_and_map_reach_the_lighting() {
+        let c = changes(
+            r#"{"clip":{"min":[-1,-2,-3],"max":[1,2,3]},
+                "surfaces":[{"isovalue":0.4,"color":[1,0,0],"opacity":0.5}],
+                "color_map":{"name":"viridis","range":[0,2]}}"#,
+        );
+        let s = apply(&Style::default(), &c, (0.0, 1.0), (0.1, 0.9)).expect("valid");
+        let l = s.lighting(&Lighting::default()).expect("a style");
+        let clip = l.clip_box.expect("clip");
+        assert_eq!(
+            (clip.min, clip.max),
+            (Vec3::new(-1.0, -2.0, -3.0), Vec3::new(1.0, 2.0, 3.0))
+        );
+        assert_eq!(l.isosurfaces.len(), 1);
+        let surface = l.isosurfaces[0];
+        assert_eq!((surface.isovalue, surface.color), (0.4, Some(Vec3::X)));
+        assert_eq!(l.materials[surface.material as usize].opacity, 0.5);
+        let map = l.color_map.expect("map");
+        assert_eq!(
+            (map.kind, map.lo, map.hi),
+            (ColorMapKind::Viridis, 0.0, 2.0)
+        );
+        // Without a range the map spans the slider; `none` removes it.
+        let s = apply(
+            &s,
+            &changes(r#"{"color_map":{"name":"grey"}}"#),
+            (0.0, 1.0),
+            (0.1, 0.9),
+        )
+        .expect("valid");
+        assert_eq!(s.color_map.map(|m| (m.lo, m.hi)), Some((0.1, 0.9)));
+        let s = apply(
+            &s,
+            &changes(r#"{"color_map":{"name":"none"},"surfaces":[]}"#),
+            (0.0, 1.0),
+            (0.1, 0.9),
+        )
+        .expect("valid");
+        assert_eq!(s.color_map, None);
+        assert_eq!(s.surfaces, Some(Vec::new()));
+    }
+
+    #[test]
+    fn bad_values_name_the_field_and_change_nothing() {
+        for (json, field) in [
+            (r#"{"clip":{"min":[1,0,0],"max":[0,1,1]}}"#, "clip"),
+            (r#"{"clip":{"min":[0,0,0],"max":[1e9,1,1]}}"#, "clip"),
+            (r#"{"surfaces":[{"isovalue":2}]}"#, "surfaces"),
+            (
+                r#"{"surfaces":[{"isovalue":0.5,"color":[2,0,0]}]}"#,
+                "surfaces",
+            ),
+            (
+                r#"{"surfaces":[{"isovalue":0.5,"opacity":-1}]}"#,
+                "surfaces",
+            ),
+            (
+                r#"{"surfaces":[{"isovalue":0.5},{"isovalue":0.5},{"isovalue":0.5},{"isovalue":0.5},{"isovalue":0.5}]}"#,
+                "surfaces",
+            ),
+            (r#"{"color_map":{"name":"jet"}}"#, "color_map"),
+            (
+                r#"{"color_map":{"name":"grey","range":[1,1]}}"#,
+                "color_map",
+            ),
+        ] {
+            let e =
+                apply(&Style::default(), &changes(json), (0.0, 1.0), (0.0, 1.0)).expect_err(json);
+            assert_eq!(e.field, field, "{json}: {}", e.message);
+        }
+        assert!(refuse_in_scene(&changes(r#"{"color_map":{"name":"grey"}}"#)).is_err());
+        assert!(refuse_in_scene(&changes(r#"{"shadows":true}"#)).is_ok());
+    }
+}

@@ -1,0 +1,116 @@
+//! A viewer's look through the render endpoint (the same `effects` fields the websocket takes):
+//! a colour map recolours a tet scene's isosurfaces, a clip box and an added isosurface change
+//! the image, a look that changes nothing leaves the bytes as they were, bad values are 400s
+//! naming the field, and a scene description refuses them. The scene description endpoint
+//! reports the scene's bounds.
+
+use super::tets::post_json;
+use super::*;
+
+/// PNG bytes to RGB pixels.
+fn pixels(body: &[u8]) -> image::RgbImage {
+    image::load_from_memory(body).expect("PNG").to_rgb8()
+}
+
+/// Share of pixels whose channels differ by more than 40 levels (clearly coloured).
+fn coloured(img: &image::RgbImage) -> f64 {
+    let n = img
+        .pixels()
+        .filter(|p| {
+            let (lo, hi) = (p.0.iter().min(), p.0.iter().max());
+            matches!((lo, hi), (Some(lo), Some(hi)) if hi - lo > 40)
+        })
+        .count();
+    n as f64 / (img.width() * img.height()) as f64
+}
+
+fn render(base: &str, effects: &str) -> Response {
+    let body = format!(r#"{{"time":0,"width":80,"height":60,"effects":{effects}}}"#);
+    post_json(base, "/api/v1/scenes/tets-gyroid/render", &body)
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_viewers_look_through_the_render_endpoint_and_the_scene_bounds() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let server = Server::start(dir.path(), &[]).await;
+    let base = server.base.clone();
+    call(move || {
+        for id in ["tets-gyroid", "blobs"] {
+            let scene = json(&get(&base, &format!("/api/v1/scenes/{id}")));
+            let b = &scene["bounds"];
+            for k in 0..3 {
+                let (lo, hi) = (b["min"][k].as_f64(), b["max"][k].as_f64());
+                assert!(
+                    matches!((lo, hi), (Some(lo), Some(hi)) if lo < hi),
+                    "{id}: {scene}"
+                );
+            }
+        }
+        // The list does not compute bounds (that needs every scene's state).
+        let list = json(&get(&base, "/api/v1/scenes"));
+        assert!(list["scenes"][0].get("bounds").is_none(), "{list}");
+
+        let plain = render(&base, "{}");
+        assert_eq!(plain.status, 200, "{}", plain.text());
+        // A look that changes nothing: byte for byte the same image.
+        let none = render(&base, r#"{"color_map":{"name":"none"}}"#);
+        assert_eq!(none.body, plain.body, "no map, no change");
+
+        let own = pixels(&plain.body);
+        let grey = pixels(&render(&base, r#"{"color_map":{"name":"grey"}}"#).body);
+        assert!(coloured(&own) > 0.05, "the scene's own colours");
+        assert!(
+            coloured(&grey) < 0.005,
+            "a grey map leaves no coloured pixel ({})",
+            coloured(&grey)
+        );
+        let viridis = render(
+            &base,
+            r#"{"color_map":{"name":"viridis","range":[-0.05,2]}}"#,
+        );
+        assert_ne!(viridis.body, plain.body);
+
+        let clipped = render(
+            &base,
+            r#"{"clip_box":true,"clip":{"min":[-5,-5,0],"max":[5,5,5]}}"#,
+        );
+        assert_eq!(clipped.status, 200, "{}", clipped.text());
+        assert_ne!(clipped.body, plain.body, "the clip box cuts");
+        let added = render(
+            &base,
+            r#"{"isosurfaces":true,"surfaces":[{"isovalue":-0.6,"color":[0,1,0]}]}"#,
+        );
+        assert_eq!(added.status, 200, "{}", added.text());
+        assert_ne!(added.body, plain.body, "the added isosurface shows");
+
+        for (effects, field) in [
+            (r#"{"color_map":{"name":"jet"}}"#, "effects.color_map"),
+            (r#"{"clip":{"min":[1,0,0],"max":[0,1,1]}}"#, "effects.clip"),
+            (r#"{"surfaces":[{"isovalue":1e9}]}"#, "effects.surfaces"),
+            (
+                r#"{"surfaces":[{"isovalue":0.1,"opacity":2}]}"#,
+                "effects.surfaces",
+            ),
+        ] {
+            let r = render(&base, effects);
+            assert_eq!(r.status, 400, "{effects}: {}", r.text());
+            assert_eq!(json(&r)["field"], field, "{effects}: {}", r.text());
+        }
+
+        // A scene description has its own clip box and isosurfaces, and no colour map.
+        let r = post_json(
+            &base,
+            "/api/v1/scenes",
+            r#"{"kind":"metaballs","lighting":{"effects":{"color_map":{"name":"grey"}}}}"#,
+        );
+        assert_eq!(r.status, 400, "{}", r.text());
+        assert_eq!(
+            json(&r)["field"],
+            "lighting.effects.color_map",
+            "{}",
+            r.text()
+        );
+    })
+    .await;
+    server.stop().await;
+}
