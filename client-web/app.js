@@ -2,7 +2,7 @@
 // the connection streams frames of the chosen scene; camera, isosurfaces, time and quality
 // controls turn user input into protocol inputs; every setting lives in the URL.
 import { $, setStatus, showError, fillSelect } from './ui.js';
-import { parseSettings, serializeSettings } from './settings.js';
+import { parseSettings, serializeSettings, withBookmark } from './settings.js';
 import { attachControls, orbitFromPose, poseFromOrbit } from './camera.js';
 import { Connection } from './connection.js';
 import { FrameView, download } from './frames.js';
@@ -14,6 +14,10 @@ import { EffectsPanel } from './effects.js';
 import { apiFetch, describeFailure } from './api.js';
 import { Reprojector } from './reproject.js';
 import { supportedCodecs } from './decode.js';
+import { Look } from './look.js';
+import { Overlay } from './overlay.js';
+import { Bookmarks } from './bookmarks.js';
+import { Recorder } from './record.js';
 
 const settings = parseSettings(location.search);
 const canvas = $('view');
@@ -35,6 +39,12 @@ function saved() {
     saveTimer = null;
     history.replaceState(null, '', serializeSettings(settings));
   }, 100);
+}
+/** Writes the URL now (before copying it or leaving the page). */
+function flushSettings() {
+  clearTimeout(saveTimer);
+  saveTimer = null;
+  history.replaceState(null, '', serializeSettings(settings));
 }
 
 // --- connection ------------------------------------------------------------------------------
@@ -79,6 +89,7 @@ function cameraChanged() {
     if (!settings.cam) return;
     const pose = poseFromOrbit(settings.cam, settings.up);
     lastCameraInput = send({ type: 'camera', ...pose }) ?? lastCameraInput;
+    overlay.update();
     // The last frame, reprojected to the new camera, in this display frame.
     const warped = reproject.render(pose, canvas.width, canvas.height);
     if (warped) view.draw(warped, canvas);
@@ -184,6 +195,34 @@ const effects = new EffectsPanel(settings, {
   saved,
 });
 
+// --- the viewer's look, the overlay, bookmarks, recording ------------------------------------
+const look = new Look(settings, { send: (changes) => send({ type: 'effects', effects: changes }), saved });
+const overlay = new Overlay(canvas, {
+  getPose: () => (settings.cam ? poseFromOrbit(settings.cam, settings.up) : null),
+  look,
+});
+const bookmarks = new Bookmarks(settings, {
+  flush: flushSettings,
+  go: (q) => location.assign(serializeSettings(withBookmark(settings, q))),
+});
+const recorder = new Recorder(canvas, {
+  pinTime: (t) => timeline.pinAt(t),
+  getTime: () => settings.time,
+  restore: (t) => (t === null ? timeline.follow() : timeline.pinAt(t)),
+});
+
+// The scene's bounds, for the clip box's fields and its first box.
+async function loadBounds(id) {
+  try {
+    const response = await apiFetch(`/api/v1/scenes/${encodeURIComponent(id)}`);
+    if (!response.ok) throw new Error(describeFailure(response));
+    const scene = await response.json();
+    if (info && info.scene.id === id) look.setBounds(scene.bounds ?? null);
+  } catch (err) {
+    if (connection.isOpen) showError(`The scene's bounds are not available: ${err.message}`);
+  }
+}
+
 // --- session start and frames ----------------------------------------------------------------
 function onInfo(message) {
   info = message;
@@ -200,6 +239,11 @@ function onInfo(message) {
   for (const m of surfaces.messages()) send(m);
   const fx = effects.restoreChanges();
   if (fx) send({ type: 'effects', effects: fx });
+  look.setInfo(message);
+  const style = look.restoreChanges();
+  if (style) send({ type: 'effects', effects: style });
+  if (!look.bounds) loadBounds(message.scene.id);
+  overlay.update();
   timeline.restore();
   refreshHistogram(0);
   saved();
@@ -208,6 +252,7 @@ function onInfo(message) {
 function onFrame(header, bytes) {
   stats.frame(header, bytes, connection.latencyOf(header.inputId));
   timeline.frameShown(header);
+  recorder.frameShown(header);
   if (!gotFrame) {
     gotFrame = true;
     setStatus('');
@@ -309,6 +354,9 @@ sceneSelect.addEventListener('change', () => {
   settings.iso = null;
   settings.time = null;
   settings.fx = {};
+  settings.clip = null;
+  settings.surf = [];
+  settings.cmap = null;
   info = null;
   selectScene(sceneSelect.value);
 });
@@ -336,10 +384,12 @@ async function start() {
     return;
   }
   const id = scenes.some((s) => s.id === settings.scene) ? settings.scene : scenes[0].id;
-  if (id !== settings.scene) { settings.cam = null; settings.iso = null; settings.time = null; settings.fx = {}; }
+  if (id !== settings.scene) {
+    Object.assign(settings, { cam: null, iso: null, time: null, fx: {}, clip: null, surf: [], cmap: null });
+  }
   selectScene(id);
 }
 
 // For tests and debugging: the live objects behind the page.
-window.isoray = { settings, stats, view, connection, timeline, quality, effects, surfaces, reproject };
+window.isoray = { settings, stats, view, connection, timeline, quality, effects, surfaces, reproject, look, overlay, bookmarks, recorder };
 start();

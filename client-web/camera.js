@@ -144,3 +144,26 @@ export function attachControls(element, { getOrbit, getUp, changed, reset }) {
     changed();
   });
 }
+
+/**
+ * Projects world points to CSS pixels of a `width` × `height` view of the camera `pose`
+ * (`{eye, target, up, fov_y_deg}`, a pinhole with a vertical field of view, as the server's
+ * camera): returns `[x, y, depth]` (depth along the view direction; ≤ 0 is behind the eye).
+ */
+export function projector(pose, width, height) {
+  const forward = normalize(pose.target.map((t, i) => t - pose.eye[i]));
+  const right = normalize(cross(forward, pose.up));
+  const up = cross(right, forward);
+  const f = 1 / Math.tan((pose.fov_y_deg * Math.PI) / 360);
+  const aspect = width / height;
+  return {
+    right, up, forward,
+    project(p) {
+      const d = p.map((v, i) => v - pose.eye[i]);
+      const z = dot(d, forward);
+      const x = (dot(d, right) / z) * (f / aspect);
+      const y = (dot(d, up) / z) * f;
+      return [(x + 1) * 0.5 * width, (1 - y) * 0.5 * height, z];
+    },
+  };
+}

@@ -21,11 +21,19 @@ export function defaults() {
     fps: null, // target frame rate, null for the server's default
     stats: false,
     token: null, // view token (servers with --view-token); kept so a reload still works
+    clip: null, // the viewer's clip box [minx, miny, minz, maxx, maxy, maxz], on while set
+    surf: [], // added isosurfaces: { v: isovalue, c: 'rrggbb' (sRGB), o: opacity }
+    cmap: null, // colour map of the isovalue: { name, lo, hi }
+    bm: [], // bookmarks: { name, q } where q is the query string of the view they keep
     extra: [], // query parameters this module does not know (other modules' switches), kept as they are
   };
 }
 
-const KNOWN = ['scene', 'cam', 'up', 'iso', 't', 'speed', 'loop', 'fx', 'codec', 'scale', 'fps', 'stats', 'token'];
+const KNOWN = ['scene', 'cam', 'up', 'iso', 't', 'speed', 'loop', 'fx', 'codec', 'scale', 'fps', 'stats', 'token',
+  'clip', 'surf', 'cmap', 'bm'];
+export const COLOR_MAPS = ['viridis', 'inferno', 'cool_warm', 'grey'];
+/** The settings a bookmark keeps (camera, isovalues, time, effects and the viewer's look). */
+export const BOOKMARKED = ['cam', 'up', 'iso', 't', 'fx', 'clip', 'surf', 'cmap'];
 
 const finite = (s) => (s !== null && s.trim() !== '' && Number.isFinite(Number(s)) ? Number(s) : null);
 
@@ -59,11 +67,42 @@ export function parseSettings(search) {
   if (fps !== null && fps >= 1 && fps <= 240) s.fps = fps;
   if (p.get('stats') === '1') s.stats = true;
   if (p.get('token')) s.token = p.get('token');
+  const clip = (p.get('clip') || '').split(',').map(finite);
+  if (clip.length === 6 && clip.every((v) => v !== null) && [0, 1, 2].every((i) => clip[i] < clip[i + 3])) s.clip = clip;
+  for (const item of (p.get('surf') || '').split(',').filter(Boolean).slice(0, 4)) {
+    const m = /^(-?[0-9.e+-]+):([0-9a-f]{6}):([0-9.]+)$/.exec(item);
+    if (m && finite(m[1]) !== null && Number(m[3]) >= 0 && Number(m[3]) <= 1) s.surf.push({ v: Number(m[1]), c: m[2], o: Number(m[3]) });
+  }
+  const cmap = (p.get('cmap') || '').split(',');
+  if (cmap.length === 3 && COLOR_MAPS.includes(cmap[0]) && finite(cmap[1]) !== null && finite(cmap[2]) !== null && Number(cmap[1]) < Number(cmap[2])) {
+    s.cmap = { name: cmap[0], lo: Number(cmap[1]), hi: Number(cmap[2]) };
+  }
+  for (const item of p.getAll('bm')) {
+    const at = item.indexOf(':');
+    const name = item.slice(0, at);
+    if (at > 0 && name.length <= 60) s.bm.push({ name, q: item.slice(at + 1) });
+  }
   s.extra = [...p].filter(([k]) => !KNOWN.includes(k));
   return s;
 }
 
 const round = (v) => String(+v.toFixed(6));
+
+/** The part of `s`'s query string a bookmark keeps (no `?`). */
+export function bookmarkQuery(s) {
+  const all = new URLSearchParams(serializeSettings({ ...s, bm: [], extra: [] }).replace(/^[^?]*\?/, ''));
+  const kept = new URLSearchParams();
+  for (const [k, v] of all) if (BOOKMARKED.includes(k)) kept.append(k, v);
+  return kept.toString();
+}
+
+/** `s` with the view of bookmark query `q`: bookmarked settings replaced, the rest kept. */
+export function withBookmark(s, q) {
+  const from = parseSettings(q);
+  const out = { ...s };
+  for (const key of ['cam', 'up', 'iso', 'time', 'fx', 'clip', 'surf', 'cmap']) out[key] = from[key];
+  return out;
+}
 
 /** The query string (with `?`) that `parseSettings` reads back as `s`. */
 export function serializeSettings(s) {
@@ -86,6 +125,10 @@ export function serializeSettings(s) {
   if (s.fps !== null) p.set('fps', round(s.fps));
   if (s.stats) p.set('stats', '1');
   if (s.token) p.set('token', s.token);
+  if (s.clip) p.set('clip', s.clip.map(round).join(','));
+  if (s.surf.length) p.set('surf', s.surf.map((x) => `${round(x.v)}:${x.c}:${round(x.o)}`).join(','));
+  if (s.cmap) p.set('cmap', `${s.cmap.name},${round(s.cmap.lo)},${round(s.cmap.hi)}`);
+  for (const b of s.bm) p.append('bm', `${b.name}:${b.q}`);
   for (const [k, v] of s.extra) p.append(k, v);
   const text = p.toString();
   return text ? `?${text}` : location.pathname;

@@ -87,6 +87,17 @@ export class Timeline {
     this.#render();
   }
 
+  /** Shows scene time `time` (stopping playback); returns the time input's id. */
+  pinAt(time) {
+    this.playing = false;
+    this.settings.time = time;
+    const id = this.sendTime(time);
+    this.awaitedInput = id;
+    this.saved();
+    this.#render();
+    return id;
+  }
+
   /** Follows the newest state (live), stopping playback. */
   follow() {
     this.pause();

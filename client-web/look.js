@@ -1,0 +1,255 @@
+// The viewer's own look of a scene, as ParaView users expect to set it: a clip box (numeric
+// fields over the scene's bounds from `GET /api/v1/scenes/{id}`, and handles dragged in the
+// view, see overlay.js), further isosurfaces added and removed with a colour and opacity each,
+// and a colour map of the isovalue with its legend. Each goes to the server as the `clip`,
+// `surfaces` and `color_map` fields of an `effects` message, and lives in the URL.
+import { $ } from './ui.js';
+import { COLOR_MAPS } from './settings.js';
+
+const AXES = ['x', 'y', 'z'];
+const MAX_SURFACES = 4;
+const SURFACE_COLORS = ['e05a47', '4fb06c', 'd9a93a', 'b164c8'];
+
+/** The sRGB stops of each map, as the server's colormap.rs has them (for the legend). */
+export const MAP_STOPS = {
+  viridis: ['440154', '482878', '3e4989', '31688e', '26828e', '1f9e89', '35b779', '6ece58', 'b5de2b', 'fde725'],
+  inferno: ['000004', '1b0c41', '4a0c6b', '781c6d', 'a52c60', 'cf4446', 'ed6925', 'fb9b06', 'f7d13d', 'fcffa4'],
+  cool_warm: ['3b4cc0', '6788ee', '9abbff', 'c9d7f0', 'edd1c2', 'f7a889', 'e26952', 'b40426'],
+  grey: ['000000', 'ffffff'],
+};
+const MAP_LABELS = { viridis: 'Viridis', inferno: 'Inferno', cool_warm: 'Cool to warm', grey: 'Grey' };
+
+/** An sRGB hex colour as linear-light channels in [0, 1] (the server shades in linear light). */
+export function linearOf(hex) {
+  return [0, 2, 4].map((i) => {
+    const s = parseInt(hex.slice(i, i + 2), 16) / 255;
+    return s <= 0.04045 ? s / 12.92 : ((s + 0.055) / 1.055) ** 2.4;
+  });
+}
+
+const fmt = (v) => String(+Number(v).toPrecision(5));
+
+export class Look {
+  /** `send(changes)` sends an `effects` message body; `saved()` writes the URL. */
+  constructor(settings, { send, saved }) {
+    this.settings = settings;
+    this.send = send;
+    this.saved = saved;
+    this.info = null;
+    this.bounds = null; // { min, max } of the scene
+    this.listeners = new Set();
+    this.clipOn = $('clip-on');
+    this.clipOn.addEventListener('change', () => this.setClip(this.clipOn.checked ? (this.settings.clip ?? this.#defaultClip()) : null));
+    this.clipInputs = [];
+    for (const [i, end] of [['min', 0], ['max', 3]].map(([end, o]) => [o, end])) {
+      AXES.forEach((axis, k) => {
+        const input = $(`clip-${end}-${axis}`);
+        input.addEventListener('change', () => {
+          const v = Number(input.value);
+          if (!Number.isFinite(v) || !this.settings.clip) return;
+          const box = [...this.settings.clip];
+          box[i + k] = v;
+          if (box[k] < box[k + 3]) this.setClip(box); else this.#showClip();
+        });
+        this.clipInputs[i + k] = input;
+      });
+    }
+    $('surface-add').addEventListener('click', () => this.#addSurface());
+    this.list = $('further');
+    this.mapSelect = $('cmap');
+    this.mapSelect.replaceChildren(new Option('None (scene colours)', ''), ...COLOR_MAPS.map((m) => new Option(MAP_LABELS[m], m)));
+    this.mapSelect.addEventListener('change', () => this.#mapChanged());
+    this.mapLo = $('cmap-lo');
+    this.mapHi = $('cmap-hi');
+    for (const input of [this.mapLo, this.mapHi]) input.addEventListener('change', () => this.#mapChanged());
+  }
+
+  /** Calls `fn()` whenever the clip box changes (the overlay redraws its handles). */
+  onClip(fn) { this.listeners.add(fn); }
+
+  /** The scene's bounds (from `GET /api/v1/scenes/{id}`), the ranges of the clip fields. */
+  setBounds(bounds) {
+    this.bounds = bounds;
+    for (const [i, input] of this.clipInputs.entries()) {
+      const axis = i % 3;
+      const pad = bounds ? (bounds.max[axis] - bounds.min[axis]) * 0.05 : 0;
+      input.min = bounds ? fmt(bounds.min[axis] - pad) : '';
+      input.max = bounds ? fmt(bounds.max[axis] + pad) : '';
+    }
+  }
+
+  /** A new session: restores the look from the settings. */
+  setInfo(info) {
+    const newScene = this.info === null || this.info.scene.id !== info.scene.id;
+    this.info = info;
+    if (newScene) this.bounds = null;
+    for (const input of this.clipInputs) input.step = 'any';
+    if (this.settings.cmap === null) {
+      [this.mapLo.value, this.mapHi.value] = info.isovalue_slider.map(fmt);
+    }
+    this.settings.surf = this.settings.surf.filter((s) => s.v > info.isovalue_range[0] && s.v < info.isovalue_range[1]);
+    this.#buildSurfaces();
+    this.#showClip();
+    this.#showMap();
+  }
+
+  /** The `effects` message body that restores the look after (re)connecting, or null. */
+  restoreChanges() {
+    const fx = {};
+    if (this.settings.clip) Object.assign(fx, this.#clipChanges(this.settings.clip));
+    if (this.settings.surf.length) Object.assign(fx, this.#surfaceChanges());
+    if (this.settings.cmap) fx.color_map = { name: this.settings.cmap.name, range: [this.settings.cmap.lo, this.settings.cmap.hi] };
+    return Object.keys(fx).length ? fx : null;
+  }
+
+  // --- clip box ------------------------------------------------------------------------------
+
+  #defaultClip() {
+    // The half of the scene's box nearest +z cut away, so switching it on shows an effect.
+    const b = this.bounds ?? { min: [-1, -1, -1], max: [1, 1, 1] };
+    const mid = (b.min[2] + b.max[2]) / 2;
+    const pad = b.max.map((v, i) => (v - b.min[i]) * 0.05);
+    return [b.min[0] - pad[0], b.min[1] - pad[1], mid, b.max[0] + pad[0], b.max[1] + pad[1], b.max[2] + pad[2]];
+  }
+
+  #clipChanges(box) {
+    return box ? { clip_box: true, clip: { min: box.slice(0, 3), max: box.slice(3) } } : { clip_box: false };
+  }
+
+  /** Sets the clip box (`null`: off), sends it and keeps it in the URL. */
+  setClip(box) {
+    this.settings.clip = box;
+    this.send(this.#clipChanges(box));
+    this.saved();
+    this.#showClip();
+  }
+
+  get clip() { return this.settings.clip; }
+
+  #showClip() {
+    const box = this.settings.clip;
+    this.clipOn.checked = Boolean(box);
+    for (const [i, input] of this.clipInputs.entries()) {
+      input.disabled = !box;
+      if (box) input.value = fmt(box[i]);
+    }
+    for (const fn of this.listeners) fn(box);
+  }
+
+  // --- further isosurfaces -------------------------------------------------------------------
+
+  #surfaceChanges() {
+    const surfaces = this.settings.surf.map((s) => ({ isovalue: s.v, color: linearOf(s.c), opacity: s.o }));
+    const fx = { isosurfaces: surfaces.length > 0, surfaces };
+    // A see-through surface needs transparency on.
+    if (this.settings.surf.some((s) => s.o < 1)) fx.transparency = true;
+    return fx;
+  }
+
+  #surfacesChanged() {
+    this.send(this.#surfaceChanges());
+    this.saved();
+  }
+
+  #addSurface() {
+    if (!this.info || this.settings.surf.length >= MAX_SURFACES) return;
+    const [lo, hi] = this.info.isovalue_slider;
+    const main = this.settings.iso ? this.settings.iso[0] : this.info.isovalue;
+    // Half way between the main surface and the low end of the slider: an enclosing shell.
+    const v = +(main - (main - lo) * 0.5).toPrecision(6);
+    const n = this.settings.surf.length;
+    this.settings.surf.push({ v: Math.min(hi, Math.max(lo, v)), c: SURFACE_COLORS[n % SURFACE_COLORS.length], o: 1 });
+    this.#buildSurfaces();
+    this.#surfacesChanged();
+    this.list.querySelector(`#further-${n} input[type=number]`)?.focus();
+  }
+
+  #buildSurfaces() {
+    if (!this.info) return;
+    $('surface-add').hidden = false;
+    $('surface-add').disabled = this.settings.surf.length >= MAX_SURFACES;
+    this.list.replaceChildren(...this.settings.surf.map((s, i) => {
+      const row = document.createElement('fieldset');
+      row.className = 'further';
+      row.id = `further-${i}`;
+      const legend = document.createElement('legend');
+      legend.textContent = `Added isosurface ${i + 1}`;
+      const value = document.createElement('input');
+      value.type = 'number';
+      value.step = 'any';
+      value.min = String(this.info.isovalue_range[0]);
+      value.max = String(this.info.isovalue_range[1]);
+      value.value = fmt(s.v);
+      value.setAttribute('aria-label', `Isovalue of added isosurface ${i + 1}`);
+      value.addEventListener('change', () => {
+        const v = Number(value.value);
+        if (!(v > this.info.isovalue_range[0] && v < this.info.isovalue_range[1])) { value.value = fmt(s.v); return; }
+        s.v = v;
+        this.#surfacesChanged();
+      });
+      const color = document.createElement('input');
+      color.type = 'color';
+      color.value = `#${s.c}`;
+      color.setAttribute('aria-label', `Colour of added isosurface ${i + 1}`);
+      color.addEventListener('change', () => { s.c = color.value.slice(1).toLowerCase(); this.#surfacesChanged(); });
+      const opacityId = `further-opacity-${i}`;
+      const opacityLabel = document.createElement('label');
+      opacityLabel.htmlFor = opacityId;
+      opacityLabel.textContent = 'Opacity';
+      const opacity = document.createElement('input');
+      opacity.type = 'range';
+      opacity.id = opacityId;
+      opacity.min = '0';
+      opacity.max = '1';
+      opacity.step = '0.05';
+      opacity.value = String(s.o);
+      opacity.addEventListener('change', () => { s.o = Number(opacity.value); this.#surfacesChanged(); });
+      const remove = document.createElement('button');
+      remove.type = 'button';
+      remove.className = 'remove';
+      remove.textContent = 'Remove';
+      remove.setAttribute('aria-label', `Remove added isosurface ${i + 1}`);
+      remove.addEventListener('click', () => {
+        this.settings.surf.splice(i, 1);
+        this.#buildSurfaces();
+        this.#surfacesChanged();
+        $('surface-add').focus();
+      });
+      const line = document.createElement('div');
+      line.className = 'row';
+      line.append(value, color, remove);
+      row.append(legend, line, opacityLabel, opacity);
+      return row;
+    }));
+  }
+
+  // --- colour map ----------------------------------------------------------------------------
+
+  #mapChanged() {
+    const name = this.mapSelect.value;
+    const lo = Number(this.mapLo.value), hi = Number(this.mapHi.value);
+    if (name && !(Number.isFinite(lo) && Number.isFinite(hi) && lo < hi)) {
+      this.#showMap();
+      return;
+    }
+    this.settings.cmap = name ? { name, lo, hi } : null;
+    this.send({ color_map: name ? { name, range: [lo, hi] } : { name: 'none' } });
+    this.saved();
+    this.#showMap();
+  }
+
+  #showMap() {
+    const map = this.settings.cmap;
+    this.mapSelect.value = map ? map.name : '';
+    if (map) { this.mapLo.value = fmt(map.lo); this.mapHi.value = fmt(map.hi); }
+    const legend = $('legend');
+    legend.hidden = !map;
+    if (!map) return;
+    const stops = MAP_STOPS[map.name];
+    $('legend-bar').style.background = `linear-gradient(to right, ${stops.map((s) => `#${s}`).join(', ')})`;
+    $('legend-lo').textContent = fmt(map.lo);
+    $('legend-hi').textContent = fmt(map.hi);
+    legend.setAttribute('aria-label', `Colour map ${MAP_LABELS[map.name]} from ${fmt(map.lo)} to ${fmt(map.hi)}`);
+    legend.dataset.map = map.name;
+  }
+}

@@ -1,0 +1,156 @@
+// The viewer's own look against the real server: the clip box's handles dragged in the view,
+// further isosurfaces added with a colour and removed, and a colour map of the isovalue with
+// its legend.
+import { test } from 'node:test';
+import assert from 'node:assert/strict';
+import { withPage, settledPixels, meanAbsDiff, frameCount } from './harness.mjs';
+import { createTetBall } from './scenes.mjs';
+
+const CHANGED = 2; // see viewer.test.mjs
+const SAME = 0.5; // see state.test.mjs
+
+/**
+ * The pixels once the still frame answering every input sent so far is on screen (a frame
+ * header carries the newest input it reflects), then settled.
+ */
+async function settledAfterInputs(page) {
+  const sent = await page.evaluate(() => window.isoray.connection.nextInputId - 1);
+  await page.waitForFunction((id) => {
+    const h = window.isoray.view.lastHeader;
+    return h && h.inputId >= id && (h.flags & 1) === 1;
+  }, sent, { timeout: 30000 });
+  return settledPixels(page);
+}
+
+/** The clip box in the page's URL, or null. */
+const clipOf = (url) => {
+  const v = new URL(url).searchParams.get('clip');
+  return v ? v.split(',').map(Number) : null;
+};
+
+test('dragging a clip-box handle in the view changes the image and the URL', async (t) => {
+  await withPage('clip-handles', async ({ server, page }) => {
+    await page.goto(`${server.url}?scene=blobs&t=3&scale=0.5`);
+    const plain = await settledPixels(page);
+    // The fields' ranges come from the scene's bounds (GET /api/v1/scenes/{id}).
+    await page.waitForFunction(() => window.isoray.look.bounds !== null);
+    const bounds = await page.evaluate(() => window.isoray.look.bounds);
+    assert.ok(bounds.min.every((v, i) => v < bounds.max[i]), `bounds ${JSON.stringify(bounds)}`);
+    assert.ok(Number(await page.locator('#clip-min-x').getAttribute('min')) < bounds.min[0]);
+
+    let before = await frameCount(page);
+    await page.locator('#clip-on').check();
+    const clipped = await settledPixels(page, { from: before });
+    await page.waitForURL(/clip=/);
+    const box = clipOf(page.url());
+    assert.ok(meanAbsDiff(plain, clipped) > CHANGED, 'switching the clip box on cuts the blobs');
+
+    // Drag the max-x face's handle to the left, along -x as drawn: the right part of the
+    // front half comes back.
+    const handle = page.locator('#handle-max-x');
+    await handle.waitFor({ state: 'visible' });
+    await page.locator('#view').scrollIntoViewIfNeeded();
+    const hb = await handle.boundingBox();
+    const [x, y] = [hb.x + hb.width / 2, hb.y + hb.height / 2];
+    before = await frameCount(page);
+    await page.mouse.move(x, y);
+    await page.mouse.down();
+    await page.mouse.move(x - 150, y, { steps: 10 });
+    await page.mouse.up();
+    const dragged = await settledPixels(page, { from: before });
+    await page.waitForURL((url) => clipOf(url) && clipOf(url)[3] < box[3] - 0.5);
+    const moved = clipOf(page.url());
+    t.diagnostic(`max x ${box[3]} -> ${moved[3]}`);
+    assert.deepEqual([...moved.slice(0, 3), ...moved.slice(4)], [...box.slice(0, 3), ...box.slice(4)], 'only the dragged face moved');
+    const diff = meanAbsDiff(clipped, dragged);
+    t.diagnostic(`mean abs diff ${diff.toFixed(2)}`);
+    assert.ok(diff > CHANGED, `the image changed (mean abs diff ${diff.toFixed(2)})`);
+    assert.equal(Number(await page.locator('#clip-max-x').inputValue()), +moved[3].toPrecision(5), 'and the numeric field follows');
+
+    // A typed value moves the box too, and a reload keeps it.
+    before = await frameCount(page);
+    await page.locator('#clip-max-y').fill(String(+(box[4] - 1).toFixed(3)));
+    await page.locator('#clip-max-y').press('Enter');
+    await settledPixels(page, { from: before });
+    await page.waitForURL((url) => clipOf(url)[4] === +(box[4] - 1).toFixed(3));
+  });
+});
+
+test('adding a second isosurface shows it, and removing it restores the image', async (t) => {
+  await withPage('add-surface', async ({ server, page }) => {
+    // Spheres of 3 - |p|²: the added surface (a lower value) is a larger sphere around the first.
+    const id = await createTetBall(server);
+    await page.goto(`${server.url}?scene=${id}&t=0&scale=0.5`);
+    const one = await settledPixels(page);
+    let before = await frameCount(page);
+    await page.locator('#surface-add').click();
+    const two = await settledPixels(page, { from: before });
+    await page.waitForURL(/surf=/);
+    const diff = meanAbsDiff(one, two);
+    t.diagnostic(`with a second isosurface: mean abs diff ${diff.toFixed(2)}`);
+    assert.ok(diff > CHANGED, `the added isosurface shows (mean abs diff ${diff.toFixed(2)})`);
+
+    // Its colour: a pure green surface makes the picture greener.
+    const green = (img) => { let g = 0; for (let i = 0; i < img.data.length; i += 4) g += img.data[i + 1] - (img.data[i] + img.data[i + 2]) / 2; return g / (img.data.length / 4); };
+    before = await frameCount(page);
+    await page.locator('#further-0 input[type=color]').fill('#00ff00');
+    const greener = await settledPixels(page, { from: before });
+    assert.ok(green(greener) > green(two) + 1, `the colour applies (${green(two).toFixed(2)} -> ${green(greener).toFixed(2)})`);
+    await page.waitForURL(/surf=[^&]*00ff00/);
+
+    before = await frameCount(page);
+    await page.locator('#further-0 button.remove').click();
+    const removed = await settledPixels(page, { from: before });
+    const back = meanAbsDiff(one, removed);
+    assert.ok(back < SAME, `removing it restores the image (mean abs diff ${back.toFixed(3)})`);
+    await page.waitForURL((url) => !new URL(url).searchParams.has('surf'));
+  });
+});
+
+test('a colour map recolours the tet surfaces and its legend shows the range', async () => {
+  await withPage('color-map', async ({ server, page }) => {
+    const id = await createTetBall(server);
+    await page.goto(`${server.url}?scene=${id}&t=0&scale=0.5`);
+    const own = await settledPixels(page);
+    assert.equal(await page.locator('#legend').isHidden(), true, 'no legend without a map');
+    const slider = await page.evaluate(() => window.isoray.look.info.isovalue_slider);
+
+    // Grey: every lit surface pixel is grey; the scene's own colours were not.
+    const coloured = (img) => { let n = 0; for (let i = 0; i < img.data.length; i += 4) { const d = img.data; if (Math.max(d[i], d[i + 1], d[i + 2]) - Math.min(d[i], d[i + 1], d[i + 2]) > 40) n += 1; } return n / (img.data.length / 4); };
+    let before = await frameCount(page);
+    await page.selectOption('#cmap', 'grey');
+    const grey = await settledPixels(page, { from: before });
+    assert.ok(coloured(own) > 0.05, `the scene's own map colours the surface (${coloured(own).toFixed(3)})`);
+    assert.ok(coloured(grey) < 0.005, `the grey map leaves no coloured pixel (${coloured(grey).toFixed(4)})`);
+    await page.waitForURL(/cmap=grey/);
+    const legend = page.locator('#legend');
+    assert.equal(await legend.isVisible(), true, 'the legend shows');
+    assert.equal(Number(await page.locator('#legend-lo').textContent()), +slider[0].toPrecision(5));
+    assert.equal(Number(await page.locator('#legend-hi').textContent()), +slider[1].toPrecision(5));
+
+    // Viridis over a chosen range: other colours, and the legend says the range.
+    before = await frameCount(page);
+    await page.selectOption('#cmap', 'viridis');
+    const viridis = await settledPixels(page, { from: before });
+    assert.ok(meanAbsDiff(grey, viridis) > CHANGED, 'another map, other colours');
+    before = await frameCount(page);
+    // The isovalue (2.5, the top of the slider's range) moves to the map's low end.
+    await page.locator('#cmap-hi').fill('5');
+    await page.locator('#cmap-hi').press('Enter');
+    await page.locator('#cmap-lo').fill('2.45');
+    await page.locator('#cmap-lo').press('Enter');
+    await page.waitForURL(/cmap=viridis%2C2\.45%2C5(&|$)/);
+    const ranged = await settledAfterInputs(page);
+    const rangeDiff = meanAbsDiff(viridis, ranged);
+    assert.ok(rangeDiff > CHANGED, `another range, other colours (mean abs diff ${rangeDiff.toFixed(2)})`);
+    assert.equal(await page.locator('#legend-lo').textContent(), '2.45');
+    assert.equal(await page.locator('#legend-hi').textContent(), '5');
+    assert.match(await legend.getAttribute('aria-label'), /Viridis from 2\.45 to 5$/);
+    assert.match(await page.locator('#legend-bar').evaluate((e) => e.style.background), /rgb\(68, 1, 84\).*rgb\(253, 231, 37\)/);
+
+    before = await frameCount(page);
+    await page.selectOption('#cmap', '');
+    const back = await settledPixels(page, { from: before });
+    assert.ok(meanAbsDiff(own, back) < SAME, 'no map: the scene\'s own colours again');
+  });
+});
