@@ -33,7 +33,14 @@ test('scrubbing time changes the picture, and play advances it', async () => {
     await page.click('#live');
     await page.waitForFunction(() => window.isoray.settings.time === null);
     await waitForFrames(page, 3);
+    // The viewer writes the URL at most every 100 ms (app.js `saved`), from the settings at
+    // the time of writing, so it follows the switch to live on its own clock, not the frames':
+    // wait for it rather than read it after some frames.
+    await page.waitForURL((url) => !url.searchParams.has('t'), { timeout: 5000 });
+    // No stale write pins an old time afterwards (a shared link would reopen the past).
+    await waitForFrames(page, 3);
     assert.doesNotMatch(page.url(), /[?&]t=/, 'live is the default, so the URL pins no time');
+    assert.equal(await page.evaluate(() => window.isoray.settings.time), null, 'still live');
   });
 });
 

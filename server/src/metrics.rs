@@ -28,6 +28,22 @@ pub const DEPTH_BYTES: &str = "isoray_depth_bytes_total";
 /// Scene states prepared (state update plus acceleration structure), by scene.
 pub const STATES_BUILT: &str = "isoray_scene_states_built_total";
 pub const INPUTS_REJECTED: &str = "isoray_inputs_rejected_total";
+/// Always 1, labelled with the version and the cargo features the binary was built with
+/// (Prometheus' `*_build_info` convention): which encoders a process has, and for the tests,
+/// that the binary they spawn is the one they were built with.
+pub const BUILD_INFO: &str = "isoray_build_info";
+
+/// The cargo features of this build, sorted, comma-separated.
+pub fn features() -> String {
+    let mut on = Vec::new();
+    if cfg!(feature = "h264") {
+        on.push("h264");
+    }
+    if cfg!(feature = "turbojpeg") {
+        on.push("turbojpeg");
+    }
+    on.join(",")
+}
 
 /// Bucket bounds, seconds: 0.5 ms to 2.5 s, about ×2 apart.
 const SECONDS_BUCKETS: [f64; 13] = [
@@ -65,6 +81,12 @@ fn register_zeroes() {
     metrics::gauge!(RENDER_QUEUE).set(0.0);
     metrics::gauge!(RENDER_RUNNING).set(0.0);
     metrics::counter!(DEPTH_BYTES).absolute(0);
+    metrics::gauge!(
+        BUILD_INFO,
+        "version" => env!("CARGO_PKG_VERSION"),
+        "features" => features()
+    )
+    .set(1.0);
 }
 
 /// The text exposition of every metric.

@@ -77,8 +77,16 @@ pub fn check_stream_view(
     query: Option<&str>,
     entry: &SceneEntry,
 ) -> Result<(), AppError> {
-    let from_query = query.and_then(|q| q.split('&').find_map(|p| p.strip_prefix("token=")));
-    check_view_token(app, bearer(headers).or(from_query), Some(entry))
+    let from_query = query.and_then(query_token);
+    check_view_token(app, bearer(headers).or(from_query.as_deref()), Some(entry))
+}
+
+/// The `token` parameter of a query string, percent-decoded as a browser's
+/// `encodeURIComponent` (or `URLSearchParams`) encoded it; the first one wins.
+pub fn query_token(query: &str) -> Option<String> {
+    form_urlencoded::parse(query.as_bytes())
+        .find(|(name, _)| name == "token")
+        .map(|(_, value)| value.into_owned())
 }
 
 fn check_view_token(

@@ -171,3 +171,53 @@ async fn write_and_view_tokens_are_enforced_everywhere() {
     drop(ws);
     server.stop().await;
 }
+
+/// `encodeURIComponent` as browsers define it: every byte of the UTF-8 form but
+/// `A–Z a–z 0–9 - _ . ! ~ * ' ( )` becomes `%XX`.
+fn encode_uri_component(s: &str) -> String {
+    s.bytes()
+        .map(|b| {
+            if b.is_ascii_alphanumeric() || b"-_.!~*'()".contains(&b) {
+                (b as char).to_string()
+            } else {
+                format!("%{b:02X}")
+            }
+        })
+        .collect()
+}
+
+/// A view token with characters a URL encodes (`+ / = % &`, a space) works over REST and on
+/// the websocket, where the browser sends `?token=` + `encodeURIComponent(token)`.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_view_token_with_url_special_characters_opens_the_stream() {
+    const ODD: &str = "a+b/c=d%e f&g-0123456789";
+    let dir = tempfile::tempdir().expect("temp dir");
+    let server = Server::start(dir.path(), &["--view-token", ODD]).await;
+    let base = server.base.clone();
+    let r = call(move || with_auth(&base, "GET", "/api/v1/scenes", Some(ODD))).await;
+    assert_eq!(
+        r.status,
+        200,
+        "the header carries it as it is: {}",
+        r.text()
+    );
+
+    let url = format!("ws://{}/api/v1/scenes/blobs/stream", server.addr);
+    let encoded = encode_uri_component(ODD);
+    let (mut ws, _) =
+        tokio_tungstenite::connect_async(format!("{url}?reproject=off&token={encoded}"))
+            .await
+            .unwrap_or_else(|e| panic!("?token={encoded} opens the stream: {e}"));
+    match crate::e2e::support::next_text(&mut ws).await {
+        isoray_protocol::ServerMessage::Info(info) => assert_eq!(info.scene.id, "blobs"),
+        other => panic!("info first, got {other:?}"),
+    }
+    drop(ws);
+    // The undecoded form is a different token, and is refused.
+    match tokio_tungstenite::connect_async(format!("{url}?token={}", ODD.replace(' ', "%20"))).await
+    {
+        Err(tokio_tungstenite::tungstenite::Error::Http(r)) => assert_eq!(r.status(), 403),
+        other => panic!("`+` means a space in a query, so this token is wrong: {other:?}"),
+    }
+    server.stop().await;
+}

@@ -241,3 +241,23 @@ fn the_server_starts_with_the_default_data_dir_even_an_unusable_one() {
     assert_eq!(json(&r)["code"], "no_store");
     p.kill();
 }
+
+/// The binary the tests spawn has the features this test build has: `.ci/run` builds it with
+/// `--all-features` and runs `cargo test --all-features`, and the tests must exercise that
+/// binary, not a default-features one built behind its back.
+#[test]
+fn the_spawned_binary_has_the_features_of_this_test_build() {
+    let home = tempfile::tempdir().expect("temp dir");
+    let p = Process::start(home.path());
+    let text = get(&p.base, "/metrics").text();
+    p.kill();
+    let info = text
+        .lines()
+        .find(|l| l.starts_with("isoray_build_info{"))
+        .unwrap_or_else(|| panic!("no isoray_build_info in /metrics:\n{text}"));
+    let want = format!("features=\"{}\"", isoray_server::metrics::features());
+    assert!(
+        info.contains(&want),
+        "the spawned binary reports `{info}`; this test build has {want}"
+    );
+}

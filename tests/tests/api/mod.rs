@@ -181,7 +181,10 @@ pub fn temp_files(root: &Path) -> Vec<PathBuf> {
 }
 
 /// The `isoray` binary of this build profile, built (or brought up to date) on first use so
-/// that `cargo test -p isoray-tests` alone also tests the current code.
+/// that `cargo test -p isoray-tests` alone also tests the current code. It is built with the
+/// cargo features this test build linked the server with (`isoray_server::metrics::features`),
+/// so under `cargo test --all-features` it is the very binary `.ci/run` built with
+/// `--all-features` (cargo finds it fresh) rather than a default-features rebuild.
 pub fn isoray_binary() -> &'static Path {
     static BINARY: OnceLock<PathBuf> = OnceLock::new();
     BINARY.get_or_init(|| {
@@ -194,6 +197,11 @@ pub fn isoray_binary() -> &'static Path {
         let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
         let mut cmd = std::process::Command::new(cargo);
         cmd.args(["build", "-p", "isoray-server", "--bin", "isoray"]);
+        cmd.arg("--no-default-features");
+        let features = isoray_server::metrics::features();
+        if !features.is_empty() {
+            cmd.args(["--features", &features]);
+        }
         if profile_dir.file_name().is_some_and(|n| n == "release") {
             cmd.arg("--release");
         }

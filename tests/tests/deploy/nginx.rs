@@ -481,3 +481,52 @@ async fn nginx_routes_every_scene_to_the_process_that_holds_it() {
     let _ = live_ws.close(None).await;
     let _ = fresh.close(None).await;
 }
+
+/// Tokens in URLs (`?token=` on the websocket, which a browser cannot authorize otherwise)
+/// do not reach nginx's access log; the path still does.
+#[test]
+fn nginx_access_log_redacts_tokens() {
+    let conf = shipped_conf();
+    let port = free_port();
+    let mut test_conf = replace_exactly(
+        &conf,
+        "listen 8080;",
+        &format!("listen 127.0.0.1:{port};"),
+        1,
+    );
+    // No process behind it: the requests get nginx's 503, and are logged all the same.
+    for (_, shipped_addr) in shards_of(&conf) {
+        let nobody = format!("127.0.0.1:{};", free_port());
+        test_conf = replace_exactly(&test_conf, &format!("{shipped_addr};"), &nobody, 2);
+    }
+    let lb = Nginx::start(&test_conf, port);
+    let secret = "SeCrEt%2B0123456789";
+    let paths = [
+        format!("/api/v1/scenes/blobs/stream?token={secret}"),
+        format!("/api/v1/scenes/blobs/stream?reproject=off&token={secret}&x=1"),
+        format!("/?scene=blobs&token={secret}"),
+    ];
+    for path in &paths {
+        let r = request(&lb.base, "GET", path, b"");
+        assert_eq!(r.status, 503, "{path}: {}", r.text());
+    }
+    // nginx writes a line once it has finished the request: wait for all three.
+    let deadline = std::time::Instant::now() + WAIT;
+    let log = loop {
+        let log = lb.access_log();
+        if log.lines().count() >= paths.len() {
+            break log;
+        }
+        assert!(std::time::Instant::now() < deadline, "3 lines in:\n{log}");
+        std::thread::sleep(Duration::from_millis(20));
+    };
+    assert!(
+        !log.contains("SeCrEt"),
+        "a token is in the access log:\n{log}"
+    );
+    assert_eq!(
+        log.matches("/api/v1/scenes/blobs/stream").count(),
+        2,
+        "the paths are logged:\n{log}"
+    );
+}
