@@ -5,3 +5,6 @@ pub mod push;
 pub mod push_args;
 pub mod push_vtu;
 pub mod render;
+pub mod vtk_grid;
+pub mod vtk_legacy;
+pub mod vtk_xml;

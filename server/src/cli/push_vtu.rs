@@ -1,30 +1,21 @@
-//! `isoray push` for a VTK series: `.vtu` unstructured grids of tetrahedra (or a `.pvd`
-//! collection of them), one file per time step, as a tet scene.
+//! `isoray push` for a VTK series: `.vtu` (XML) or `.vtk` (legacy) unstructured grids, or a
+//! `.pvd` collection of them, one file per time step, as a tet scene.
 //!
-//! The first file's points and tetrahedra become the scene's mesh (sent once with
-//! `PUT .../mesh` as two `.npy` arrays); every file's point scalar array becomes a step of one
-//! value per vertex. A series keeps its connectivity: a file whose points or cells differ
-//! from the first's is refused, naming it. Files are read with vtkio (ASCII, base64, raw
-//! appended and zlib-compressed XML). Tets whose corners turn the wrong way for VTK's
-//! convention are reordered (corners 1 and 2 swapped) and counted, since the server refuses
-//! inverted tets.
+//! The first file's points and cells become the scene's mesh (sent once with `PUT .../mesh`
+//! as two `.npy` arrays; hexahedra, wedges and pyramids split into tets, see `vtk_grid`);
+//! every file's scalar array becomes a step of one value per vertex (a cell array is moved
+//! to the points). A series keeps its connectivity: a file whose points or cells differ
+//! from the first's is refused, naming it. `.vtu` files are read by `vtk_xml` (every
+//! encoding and compressor VTK writes), legacy files by vtkio (`vtk_legacy`). Tets whose
+//! corners turn the wrong way for VTK's convention are reordered (corners 1 and 2 swapped)
+//! and counted, since the server refuses inverted tets.
 
 use super::push_args::{create_scene, put_step, step_path, PushArgs};
+use super::vtk_grid::TetGrid;
 use isoray_server::api::client::{npy_header, npy_header_f32, Body, Client};
+use quick_xml::events::Event;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
-use vtkio::model::{Attribute, CellType, DataSet, ElementType};
-use vtkio::Vtk;
-
-/// One file of the series: the mesh it holds and its scalars.
-#[derive(Debug, PartialEq)]
-pub struct VtuStep {
-    pub points: Vec<[f64; 3]>,
-    pub cells: Vec<[u64; 4]>,
-    pub scalars: Vec<f64>,
-    /// The scalar array used.
-    pub array: String,
-}
 
 /// Whether `path` names a file this module reads.
 pub fn is_vtk_series(path: &Path) -> bool {
@@ -32,11 +23,11 @@ pub fn is_vtk_series(path: &Path) -> bool {
         path.extension()
             .map(|e| e.to_string_lossy().to_ascii_lowercase())
             .as_deref(),
-        Some("vtu" | "pvd")
+        Some("vtu" | "pvd" | "vtk")
     )
 }
 
-/// The `.vtu` files to push, in order, with the time a `.pvd` gives each.
+/// The `.vtu`/`.vtk` files to push, in order, with the time a `.pvd` gives each.
 pub fn expand(files: &[PathBuf]) -> Result<Vec<(PathBuf, Option<f64>)>, String> {
     let mut out = Vec::new();
     for file in files {
@@ -52,173 +43,64 @@ pub fn expand(files: &[PathBuf]) -> Result<Vec<(PathBuf, Option<f64>)>, String> 
     Ok(out)
 }
 
-/// The `<DataSet timestep=".." file=".."/>` entries of a ParaView collection, in order.
+/// The `<DataSet timestep=".." file=".."/>` entries of a ParaView collection, in order,
+/// read with quick-xml.
 fn read_pvd(path: &Path) -> Result<Vec<(PathBuf, Option<f64>)>, String> {
-    let text = std::fs::read_to_string(path).map_err(|e| format!("{}: {e}", path.display()))?;
+    let at = |e: &dyn std::fmt::Display| format!("{}: {e}", path.display());
+    let text = std::fs::read(path).map_err(|e| at(&e))?;
     let base = path.parent().unwrap_or(Path::new("."));
-    let attr = |tag: &str, name: &str| {
-        let key = format!("{name}=\"");
-        tag.find(&key).and_then(|at| {
-            let rest = &tag[at + key.len()..];
-            rest.find('"').map(|end| rest[..end].to_string())
-        })
-    };
+    let mut reader = quick_xml::Reader::from_reader(text.as_slice());
     let mut out = Vec::new();
-    for (i, tag) in text.split("<DataSet").skip(1).enumerate() {
-        let tag = tag.split('>').next().unwrap_or("");
-        let file = attr(tag, "file")
-            .ok_or_else(|| format!("{}: DataSet {i} has no file attribute", path.display()))?;
-        let time = match attr(tag, "timestep") {
-            Some(t) => Some(t.trim().parse::<f64>().map_err(|_| {
-                format!(
-                    "{}: DataSet {i} has timestep {t:?}, not a number",
-                    path.display()
-                )
-            })?),
-            None => None,
-        };
-        out.push((base.join(file), time));
+    loop {
+        match reader
+            .read_event()
+            .map_err(|e| at(&format!("XML error: {e}")))?
+        {
+            Event::Start(e) | Event::Empty(e) if e.name().as_ref() == b"DataSet" => {
+                let i = out.len();
+                let value = |name: &str| -> Result<Option<String>, String> {
+                    match e.try_get_attribute(name) {
+                        Ok(Some(a)) => a
+                            .unescape_value()
+                            .map(|v| Some(v.into_owned()))
+                            .map_err(|err| at(&format!("DataSet {i}: {name}: {err}"))),
+                        Ok(None) => Ok(None),
+                        Err(err) => Err(at(&format!("DataSet {i}: {err}"))),
+                    }
+                };
+                let file = value("file")?
+                    .ok_or_else(|| at(&format!("DataSet {i} has no file attribute")))?;
+                let time = match value("timestep")? {
+                    Some(t) => Some(t.trim().parse::<f64>().map_err(|_| {
+                        at(&format!("DataSet {i} has timestep {t:?}, not a number"))
+                    })?),
+                    None => None,
+                };
+                out.push((base.join(file), time));
+            }
+            Event::Eof => break,
+            _ => {}
+        }
     }
     if out.is_empty() {
-        return Err(format!("{}: no DataSet entries", path.display()));
+        return Err(at(&"no DataSet entries"));
     }
     Ok(out)
 }
 
-/// Reads one `.vtu`: its tetrahedra, points and the point array `array` (or the first
-/// one-component point array).
-pub fn read_vtu(path: &Path, array: Option<&str>) -> Result<VtuStep, String> {
-    let at = |e: &dyn std::fmt::Display| format!("{}: {e}", path.display());
-    let vtk = Vtk::import(path).map_err(|e| at(&e))?;
-    let DataSet::UnstructuredGrid { pieces, .. } = vtk.data else {
-        return Err(at(&"not an unstructured grid (.vtu)"));
+/// Reads one file of a series as tets, with the scalar array `array` (or the first
+/// one-component point array, else cell array); errors name the file.
+pub fn read_tets(path: &Path, array: Option<&str>) -> Result<TetGrid, String> {
+    let legacy = path
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("vtk"));
+    let grid = if legacy {
+        super::vtk_legacy::read(path, array)
+    } else {
+        super::vtk_xml::read(path, array)
     };
-    let mut step = VtuStep {
-        points: Vec::new(),
-        cells: Vec::new(),
-        scalars: Vec::new(),
-        array: String::new(),
-    };
-    for (p, piece) in pieces.into_iter().enumerate() {
-        let piece = piece
-            .into_loaded_piece_data(Some(path))
-            .map_err(|e| at(&format!("piece {p}: {e}")))?;
-        let base = step.points.len() as u64;
-        let coords: Vec<f64> = piece
-            .points
-            .cast_into()
-            .ok_or_else(|| at(&format!("piece {p}: points are not numbers")))?;
-        if coords.len() % 3 != 0 {
-            return Err(at(&format!(
-                "piece {p}: {} point coordinates, not a multiple of 3",
-                coords.len()
-            )));
-        }
-        let count = coords.len() / 3;
-        step.points
-            .extend(coords.chunks_exact(3).map(|c| [c[0], c[1], c[2]]));
-        let types = piece.cells.types.clone();
-        let (connectivity, offsets) = piece.cells.cell_verts.into_xml();
-        if offsets.len() != types.len() {
-            return Err(at(&format!(
-                "piece {p}: {} cell offsets for {} cell types",
-                offsets.len(),
-                types.len()
-            )));
-        }
-        let mut start = 0u64;
-        for (c, (&end, kind)) in offsets.iter().zip(&types).enumerate() {
-            let cell = step.cells.len();
-            if *kind != CellType::Tetra {
-                return Err(at(&format!(
-                    "cell {cell} is a {kind:?}; only tetrahedra (VTK cell type 10) can be pushed"
-                )));
-            }
-            let ids = connectivity
-                .get(start as usize..end as usize)
-                .filter(|ids| ids.len() == 4)
-                .ok_or_else(|| at(&format!("piece {p}: cell {c} does not list 4 points")))?;
-            if let Some((corner, id)) = ids.iter().enumerate().find(|(_, &id)| id >= count as u64) {
-                return Err(at(&format!(
-                    "tet {cell} (piece {p}, cell {c}) corner {corner} references point {id}, \
-                     but the piece has {count} points"
-                )));
-            }
-            step.cells
-                .push([ids[0] + base, ids[1] + base, ids[2] + base, ids[3] + base]);
-            start = end;
-        }
-        let (name, values) = scalar_array(&piece.data.point, count, array)
-            .map_err(|e| at(&format!("piece {p}: {e}")))?;
-        if p > 0 && name != step.array {
-            return Err(at(&format!(
-                "piece {p} uses point array {name:?}, piece 0 {:?}",
-                step.array
-            )));
-        }
-        step.array = name;
-        step.scalars.extend(values);
-    }
-    if step.cells.is_empty() {
-        return Err(at(&"no cells"));
-    }
-    Ok(step)
-}
-
-/// The named point array, or the first with one component, as f64.
-fn scalar_array(
-    arrays: &[Attribute],
-    points: usize,
-    wanted: Option<&str>,
-) -> Result<(String, Vec<f64>), String> {
-    let names: Vec<&str> = arrays.iter().map(Attribute::name).collect();
-    for a in arrays {
-        let Attribute::DataArray(d) = a else { continue };
-        let one = matches!(
-            d.elem,
-            ElementType::Scalars { num_comp: 1, .. } | ElementType::Generic(1)
-        );
-        let pick = match wanted {
-            Some(name) => d.name == name,
-            None => one,
-        };
-        if !pick {
-            continue;
-        }
-        if !one {
-            return Err(format!(
-                "point array {:?} has more than one component",
-                d.name
-            ));
-        }
-        let values: Vec<f64> = d
-            .data
-            .clone()
-            .cast_into()
-            .ok_or_else(|| format!("point array {:?} is not numeric", d.name))?;
-        if values.len() != points {
-            return Err(format!(
-                "point array {:?} has {} values for {points} points",
-                d.name,
-                values.len()
-            ));
-        }
-        return Ok((d.name.clone(), values));
-    }
-    Err(match wanted {
-        Some(name) => format!("no point array named {name:?} (there are {names:?})"),
-        None => format!("no one-component point array to push (there are {names:?})"),
-    })
-}
-
-/// Six times the signed volume of a tet, VTK's sign.
-/// Corners missing from `points` count as the origin; `read_vtu` has checked them.
-fn volume6(points: &[[f64; 3]], cell: &[u64; 4]) -> f64 {
-    let p = cell.map(|i| points.get(i as usize).copied().unwrap_or([0.0; 3]));
-    let d = |a: [f64; 3], b: [f64; 3]| [b[0] - a[0], b[1] - a[1], b[2] - a[2]];
-    let (a, b, c) = (d(p[0], p[1]), d(p[0], p[2]), d(p[0], p[3]));
-    a[0] * (b[1] * c[2] - b[2] * c[1]) - a[1] * (b[0] * c[2] - b[2] * c[0])
-        + a[2] * (b[0] * c[1] - b[1] * c[0])
+    grid.and_then(super::vtk_grid::Grid::into_tets)
+        .map_err(|e| format!("{}: {e}", path.display()))
 }
 
 /// The body of `PUT .../mesh`: points `(V, 3)` float64, then cells `(T, 4)` int64.
@@ -242,20 +124,11 @@ pub fn run(args: &PushArgs) -> Result<(), String> {
     let Some((first_path, _)) = files.first() else {
         return Err("no .vtu files to push".into());
     };
-    let mut first = read_vtu(first_path, args.array.as_deref())?;
-    let mut flipped = 0usize;
-    for cell in &mut first.cells {
-        if volume6(&first.points, cell) < 0.0 {
-            cell.swap(1, 2);
-            flipped += 1;
-        }
+    let first = read_tets(first_path, args.array.as_deref())?;
+    for note in first.notes() {
+        println!("{}: {note}", first_path.display());
     }
-    if flipped > 0 {
-        println!(
-            "{flipped} of {} tets turned the other way from VTK's convention; corners 1 and 2 swapped",
-            first.cells.len()
-        );
-    }
+    let array = first.picked.name().to_string();
     let (scene, token) = match (&args.scene, &args.token) {
         (Some(scene), Some(token)) => (scene.clone(), token.clone()),
         (Some(_), None) => {
@@ -317,12 +190,7 @@ pub fn run(args: &PushArgs) -> Result<(), String> {
         let step = if i == 0 {
             None
         } else {
-            let mut s = read_vtu(file, Some(&first.array))?;
-            for cell in &mut s.cells {
-                if volume6(&s.points, cell) < 0.0 {
-                    cell.swap(1, 2);
-                }
-            }
+            let s = read_tets(file, Some(&array))?;
             if s.points != first.points || s.cells != first.cells {
                 return Err(format!(
                     "{}: its mesh differs from {}'s; a series keeps the first file's points and cells",
@@ -351,7 +219,7 @@ pub fn run(args: &PushArgs) -> Result<(), String> {
             "step {index}: {} ({} scalars of {:?}, checksum {})",
             answer["outcome"].as_str().unwrap_or("?"),
             scalars.len(),
-            first.array,
+            array,
             answer["step"]["checksum"].as_str().unwrap_or("?")
         );
         total_bytes += payload.len() as u64;
@@ -404,7 +272,7 @@ mod tests {
     }
 
     #[test]
-    fn reads_tets_and_refuses_missing_points_non_tets_and_short_arrays() {
+    fn reads_tets_and_refuses_missing_points_unknown_cells_and_short_arrays() {
         let dir = tempfile::tempdir().expect("temp dir");
         let path = dir.path().join("a.vtu");
         let tet = vec![CellType::Tetra];
@@ -414,35 +282,30 @@ mod tests {
             tet.clone(),
             vec![0.0, 1.0, 2.0, 3.0],
         );
-        let step = read_vtu(&path, None).expect("a good file");
+        let step = read_tets(&path, None).expect("a good file");
         assert_eq!(step.cells, vec![[0, 1, 2, 3]]);
         assert_eq!(step.scalars, vec![0.0, 1.0, 2.0, 3.0]);
-        assert_eq!(step.array, "p");
-        assert!(volume6(&step.points, &step.cells[0]) > 0.0);
+        assert_eq!(step.picked.name(), "p");
 
         let two = vec![CellType::Tetra; 2];
         write(&path, &[[0, 1, 2, 3], [0, 1, 7, 3]], two, vec![0.0; 4]);
-        let e = read_vtu(&path, None).expect_err("point 7 of 4");
-        assert!(
-            e.contains("a.vtu") && e.contains("tet 1") && e.contains("corner 2"),
-            "{e}"
-        );
-        assert!(e.contains("point 7"), "{e}");
+        let e = read_tets(&path, None).expect_err("point 7 of 4");
+        assert!(e.contains("a.vtu") && e.contains("connectivity[6]"), "{e}");
+        assert!(e.contains("is 7"), "{e}");
 
         write(
             &path,
             &[[0, 1, 2, 3]],
-            vec![CellType::Pyramid],
+            vec![CellType::Polyhedron],
             vec![0.0; 4],
         );
-        let e = read_vtu(&path, None).expect_err("not a tet");
+        let e = read_tets(&path, None).expect_err("not a volume cell isoray reads");
         assert!(e.contains("cell 0") && e.contains("tetrahedra"), "{e}");
 
         write(&path, &[[0, 1, 2, 3]], tet, vec![0.0; 3]);
-        // vtkio drops an array of the wrong length; either way the file is refused.
-        let e = read_vtu(&path, None).expect_err("3 values for 4 points");
-        assert!(e.contains("a.vtu") && e.contains("point array"), "{e}");
-        let e = read_vtu(&path, Some("q")).expect_err("no such array");
+        let e = read_tets(&path, None).expect_err("3 values for 4 points");
+        assert!(e.contains("a.vtu") && e.contains("\"p\""), "{e}");
+        let e = read_tets(&path, Some("q")).expect_err("no such array");
         assert!(e.contains("\"q\""), "{e}");
     }
 

@@ -14,6 +14,7 @@ mod python_example;
 mod restart;
 mod slow_headers;
 mod tets;
+mod vtk_files;
 
 use isoray_server::api::client::{npy_header_f32, Body, Client, Response};
 use isoray_server::{AppState, Config};

@@ -1,0 +1,134 @@
+//! `isoray push` of VTK files as the tools scientists use write them: a fixture script
+//! (`tests/fixtures/vtk_meshes.py`, VTK's Python package and meshio) writes a mesh of
+//! 215,622 tets in every encoding they offer (raw, base64 and appended data; zlib, LZ4 and
+//! xz blocks; UInt32 and UInt64 headers; ASCII; legacy `.vtk` ASCII and binary; a `.pvd`
+//! series), and every file pushes through the real binary and renders the same image as
+//! the raw, uncompressed one. Hexahedra with cell data push and render alike from both
+//! tools; a legacy 5.1 file is refused, naming the line and what to write instead.
+
+use super::*;
+use crate::e2e::support::pixel_stddev;
+
+/// Runs `isoray push --server base files...`; returns (success, stdout + stderr).
+fn push_files(base: &str, files: &[PathBuf]) -> (bool, String) {
+    let out = Command::new(isoray_binary())
+        .arg("push")
+        .args(["--server", base])
+        .args(files)
+        .output()
+        .expect("isoray push runs");
+    let text = String::from_utf8_lossy(&out.stdout).to_string()
+        + &String::from_utf8_lossy(&out.stderr);
+    (out.status.success(), text)
+}
+
+fn scene_id(text: &str) -> String {
+    text.lines()
+        .find_map(|l| l.strip_prefix("created scene "))
+        .unwrap_or_else(|| panic!("the new scene's id is printed: {text}"))
+        .trim()
+        .to_string()
+}
+
+/// A small PNG of `step` with the scene's own camera and isovalue.
+fn render(base: &str, id: &str, step: u64) -> Vec<u8> {
+    let r = Client::new(base)
+        .expect("url")
+        .request(
+            "POST",
+            &format!("/api/v1/scenes/{id}/render"),
+            &[("Content-Type", "application/json")],
+            Body::Bytes(format!(r#"{{"step":{step},"width":48,"height":36}}"#).as_bytes()),
+        )
+        .expect("answer");
+    assert_eq!(r.status, 200, "{}", r.text());
+    r.body
+}
+
+fn not_blank(png: &[u8]) {
+    let img = image::load_from_memory(png).expect("a PNG").to_rgb8();
+    assert!(pixel_stddev(&img) > 5.0, "the image shows something");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn vtk_files_in_every_encoding_render_the_same_image() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let files = dir.path().join("files");
+    let out = Command::new(python())
+        .arg(repo_root().join("tests/fixtures/vtk_meshes.py"))
+        .arg(&files)
+        .output()
+        .expect("python runs (CI installs vtk and meshio into ISORAY_PYTHON)");
+    assert!(
+        out.status.success(),
+        "the fixture script ran: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let server = Server::start(&dir.path().join("data"), &[]).await;
+    let base = server.base.clone();
+    call(move || {
+        let f = |name: &str| files.join(name);
+        let (ok, text) = push_files(&base, &[f("vtk_raw.vtu")]);
+        assert!(ok, "{text}");
+        assert!(text.contains("215622 tets"), "{text}");
+        let reference = render(&base, &scene_id(&text), 0);
+        not_blank(&reference);
+        for name in [
+            "vtk_default.vtu",
+            "vtk_raw_zlib.vtu",
+            "vtk_ascii.vtu",
+            "vtk_base64.vtu",
+            "vtk_base64_raw.vtu",
+            "vtk_lz4.vtu",
+            "vtk_lzma.vtu",
+            "vtk_uint64.vtu",
+            "vtk_uint64_base64.vtu",
+            "vtk_small_blocks.vtu",
+            "vtk_legacy_ascii.vtk",
+            "vtk_legacy_binary.vtk",
+            "meshio_default.vtu",
+            "meshio_raw.vtu",
+            "meshio_lzma.vtu",
+            "meshio_ascii.vtu",
+            "meshio_legacy.vtk",
+        ] {
+            let (ok, text) = push_files(&base, &[f(name)]);
+            assert!(ok, "{name}: {text}");
+            let png = render(&base, &scene_id(&text), 0);
+            assert!(png == reference, "{name} renders as the raw file does");
+        }
+
+        // A .pvd series: two steps at the collection's times, the first the same image.
+        let (ok, text) = push_files(&base, &[f("series.pvd")]);
+        assert!(ok, "{text}");
+        let id = scene_id(&text);
+        let listed = steps(&base, &id);
+        let times: Vec<f64> = listed
+            .as_array()
+            .expect("steps")
+            .iter()
+            .map(|s| s["time"].as_f64().expect("time"))
+            .collect();
+        assert_eq!(times, vec![0.0, 0.5]);
+        assert!(render(&base, &id, 0) == reference);
+        assert!(render(&base, &id, 1) != reference, "step 1's field is scaled");
+
+        // Hexahedra with cell data: split, moved to the points, the same from both tools.
+        let (ok, text) = push_files(&base, &[f("hex_vtk.vtu")]);
+        assert!(ok && text.contains("hexahedra") && text.contains("cell array"), "{text}");
+        let hex = render(&base, &scene_id(&text), 0);
+        not_blank(&hex);
+        let (ok, text) = push_files(&base, &[f("hex_meshio.vtu")]);
+        assert!(ok, "{text}");
+        assert!(render(&base, &scene_id(&text), 0) == hex);
+
+        let (ok, text) = push_files(&base, &[f("legacy51.vtk")]);
+        assert!(!ok);
+        assert!(
+            text.contains("legacy51.vtk") && text.contains("line 1") && text.contains("4.2"),
+            "{text}"
+        );
+    })
+    .await;
+    server.stop().await;
+}
