@@ -6,6 +6,7 @@ mod bad_balls;
 mod cli;
 mod crash;
 mod limits;
+mod molecules;
 mod openapi;
 mod push_errors;
 mod python_example;
