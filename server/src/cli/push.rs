@@ -19,6 +19,13 @@ pub fn run(args: PushArgs) -> Result<(), String> {
             return Err(format!("--time-step {dt} must be a positive number"));
         }
     }
+    if args
+        .files
+        .iter()
+        .any(|f| super::push_molecule::is_molecule(f))
+    {
+        return super::push_molecule::run(&args);
+    }
     let series = args
         .files
         .iter()

@@ -39,8 +39,18 @@ pub struct PushArgs {
     /// The point array of a `.vtu` series to push (default: the first with one component).
     #[arg(long)]
     pub array: Option<String>,
+    /// Molecules (.pdb, .cif): keep hydrogen atoms.
+    #[arg(long)]
+    pub hydrogens: bool,
+    /// Molecules: keep waters (HOH, WAT, DOD).
+    #[arg(long)]
+    pub waters: bool,
+    /// Molecules: a ball's support radius over its element's van der Waals radius.
+    #[arg(long, default_value_t = 2.0)]
+    pub radius_scale: f32,
     /// The step files: `.npy` (float32 or float64, shape (rows, columns)), raw arrays with
-    /// the 16-byte `ISRA` header (any other extension), or a VTK series (`.vtu` or `.pvd`).
+    /// the 16-byte `ISRA` header (any other extension), a VTK series (`.vtu`, `.pvd`,
+    /// `.vtk`), or one molecule (`.pdb`, `.cif`: its models are the steps).
     #[arg(required = true)]
     pub files: Vec<PathBuf>,
 }

@@ -48,7 +48,10 @@ fn check_version(path: &Path) -> Result<(), String> {
         .read_until(b'\n', &mut first)
         .map_err(|e| e.to_string())?;
     let line = String::from_utf8_lossy(&first);
-    let version = line.trim().strip_prefix("# vtk DataFile Version ").unwrap_or("");
+    let version = line
+        .trim()
+        .strip_prefix("# vtk DataFile Version ")
+        .unwrap_or("");
     if version.trim_start().starts_with('5') {
         return Err(format!(
             "line 1: legacy VTK version {} is not read; write version 4.2 (VTK: \

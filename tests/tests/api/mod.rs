@@ -7,6 +7,7 @@ mod cli;
 mod crash;
 mod limits;
 mod look;
+mod molecules;
 mod openapi;
 mod push_errors;
 mod python_client;

@@ -17,8 +17,8 @@ fn push_files(base: &str, files: &[PathBuf]) -> (bool, String) {
         .args(files)
         .output()
         .expect("isoray push runs");
-    let text = String::from_utf8_lossy(&out.stdout).to_string()
-        + &String::from_utf8_lossy(&out.stderr);
+    let text =
+        String::from_utf8_lossy(&out.stdout).to_string() + &String::from_utf8_lossy(&out.stderr);
     (out.status.success(), text)
 }
 
@@ -111,11 +111,17 @@ async fn vtk_files_in_every_encoding_render_the_same_image() {
             .collect();
         assert_eq!(times, vec![0.0, 0.5]);
         assert!(render(&base, &id, 0) == reference);
-        assert!(render(&base, &id, 1) != reference, "step 1's field is scaled");
+        assert!(
+            render(&base, &id, 1) != reference,
+            "step 1's field is scaled"
+        );
 
         // Hexahedra with cell data: split, moved to the points, the same from both tools.
         let (ok, text) = push_files(&base, &[f("hex_vtk.vtu")]);
-        assert!(ok && text.contains("hexahedra") && text.contains("cell array"), "{text}");
+        assert!(
+            ok && text.contains("hexahedra") && text.contains("cell array"),
+            "{text}"
+        );
         let hex = render(&base, &scene_id(&text), 0);
         not_blank(&hex);
         let (ok, text) = push_files(&base, &[f("hex_meshio.vtu")]);

@@ -1,0 +1,116 @@
+//! `isoray push` of molecules: a real PDB entry from Debian's pymol-data (1TII, 5,565 atoms
+//! without waters) and the same structure as mmCIF, written by gemmi from it, push as
+//! metaball scenes and render the molecule; a truncated file and a malformed coordinate are
+//! refused naming the line.
+
+use super::*;
+use crate::e2e::support::pixel_stddev;
+
+const PDB: &str = "/usr/share/pymol/test/dat/1tii.pdb";
+
+fn push_file(base: &str, file: &Path) -> (bool, String) {
+    let out = Command::new(isoray_binary())
+        .args(["push", "--server", base])
+        .arg(file)
+        .output()
+        .expect("isoray push runs");
+    let text =
+        String::from_utf8_lossy(&out.stdout).to_string() + &String::from_utf8_lossy(&out.stderr);
+    (out.status.success(), text)
+}
+
+/// Pushes `file`, renders step 0 small; returns the atoms pushed and the image.
+fn push_and_render(base: &str, file: &Path) -> (u64, image::RgbImage) {
+    let (ok, text) = push_file(base, file);
+    assert!(ok, "{}: {text}", file.display());
+    let id = text
+        .lines()
+        .find_map(|l| l.strip_prefix("created scene "))
+        .expect("the new scene's id is printed")
+        .trim()
+        .to_string();
+    let atoms: u64 = text
+        .split(", ")
+        .find_map(|p| p.strip_suffix(" atoms"))
+        .and_then(|n| n.parse().ok())
+        .unwrap_or_else(|| panic!("the atom count is printed: {text}"));
+    let r = Client::new(base)
+        .expect("url")
+        .request(
+            "POST",
+            &format!("/api/v1/scenes/{id}/render"),
+            &[("Content-Type", "application/json")],
+            Body::Bytes(br#"{"step":0,"width":48,"height":36}"#),
+        )
+        .expect("answer");
+    assert_eq!(r.status, 200, "{}", r.text());
+    let img = image::load_from_memory(&r.body).expect("png").to_rgb8();
+    (atoms, img)
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn pdb_and_mmcif_files_push_and_render_and_bad_lines_are_named() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let cif = dir.path().join("1tii.cif");
+    let script = format!(
+        "import gemmi, sys\nst = gemmi.read_structure({PDB:?})\nst.remove_waters()\n\
+         st.setup_entities()\nst.make_mmcif_document().write_file(sys.argv[1])\n"
+    );
+    let out = Command::new(python())
+        .args(["-c", &script])
+        .arg(&cif)
+        .output()
+        .expect("python runs (CI installs gemmi, and pymol-data with apt)");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let text = std::fs::read_to_string(PDB).expect("pymol-data's 1tii.pdb");
+    let lines: Vec<&str> = text.lines().collect();
+    let first_atom = lines
+        .iter()
+        .position(|l| l.starts_with("ATOM"))
+        .expect("ATOM records");
+    // Cut inside the third atom's y coordinate; and a letter inside the second's x.
+    let truncated = dir.path().join("truncated.pdb");
+    let mut cut = lines[..first_atom + 2].join("\n");
+    cut.push('\n');
+    cut.push_str(&lines[first_atom + 2][..40]);
+    std::fs::write(&truncated, cut).expect("write");
+    let malformed = dir.path().join("malformed.pdb");
+    let mut bad: Vec<String> = lines[..first_atom + 5]
+        .iter()
+        .map(|l| l.to_string())
+        .collect();
+    bad[first_atom + 1].replace_range(32..33, "x");
+    std::fs::write(&malformed, bad.join("\n")).expect("write");
+
+    let server = Server::start(&dir.path().join("data"), &[]).await;
+    let base = server.base.clone();
+    call(move || {
+        let (atoms, pdb_image) = push_and_render(&base, Path::new(PDB));
+        assert_eq!(atoms, 5565, "1TII's atoms without hydrogens and waters");
+        assert!(pixel_stddev(&pdb_image) > 5.0, "the molecule shows");
+        let (cif_atoms, cif_image) = push_and_render(&base, &cif);
+        assert!(cif_atoms > 5000, "{cif_atoms}");
+        assert!(pixel_stddev(&cif_image) > 5.0, "the molecule shows");
+
+        let (ok, text) = push_file(&base, &truncated);
+        assert!(!ok);
+        let line = format!("line {}", first_atom + 3);
+        assert!(
+            text.contains("truncated.pdb") && text.contains(&line),
+            "{line}: {text}"
+        );
+        let (ok, text) = push_file(&base, &malformed);
+        assert!(!ok);
+        let line = format!("line {}", first_atom + 2);
+        assert!(
+            text.contains("malformed.pdb") && text.contains(&line),
+            "{line}: {text}"
+        );
+    })
+    .await;
+    server.stop().await;
+}
