@@ -4,7 +4,7 @@
 //! §3 projections + secant, the tutorial's marching + bisection, sphere tracing) under the
 //! Fitted BVH, at a ladder of hit-distance tolerances: the 640×480 render time (median of
 //! `--runs`), and the error of the hit distance against the `f64` reference
-//! (`metaball::reference`: Bézier clipping in double precision at a `1e-9` tolerance) on a
+//! (`metaballs::reference`: the exact piecewise polynomial, certified interval search) on a
 //! grid of the image's rays (every `--sample`-th pixel in x and y): the largest and mean
 //! absolute error over rays both hit, and how many rays hit in one and miss in the other.
 //! Distances are in world units; the scene's size is printed beside them.
