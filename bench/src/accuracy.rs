@@ -4,14 +4,14 @@
 //! §3 projections + secant, the tutorial's marching + bisection, sphere tracing) under the
 //! Fitted BVH, at a ladder of hit-distance tolerances: the 640×480 render time (median of
 //! `--runs`), and the error of the hit distance against the `f64` reference
-//! (`metaball::reference`: Bézier clipping in double precision at a `1e-9` tolerance) on a
+//! (`metaballs::reference`: the exact piecewise polynomial, certified interval search) on a
 //! grid of the image's rays (every `--sample`-th pixel in x and y): the largest and mean
 //! absolute error over rays both hit, and how many rays hit in one and miss in the other.
 //! Distances are in world units; the scene's size is printed beside them.
 
 use crate::common::{median, write_json, Machine};
 use clap::Args;
-use isoray_render::kinds::metaballs::reference::reference_hit;
+use isoray_render::kinds::metaballs::reference::ReferenceRay;
 use isoray_render::kinds::metaballs::{PrepareOptions, RayCounters, RootFinder};
 use isoray_render::scene::Geometry;
 use rayon::prelude::*;
@@ -38,6 +38,9 @@ pub struct AccuracyArgs {
     /// Also write the rows as JSON to this file.
     #[arg(long)]
     json: Option<PathBuf>,
+    /// Also write the rows as CSV to this file.
+    #[arg(long)]
+    csv: Option<PathBuf>,
 }
 
 #[derive(Serialize)]
@@ -49,8 +52,18 @@ struct Row {
     iterations_per_hit: f64,
     max_error: f64,
     mean_error: f64,
+    /// 99th percentile of the error over rays both hit.
+    p99_error: f64,
+    /// The scene's extent (largest side of its bounds), world units.
+    extent: f64,
+    /// Largest angle between the finder's normal and the reference's, degrees.
+    max_normal_deg: f64,
     compared: usize,
     disagreements: usize,
+    /// Rays the reference hits and the finder misses (silhouette pixels lost).
+    lost: usize,
+    /// Rays the finder hits and the reference misses (gained).
+    gained: usize,
 }
 
 #[derive(Serialize)]
@@ -103,20 +116,19 @@ pub fn run(args: AccuracyArgs) -> Result<(), String> {
             })
             .collect();
         // The reference once per scene: the first hit in the ray's own parameter.
-        let reference: Vec<Option<f64>> = pixels
+        let reference: Vec<Option<(f64, glam::DVec3)>> = pixels
             .par_iter()
             .map(|&(x, y)| {
                 let ray = rays.through_pixel(x, y);
-                let dir = ray.dir.as_dvec3();
-                reference_hit(
+                let r = ReferenceRay::new(
                     balls,
                     ray.origin.as_dvec3(),
-                    dir,
+                    ray.dir.as_dvec3(),
                     0.0,
-                    T_MAX as f64 * dir.length(),
-                    isovalue as f64,
-                )
-                .map(|t| t / dir.length())
+                    T_MAX as f64,
+                );
+                let t = r.first_at_least(isovalue as f64, 0.0)?;
+                Some((t, r.normal(t).unwrap_or_default()))
             })
             .collect();
         let extent = balls
@@ -137,7 +149,7 @@ pub fn run(args: AccuracyArgs) -> Result<(), String> {
                     times.push(ms);
                     counters = c;
                 }
-                let answers: Vec<Option<f64>> = pixels
+                let answers: Vec<Option<(f64, glam::DVec3)>> = pixels
                     .par_iter()
                     .map(|&(x, y)| {
                         let ray = rays.through_pixel(x, y);
@@ -149,22 +161,32 @@ pub fn run(args: AccuracyArgs) -> Result<(), String> {
                                 isovalue,
                                 &mut RayCounters::default(),
                             )
-                            .map(|h| h.t as f64)
+                            .map(|h| (h.t as f64, h.normal.as_dvec3()))
                     })
                     .collect();
-                let (mut max_error, mut sum, mut compared, mut disagreements) = (0.0f64, 0.0, 0, 0);
+                let (mut errors, mut lost, mut gained, mut max_normal_deg) =
+                    (Vec::new(), 0, 0, 0.0f64);
                 for (a, r) in answers.iter().zip(&reference) {
                     match (a, r) {
-                        (Some(a), Some(r)) => {
-                            let e = (a - r).abs();
-                            max_error = max_error.max(e);
-                            sum += e;
-                            compared += 1;
+                        (Some((a, na)), Some((r, nr))) => {
+                            errors.push((a - r).abs());
+                            let cos = na.dot(*nr).clamp(-1.0, 1.0);
+                            max_normal_deg = max_normal_deg.max(cos.acos().to_degrees());
                         }
                         (None, None) => {}
-                        _ => disagreements += 1,
+                        (None, Some(_)) => lost += 1,
+                        (Some(_), None) => gained += 1,
                     }
                 }
+                errors.sort_by(f64::total_cmp);
+                let compared = errors.len();
+                let max_error = errors.last().copied().unwrap_or(0.0);
+                let sum: f64 = errors.iter().sum();
+                let p99_error = errors
+                    .get((compared * 99 / 100).min(compared.saturating_sub(1)))
+                    .copied()
+                    .unwrap_or(0.0);
+                let disagreements = lost + gained;
                 let row = Row {
                     scene: id.to_string(),
                     finder: finder.name().into(),
@@ -173,8 +195,13 @@ pub fn run(args: AccuracyArgs) -> Result<(), String> {
                     iterations_per_hit: crate::common::per(counters.hit_iterations, counters.hits),
                     max_error,
                     mean_error: sum / compared.max(1) as f64,
+                    p99_error,
+                    extent: extent as f64,
+                    max_normal_deg,
                     compared,
                     disagreements,
+                    lost,
+                    gained,
                 };
                 eprintln!(
                     "{id} {:<20} tol {tolerance:e}: {:.1} ms, max error {:.2e}",
@@ -185,28 +212,57 @@ pub fn run(args: AccuracyArgs) -> Result<(), String> {
         }
     }
     println!(
-        "| scene | finder | tolerance | render ms | iterations/hit | max error | mean error | \
-         rays compared | hit/miss disagreements |"
+        "| scene | finder | tolerance | render ms | iterations/hit | max error | p99 error | \
+         mean error | max/extent | normal ° | rays compared | lost | gained |"
     );
-    println!("|---|---|---:|---:|---:|---:|---:|---:|---:|");
+    println!("|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|");
     for r in &rows {
         println!(
-            "| {} | {} | {:.0e} | {:.1} | {:.2} | {:.1e} | {:.1e} | {} | {} |",
+            "| {} | {} | {:.0e} | {:.1} | {:.2} | {:.1e} | {:.1e} | {:.1e} | {:.1e} | {:.2} | {} | {} | {} |",
             r.scene,
             r.finder,
             r.tolerance,
             r.render_ms,
             r.iterations_per_hit,
             r.max_error,
+            r.p99_error,
             r.mean_error,
+            r.max_error / r.extent.max(1e-30),
+            r.max_normal_deg,
             r.compared,
-            r.disagreements
+            r.lost,
+            r.gained
         );
     }
     println!(
         "\nHit/miss disagreements are rays that only graze the surface (within the f32 field's \
          rounding) or, for marching, cross a stretch thinner than its step."
     );
+    if let Some(path) = &args.csv {
+        let mut text = String::from(
+            "kind,scene,setting,tolerance,render_ms,iterations_per_hit,max_error,mean_error,\
+             p99_error,relative_max_error,max_normal_deg,compared,lost,gained\n",
+        );
+        for r in &rows {
+            text.push_str(&format!(
+                "metaballs,{},{},{:e},{:.3},{:.3},{:e},{:e},{:e},{:e},{:.4},{},{},{}\n",
+                r.scene,
+                r.finder,
+                r.tolerance,
+                r.render_ms,
+                r.iterations_per_hit,
+                r.max_error,
+                r.mean_error,
+                r.p99_error,
+                r.max_error / r.extent.max(1e-30),
+                r.max_normal_deg,
+                r.compared,
+                r.lost,
+                r.gained
+            ));
+        }
+        std::fs::write(path, text).map_err(|e| format!("{}: {e}", path.display()))?;
+    }
     if let Some(path) = &args.json {
         write_json(path, &Report { machine, rows })?;
     }
@@ -223,6 +279,7 @@ mod tests {
             runs,
             sample,
             json: None,
+            csv: None,
         };
         assert!(super::run(args(0, 8, vec![1e-3])).is_err());
         assert!(super::run(args(1, 0, vec![1e-3])).is_err());

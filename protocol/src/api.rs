@@ -334,6 +334,10 @@ pub enum ImageFormat {
     #[default]
     Png,
     Jpeg,
+    /// NumPy `.npy`: an `(H, W, 4)` little-endian `f32` array per pixel of the hit distance
+    /// along the ray from the eye and the outward unit normal (x, y, z), `[inf, 0, 0, 0]`
+    /// where the ray misses. The primary rays' isosurface only (no effects).
+    Npy,
 }
 
 /// Body of `POST /api/v1/scenes/{id}/render`.

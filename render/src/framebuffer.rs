@@ -27,3 +27,30 @@ impl Framebuffer {
         self.depth.iter().filter(|d| d.is_finite()).count()
     }
 }
+
+/// What a primary ray found, per pixel: the distance along the unit-length ray from the eye
+/// to the first hit and the outward unit normal there (world space, not turned towards the
+/// viewer). A miss is `[∞, 0, 0, 0]`. Row-major from the top-left, four `f32` per pixel: the
+/// `(H, W, 4)` array that `format: "npy"` returns.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SurfaceBuffer {
+    pub width: u32,
+    pub height: u32,
+    pub values: Vec<f32>,
+}
+
+impl SurfaceBuffer {
+    /// Values per pixel: hit distance, normal x, y, z.
+    pub const CHANNELS: usize = 4;
+
+    /// The pixel's `[t, nx, ny, nz]`.
+    pub fn at(&self, x: u32, y: u32) -> [f32; 4] {
+        let i = (y as usize * self.width as usize + x as usize) * Self::CHANNELS;
+        [
+            self.values[i],
+            self.values[i + 1],
+            self.values[i + 2],
+            self.values[i + 3],
+        ]
+    }
+}

@@ -39,7 +39,7 @@ pub mod view;
 pub use backend::{Accumulator, Backend, CpuBackend, FrameRays};
 pub use camera::Camera;
 pub use effects::{EffectKind, Effects, EffectsPlan, RayCounts, RayKind};
-pub use framebuffer::Framebuffer;
+pub use framebuffer::{Framebuffer, SurfaceBuffer};
 pub use ray::{Hit, Ray};
 pub use scene::{PreparedScene, Scene, SceneError};
 pub use shade::Lighting;

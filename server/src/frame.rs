@@ -16,7 +16,7 @@ use isoray_protocol::{
     Codec, FrameHeader, InputId, StageTimings, FLAG_DEPTH, FLAG_KEYFRAME, FLAG_STILL,
     PROTOCOL_VERSION,
 };
-use isoray_render::{Backend, Effects, Framebuffer, View};
+use isoray_render::{Backend, Effects, Framebuffer, SurfaceBuffer, View};
 use std::time::Instant;
 
 /// The H.264 stream of a session, moved into each H.264 frame and back.
@@ -140,6 +140,22 @@ pub fn render(
         trace_us: micros(t1 - t0),
         encode_us: micros(t1.elapsed()),
     })
+}
+
+/// The primary hits of `view` as a `.npy` file: an `(H, W, 4)` `f32` array of the hit
+/// distance along the ray and the outward normal (`[∞, 0, 0, 0]` for a miss); the
+/// `format: "npy"` output of the render endpoint and `isoray render`. Geometry only: effects
+/// do not change it.
+pub fn surface_npy(backend: &Backend, state: &PreparedState, view: &View) -> Vec<u8> {
+    let surface = backend.render_surface(&state.prepared, view);
+    crate::npy::write_f32(
+        &[
+            surface.height as usize,
+            surface.width as usize,
+            SurfaceBuffer::CHANNELS,
+        ],
+        &surface.values,
+    )
 }
 
 /// What a stream message says about its frame besides the frame itself.

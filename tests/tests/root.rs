@@ -6,4 +6,5 @@ mod deploy;
 mod e2e;
 mod golden;
 mod scene_json;
+mod stability;
 mod structure;

@@ -8,7 +8,7 @@
 use crate::backend::accumulator::{self, Accumulator, FrameRays, Pass, TracePasses};
 use crate::effects::plan::EffectsPlan;
 use crate::effects::toggles::Effects;
-use crate::framebuffer::Framebuffer;
+use crate::framebuffer::{Framebuffer, SurfaceBuffer};
 use crate::geom::rng::PixelRng;
 use crate::integrator::{shade_primary, Tracer, T_MAX};
 use crate::kinds::counters::SceneCounters;
@@ -53,6 +53,12 @@ impl CpuBackend {
     /// Renders one frame with primary rays only, blocking the caller until it is done.
     pub fn render(&self, scene: &PreparedScene, view: &View) -> Framebuffer {
         self.render_primary(scene, view)
+    }
+
+    /// The primary hits' distances and normals, blocking: the same hits
+    /// [`CpuBackend::render`] shades.
+    pub fn render_surface(&self, scene: &PreparedScene, view: &View) -> SurfaceBuffer {
+        self.pool.install(|| surface_tiles(scene, view))
     }
 
     /// Renders one frame with `effects` (its first refinement pass), blocking. A plan with
@@ -165,6 +171,45 @@ fn render_tiles(scene: &PreparedScene, view: &View) -> Framebuffer {
     };
     trace_tiles(width, height, 3, trace, &mut fb.rgb, &mut fb.depth, |()| {});
     fb
+}
+
+/// Each tile's primary hits, as distance and normal.
+fn surface_tiles(scene: &PreparedScene, view: &View) -> SurfaceBuffer {
+    let (width, height) = (view.width, view.height);
+    let rays = view.camera.rays(width, height);
+    let n = width as usize * height as usize;
+    let mut values = vec![0.0f32; n * SurfaceBuffer::CHANNELS];
+    let mut distances = vec![f32::INFINITY; n];
+    let trace = |rect: Rect| {
+        let (x0, y0, x1, y1) = rect;
+        let n = ((x1 - x0) * (y1 - y0)) as usize;
+        let mut out = Vec::with_capacity(n * SurfaceBuffer::CHANNELS);
+        let mut t_out = Vec::with_capacity(n);
+        let mut counters = SceneCounters::default();
+        for (_, hit) in scene.primary_hits(&rays, rect, view.isovalue, T_MAX, &mut counters) {
+            let px = match hit {
+                Some(h) => [h.t, h.normal.x, h.normal.y, h.normal.z],
+                None => [f32::INFINITY, 0.0, 0.0, 0.0],
+            };
+            out.extend(px);
+            t_out.push(px[0]);
+        }
+        (out, t_out, ())
+    };
+    trace_tiles(
+        width,
+        height,
+        SurfaceBuffer::CHANNELS,
+        trace,
+        &mut values,
+        &mut distances,
+        |()| {},
+    );
+    SurfaceBuffer {
+        width,
+        height,
+        values,
+    }
 }
 
 /// One pass of an effects plan: every pixel's primary ray followed by the integrator, in

@@ -9,7 +9,7 @@
 use crate::backend::accumulator::{self, Accumulator, FrameRays, TracePasses};
 use crate::backend::cpu::{CpuBackend, PoolError};
 use crate::effects::toggles::Effects;
-use crate::framebuffer::Framebuffer;
+use crate::framebuffer::{Framebuffer, SurfaceBuffer};
 use crate::scene::PreparedScene;
 use crate::view::View;
 
@@ -52,6 +52,14 @@ impl Backend {
     pub fn render(&self, scene: &PreparedScene, view: &View) -> Framebuffer {
         match self {
             Backend::Cpu(cpu) => cpu.render_primary(scene, view),
+        }
+    }
+
+    /// The primary hits' distances along the ray and outward normals, blocking (the
+    /// `format: "npy"` output).
+    pub fn render_surface(&self, scene: &PreparedScene, view: &View) -> SurfaceBuffer {
+        match self {
+            Backend::Cpu(cpu) => cpu.render_surface(scene, view),
         }
     }
 

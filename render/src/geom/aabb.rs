@@ -87,6 +87,10 @@ pub fn slab(
 ) -> Option<(f32, f32)> {
     let t0 = (lo - origin) * inv_dir;
     let t1 = (hi - origin) * inv_dir;
+    #[cfg(isoray_mutation = "slab-infinities")]
+    if !(t0.is_finite() && t1.is_finite()) {
+        return None;
+    }
     let near = t0.min(t1).max_element().max(t_min);
     let far = t0.max(t1).min_element().min(t_max);
     (near <= far).then_some((near, far))

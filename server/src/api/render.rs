@@ -1,4 +1,5 @@
-//! `POST /api/v1/scenes/{id}/render`: one image of a scene, PNG or JPEG.
+//! `POST /api/v1/scenes/{id}/render`: one image of a scene, PNG or JPEG, or its hit
+//! distances and normals as a `.npy` array.
 
 use crate::api::access::{check_view, scene_of};
 use crate::api::request::read_json;
@@ -17,7 +18,9 @@ use isoray_render::View;
 /// Default image size of a one-shot render.
 const DEFAULT_RENDER_SIZE: (u32, u32) = (640, 480);
 
-/// Renders one image of a scene on the render pool: PNG (lossless) or JPEG.
+/// Renders one image of a scene on the job pool: PNG (lossless) or JPEG; or, with
+/// `format: "npy"`, an `(H, W, 4)` float32 array of hit distance and outward normal per pixel
+/// (infinity and a zero normal for a miss).
 #[utoipa::path(
     post,
     path = "/api/v1/scenes/{id}/render",
@@ -25,7 +28,7 @@ const DEFAULT_RENDER_SIZE: (u32, u32) = (640, 480);
     params(("id" = String, Path, description = "Scene id")),
     request_body = RenderRequest,
     responses(
-        (status = 200, description = "The image", content(("image/png"), ("image/jpeg"))),
+        (status = 200, description = "The image", content(("image/png"), ("image/jpeg"), ("application/x-npy"))),
         (status = 400, description = "Invalid request", body = ApiErrorBody),
         (status = 404, description = "Not found", body = ApiErrorBody)
     )
@@ -124,6 +127,9 @@ pub async fn render(
         let codec = match format {
             ImageFormat::Png => Codec::Png,
             ImageFormat::Jpeg => Codec::Jpeg,
+            ImageFormat::Npy => {
+                return Ok(frame::surface_npy(job_app.backend(), &state, &view));
+            }
         };
         let request = FrameRequest {
             style: Some(&style),
@@ -138,6 +144,7 @@ pub async fn render(
     let content_type = match format {
         ImageFormat::Png => "image/png",
         ImageFormat::Jpeg => "image/jpeg",
+        ImageFormat::Npy => "application/x-npy",
     };
     Ok(([(header::CONTENT_TYPE, content_type)], image).into_response())
 }

@@ -42,9 +42,13 @@ pub struct RenderArgs {
     /// Time of the demo scene, seconds.
     #[arg(long, default_value_t = 0.0, requires = "demo")]
     pub time: f64,
-    /// Where to write the image: `.png`, `.jpg` or `.jpeg`.
+    /// Where to write the image: `.png`, `.jpg` or `.jpeg` (or `.npy`).
     #[arg(long, short)]
     pub output: PathBuf,
+    /// `png`, `jpeg`, or `npy` (an `(H, W, 4)` float32 array of hit distance and outward
+    /// normal per pixel, infinity for a miss); default: from the output's extension.
+    #[arg(long)]
+    pub format: Option<String>,
     #[arg(long, default_value_t = 640)]
     pub width: u32,
     #[arg(long, default_value_t = 480)]
@@ -158,17 +162,23 @@ pub fn run(args: RenderArgs) -> Result<(), String> {
         fx = effects::apply(&fx, &changes, &limits)
             .map_err(|e| format!("--effects: {}: {}", e.field, e.message))?;
     }
-    let format = match args
+    let extension = args
         .output
         .extension()
-        .map(|e| e.to_string_lossy().to_ascii_lowercase())
-        .as_deref()
-    {
+        .map(|e| e.to_string_lossy().to_ascii_lowercase());
+    let format = match args.format.as_deref().or(extension.as_deref()) {
         Some("png") => Format::Png,
         Some("jpg" | "jpeg") => Format::Jpeg,
+        Some("npy") => Format::Npy,
+        _ if args.format.is_some() => {
+            return Err(format!(
+                "--format {}: use png, jpeg or npy",
+                args.format.as_deref().unwrap_or_default()
+            ))
+        }
         _ => {
             return Err(format!(
-                "{}: write .png, .jpg or .jpeg",
+                "{}: write .png, .jpg, .jpeg or .npy (or give --format)",
                 args.output.display()
             ))
         }
@@ -192,11 +202,16 @@ pub fn run(args: RenderArgs) -> Result<(), String> {
     let codec = match format {
         Format::Png => Codec::Png,
         Format::Jpeg => Codec::Jpeg,
+        Format::Npy => Codec::Png,
     };
-    let request = FrameRequest::image(view, &fx, codec, args.quality);
-    let bytes = frame::render(&backend, &state, &request, None)
-        .map_err(|e| e.to_string())?
-        .payload;
+    let bytes = if let Format::Npy = format {
+        frame::surface_npy(&backend, &state, &view)
+    } else {
+        let request = FrameRequest::image(view, &fx, codec, args.quality);
+        frame::render(&backend, &state, &request, None)
+            .map_err(|e| e.to_string())?
+            .payload
+    };
     std::fs::write(&args.output, bytes).map_err(|e| format!("{}: {e}", args.output.display()))?;
     println!(
         "wrote {} ({}×{})",
@@ -210,6 +225,7 @@ pub fn run(args: RenderArgs) -> Result<(), String> {
 enum Format {
     Png,
     Jpeg,
+    Npy,
 }
 
 /// Reads the scene description and the step, checking both as the server would.

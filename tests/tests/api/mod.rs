@@ -5,6 +5,7 @@ mod auth;
 mod bad_balls;
 mod cli;
 mod crash;
+mod depth;
 mod limits;
 mod look;
 mod molecules;
