@@ -5,9 +5,9 @@
 //! relative terms (linear in the simulation nodes). In lazy mode every inner sphere and every
 //! surfel has a once-only slot for this step, filled by whichever ray touches it first; a
 //! filled value is a pure function of the step (eq. 4 and 9 for spheres, eq. 1 for surfels),
-//! so it is the same whatever thread computes it, and no lock is taken. A sphere seen again
-//! once both its children are filled is tightened by eq. 11 and the result stored in an
-//! atomic; which rays see the tighter radius depends on timing, but every radius in use is a
+//! so it is the same whatever thread computes it, and no lock is taken. A sphere seen while
+//! both its children are filled is tightened by eq. 11 and the smallest radius so far kept
+//! in an atomic (`fetch_min`); which rays see the tighter radius depends on timing, but every radius in use is a
 //! conservative bound, so the set of hits, and the image, do not (the traversal returns the
 //! nearest hit, ties to the lower surfel).
 

@@ -71,17 +71,19 @@ impl Spheres for LazyView<'_> {
             c.node_updates += 1;
             node_sphere(&self.p.model, &self.p.step, n as usize)
         });
+        // Eq. 11 whenever both children are updated (§4.4: "if a node is already visited
+        // before, update the radius using Equation 11"); radii only ever shrink, and a
+        // positive f32's bits order like the value, so `fetch_min` keeps the tightest.
         let rf = self.refined[n as usize].load(Ordering::Relaxed);
-        if rf != UNSET {
-            return (centre, f32::from_bits(rf));
-        }
-        // Eq. 11 once both children are updated; min with eq. 9.
+        let mut r = if rf == UNSET { r9 } else { f32::from_bits(rf) };
         if let (Some(a), Some(b)) = (self.peek(node.kids[0]), self.peek(node.kids[1])) {
-            let r = r9.min(radius_from_children(centre, [a, b]));
-            self.refined[n as usize].store(r.to_bits(), Ordering::Relaxed);
-            return (centre, r);
+            let r11 = radius_from_children(centre, [a, b]);
+            if r11 < r {
+                r = r11;
+                self.refined[n as usize].fetch_min(r.to_bits(), Ordering::Relaxed);
+            }
         }
-        (centre, r9)
+        (centre, r)
     }
 
     #[inline]
