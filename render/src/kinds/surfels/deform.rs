@@ -12,8 +12,9 @@
 //! shrinks the relative displacements `ũ_j = x_j + u_j − frame(x_j)` and gradients
 //! `G̃_j = (I + G_j) Rᵀ − I` that eq. 9 sums, which keeps the radii tight under rotation.
 
+use crate::kinds::surfels::kernel::{sigma_max, weight};
 use crate::kinds::surfels::knn::Grid;
-use crate::kinds::surfels::model::{sigma_max, weight, SurfelError, SurfelModel};
+use crate::kinds::surfels::model::{SurfelError, SurfelModel};
 use crate::kinds::surfels::rigid::RigidFrame;
 use crate::kinds::surfels::tree::MIXED;
 use glam::{Mat3, Vec3};

@@ -11,7 +11,7 @@
 //! Everything depends on the leaf and the ray only, so every traversal finds the same hits.
 
 use crate::kinds::surfels::counters::SurfelCounters;
-use crate::kinds::surfels::model::weight;
+use crate::kinds::surfels::kernel::weight;
 use crate::kinds::surfels::prepared::PreparedSurfels;
 use crate::ray::Ray;
 use glam::Vec3;

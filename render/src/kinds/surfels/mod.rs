@@ -6,6 +6,7 @@ pub mod counters;
 pub mod deform;
 pub mod demo;
 pub mod intersect;
+pub mod kernel;
 pub mod kind;
 pub mod knn;
 pub mod miniball;

@@ -14,8 +14,8 @@
 //! `ρ_max · A_j`, the bound on how much the leaf radii below can grow), and the weights of
 //! eq. 3 for the centre.
 
+use crate::kinds::surfels::kernel::{weight, Rows};
 use crate::kinds::surfels::miniball::miniball;
-use crate::kinds::surfels::model::{weight, Rows};
 use glam::Vec3;
 
 /// `kids[0]` of a leaf.
