@@ -9,6 +9,7 @@ mod ingest;
 mod load;
 mod metaballs;
 mod stream;
+mod surfels;
 mod tets;
 
 use clap::{Parser, Subcommand};
@@ -43,6 +44,9 @@ enum Command {
     /// balancer: per-viewer fps, input-to-frame latency percentiles and the frame size the
     /// server's adaptive controller settled on.
     Load(load::LoadArgs),
+    /// The deforming-surfels paper (§5, Fig. 3, Fig. 5): ms per frame for rebuild, eager
+    /// refit, lazy and lazy + cache; tests per ray; radius tightness per level.
+    Surfels(surfels::SurfelsArgs),
 }
 
 fn main() {
@@ -56,6 +60,7 @@ fn main() {
         Command::Accuracy(args) => accuracy::run(args),
         Command::Stream(args) => stream::run(args),
         Command::Load(args) => load::run(args),
+        Command::Surfels(args) => surfels::run(args),
     };
     if let Err(e) = result {
         eprintln!("isoray-bench: {e}");

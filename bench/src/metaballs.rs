@@ -546,7 +546,7 @@ pub fn build_ablation(args: BuildArgs) -> Result<(), String> {
             };
             let stats = match prepared.geometry() {
                 PreparedGeometry::Metaballs(m) => m.tree_stats().unwrap_or_default(),
-                PreparedGeometry::Tets(_) => Default::default(),
+                PreparedGeometry::Tets(_) | PreparedGeometry::Surfels(_) => Default::default(),
             };
             let row = BuildResult {
                 scene: demo.id().into(),

@@ -2,6 +2,7 @@
 
 use crate::geom::counters::{KindCounters, RayTotals};
 use crate::kinds::metaballs::counters::MetaballCounters;
+use crate::kinds::surfels::counters::SurfelCounters;
 use crate::kinds::tets::counters::TetCounters;
 
 /// Each kind's own counters. A new kind adds its field here (and to the two sums below).
@@ -9,18 +10,21 @@ use crate::kinds::tets::counters::TetCounters;
 pub struct SceneCounters {
     pub metaballs: MetaballCounters,
     pub tets: TetCounters,
+    pub surfels: SurfelCounters,
 }
 
 impl SceneCounters {
     pub fn add(&mut self, o: &SceneCounters) {
         self.metaballs.add(&o.metaballs);
         self.tets.add(&o.tets);
+        self.surfels.add(&o.surfels);
     }
 
     /// The frame summary: every kind's totals added.
     pub fn totals(&self) -> RayTotals {
         let mut t = self.metaballs.totals();
         t.add(&self.tets.totals());
+        t.add(&self.surfels.totals());
         t
     }
 }

@@ -12,6 +12,9 @@ use crate::kinds::counters::SceneCounters;
 use crate::kinds::metaballs::counters::MetaballCounters;
 use crate::kinds::metaballs::engine::{PrepareOptions, PreparedMetaballs};
 use crate::kinds::metaballs::scene::{MetaballError, MetaballScene};
+use crate::kinds::surfels::model::SurfelError;
+use crate::kinds::surfels::prepared::PreparedSurfels;
+use crate::kinds::surfels::scene::SurfelScene;
 use crate::kinds::tets::mesh::{TetError, TetScene};
 use crate::kinds::tets::prepared::{PreparedTets, TetOptions};
 use crate::ray::{Hit, Ray};
@@ -23,6 +26,8 @@ pub enum Geometry {
     Metaballs(MetaballScene),
     /// A tetrahedral mesh with one scalar field (one time step).
     Tets(TetScene),
+    /// A deforming surfel object (one step).
+    Surfels(SurfelScene),
 }
 
 /// The prepared form of each primitive kind.
@@ -30,6 +35,7 @@ pub enum Geometry {
 pub enum PreparedGeometry {
     Metaballs(Arc<PreparedMetaballs>),
     Tets(Arc<PreparedTets>),
+    Surfels(Arc<PreparedSurfels>),
 }
 
 /// Why scene data was rejected.
@@ -39,6 +45,8 @@ pub enum SceneError {
     Metaball(#[from] MetaballError),
     #[error(transparent)]
     Tet(#[from] TetError),
+    #[error(transparent)]
+    Surfel(#[from] SurfelError),
 }
 
 impl Geometry {
@@ -47,6 +55,7 @@ impl Geometry {
         match self {
             Geometry::Metaballs(m) => m.validate(primitive_limit)?,
             Geometry::Tets(t) => t.validate(primitive_limit)?,
+            Geometry::Surfels(s) => s.validate(primitive_limit)?,
         }
         Ok(())
     }
@@ -56,6 +65,7 @@ impl Geometry {
         match self {
             Geometry::Metaballs(m) => m.balls.len(),
             Geometry::Tets(t) => t.tet_count(),
+            Geometry::Surfels(s) => s.model.len(),
         }
     }
 
@@ -73,6 +83,7 @@ impl Geometry {
         match self {
             Geometry::Metaballs(m) => m.isovalue_range(),
             Geometry::Tets(t) => t.isovalue_range(),
+            Geometry::Surfels(s) => s.isovalue_range(),
         }
     }
 
@@ -81,7 +92,7 @@ impl Geometry {
     pub fn default_metaball_options(&self) -> PrepareOptions {
         match self {
             Geometry::Metaballs(m) => PrepareOptions::fitted(m.min_isovalue),
-            Geometry::Tets(_) => PrepareOptions::fitted(0.0),
+            Geometry::Tets(_) | Geometry::Surfels(_) => PrepareOptions::fitted(0.0),
         }
     }
 
@@ -93,6 +104,9 @@ impl Geometry {
             }
             Geometry::Tets(t) => {
                 PreparedGeometry::Tets(Arc::new(PreparedTets::new(t.clone(), tet_options)))
+            }
+            Geometry::Surfels(s) => {
+                PreparedGeometry::Surfels(Arc::new(PreparedSurfels::new(s.clone())))
             }
         }
     }
@@ -137,6 +151,7 @@ impl PreparedGeometry {
         match self {
             PreparedGeometry::Metaballs(m) => build_ms(m.as_ref()),
             PreparedGeometry::Tets(t) => build_ms(t.as_ref()),
+            PreparedGeometry::Surfels(s) => build_ms(s.as_ref()),
         }
     }
 
@@ -156,6 +171,9 @@ impl PreparedGeometry {
             PreparedGeometry::Tets(t) => {
                 first_hit(t.as_ref(), ray, t_min, t_max, isovalue, counters)
             }
+            PreparedGeometry::Surfels(s) => {
+                first_hit(s.as_ref(), ray, t_min, t_max, isovalue, counters)
+            }
         }
     }
 
@@ -171,6 +189,7 @@ impl PreparedGeometry {
         match self {
             PreparedGeometry::Metaballs(m) => uncounted(m.as_ref(), ray, t_min, t_max, isovalue),
             PreparedGeometry::Tets(t) => uncounted(t.as_ref(), ray, t_min, t_max, isovalue),
+            PreparedGeometry::Surfels(s) => uncounted(s.as_ref(), ray, t_min, t_max, isovalue),
         }
     }
 
@@ -188,6 +207,9 @@ impl PreparedGeometry {
                 any_hit(m.as_ref(), ray, t_min, t_max, isovalue, counters)
             }
             PreparedGeometry::Tets(t) => any_hit(t.as_ref(), ray, t_min, t_max, isovalue, counters),
+            PreparedGeometry::Surfels(s) => {
+                any_hit(s.as_ref(), ray, t_min, t_max, isovalue, counters)
+            }
         }
     }
 
@@ -207,6 +229,9 @@ impl PreparedGeometry {
             PreparedGeometry::Tets(t) => {
                 exit_hit(t.as_ref(), ray, t_min, t_max, isovalue, counters)
             }
+            PreparedGeometry::Surfels(s) => {
+                exit_hit(s.as_ref(), ray, t_min, t_max, isovalue, counters)
+            }
         }
     }
 
@@ -215,6 +240,7 @@ impl PreparedGeometry {
         match self {
             PreparedGeometry::Metaballs(m) => optical_depth(m.as_ref(), ray, t_min, t_max),
             PreparedGeometry::Tets(t) => optical_depth(t.as_ref(), ray, t_min, t_max),
+            PreparedGeometry::Surfels(s) => optical_depth(s.as_ref(), ray, t_min, t_max),
         }
     }
 
@@ -232,6 +258,9 @@ impl PreparedGeometry {
             }
             PreparedGeometry::Tets(t) => {
                 primary_tile(t.as_ref(), rays, rect, isovalue, t_max, counters)
+            }
+            PreparedGeometry::Surfels(s) => {
+                primary_tile(s.as_ref(), rays, rect, isovalue, t_max, counters)
             }
         }
     }

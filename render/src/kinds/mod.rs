@@ -4,4 +4,5 @@ pub mod contract;
 pub mod counters;
 pub mod dispatch;
 pub mod metaballs;
+pub mod surfels;
 pub mod tets;

@@ -18,6 +18,7 @@ pub mod convert;
 pub mod error;
 pub mod histogram;
 pub mod metaballs;
+pub mod surfels;
 pub mod tets;
 
 use crate::effects::EffectLimits;
@@ -26,6 +27,7 @@ use crate::kinds::error::{KindError, KindErrorKind};
 use crate::kinds::histogram::Histogram;
 use crate::kinds::metaballs::histogram::field_histogram;
 use crate::kinds::metaballs::setup::{self as ball_setup, BallDefaults};
+use crate::kinds::surfels::histogram::displacement_histogram;
 use crate::kinds::tets::histogram::vertex_histogram;
 use crate::kinds::tets::setup::{self as tet_setup, MeshSlot, TetSetup};
 use crate::kinds::tets::step as tet_step;
@@ -282,6 +284,7 @@ pub fn histogram_of(geometry: &Geometry, lo: f32, hi: f32, bins: usize) -> Histo
     match geometry {
         Geometry::Metaballs(m) => field_histogram(m, lo, hi, bins),
         Geometry::Tets(t) => vertex_histogram(t.scalars(), lo, hi, bins),
+        Geometry::Surfels(s) => displacement_histogram(s, lo, hi, bins),
     }
 }
 

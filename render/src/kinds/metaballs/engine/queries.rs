@@ -371,7 +371,9 @@ mod tests {
     fn blobs() -> MetaballScene {
         match DemoScene::Blobs.state_at(2.0).geometry {
             crate::scene::Geometry::Metaballs(m) => m,
-            crate::scene::Geometry::Tets(_) => panic!("Blobs is a metaball scene"),
+            crate::scene::Geometry::Tets(_) | crate::scene::Geometry::Surfels(_) => {
+                panic!("Blobs is a metaball scene")
+            }
         }
     }
 

@@ -1,0 +1,145 @@
+//! The ray–surface intersection of deforming-point-sampled-surfaces.txt §4.2.1 with the
+//! clipping of §4.3.
+//!
+//! How it works: a ray that reaches a leaf is first intersected with the leaf surfel's
+//! deformed ellipse; that point starts the iteration: the weighted average position `a(x)`
+//! and normal `n(x)` of the surfel's fixed neighbourhood (eq. 12, weights of eq. 2 about the
+//! current point) define a plane; the ray meets the plane at the next point, until
+//! `|n(x)ᵀ(x − a(x))| < ε`. A point leaving the leaf's sphere rejects the intersection. The
+//! converged point is then clipped (§4.3): for each surface that clips this surfel's surface,
+//! the nearer of its two stored surfels decides, by the side of its tangent plane.
+//! Everything depends on the leaf and the ray only, so every traversal finds the same hits.
+
+use crate::kinds::surfels::counters::SurfelCounters;
+use crate::kinds::surfels::kernel::weight;
+use crate::kinds::surfels::prepared::PreparedSurfels;
+use crate::ray::Ray;
+use glam::Vec3;
+
+/// MLS iterations before a leaf gives up.
+pub const MAX_ITERATIONS: u32 = 12;
+/// Convergence: `|f(x)| < EPSILON · h`.
+pub const EPSILON: f32 = 1e-4;
+
+/// A converged, unclipped intersection with one leaf.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LeafHit {
+    pub t: f32,
+    pub position: Vec3,
+    pub normal: Vec3,
+    pub colour: Vec3,
+    pub surfel: u32,
+}
+
+impl LeafHit {
+    /// Nearer first, ties to the lower surfel: the order every traversal keeps.
+    #[inline]
+    pub fn before(&self, o: &LeafHit) -> bool {
+        self.t < o.t || (self.t == o.t && self.surfel < o.surfel)
+    }
+}
+
+/// The ray's intersection with leaf surfel `s` within `[t_min, t_max]`.
+pub fn intersect_leaf(
+    p: &PreparedSurfels,
+    ray: &Ray,
+    s: usize,
+    t_min: f32,
+    t_max: f32,
+    c: &mut SurfelCounters,
+) -> Option<LeafHit> {
+    c.surfel_tests += 1;
+    let mut fresh = false;
+    let leaf = *p.surfel(s, &mut fresh);
+    c.surfel_updates += fresh as u64;
+    // The deformed ellipse: the start point.
+    let denom = leaf.normal.dot(ray.dir);
+    if denom.abs() < 1e-7 {
+        return None;
+    }
+    let t0 = leaf.normal.dot(leaf.centre - ray.origin) / denom;
+    let q = ray.at(t0) - leaf.centre;
+    let (g11, g12, g22) = (
+        leaf.t1.length_squared(),
+        leaf.t1.dot(leaf.t2),
+        leaf.t2.length_squared(),
+    );
+    let det = g11 * g22 - g12 * g12;
+    if !(det > 0.0) {
+        return None;
+    }
+    let (r1, r2) = (leaf.t1.dot(q), leaf.t2.dot(q));
+    let (a, b) = ((g22 * r1 - g12 * r2) / det, (g11 * r2 - g12 * r1) / det);
+    let radius = p.model.surfels[s].radius;
+    if a * a + b * b > radius * radius {
+        return None;
+    }
+    let stretch = leaf.leaf_radius / p.model.leaf_radius[s].max(1e-20);
+    let h = p.model.support[s] * stretch.max(1e-3);
+    let neighbours = p.model.neighbours.row(s);
+    let mut x = ray.at(t0);
+    for _ in 0..MAX_ITERATIONS {
+        c.iterations += 1;
+        let (mut sw, mut sp, mut sn, mut sc) = (0.0f32, Vec3::ZERO, Vec3::ZERO, Vec3::ZERO);
+        for &k in neighbours {
+            let mut fresh = false;
+            let d = p.surfel(k as usize, &mut fresh);
+            c.surfel_updates += fresh as u64;
+            let w = weight((x - d.centre).length() / h);
+            sw += w;
+            sp += w * d.centre;
+            sn += w * d.normal;
+            sc += w * p.model.surfels[k as usize].colour;
+        }
+        if !(sw > 0.0) {
+            return None;
+        }
+        let avg = sp / sw;
+        let n = sn.normalize_or_zero();
+        if n == Vec3::ZERO {
+            return None;
+        }
+        if n.dot(x - avg).abs() < EPSILON * h {
+            let t = (x - ray.origin).dot(ray.dir);
+            if !(t >= t_min && t <= t_max) || clipped(p, s, x, c) {
+                return None;
+            }
+            return Some(LeafHit {
+                t,
+                position: x,
+                normal: n,
+                colour: sc / sw,
+                surfel: s as u32,
+            });
+        }
+        let dn = n.dot(ray.dir);
+        if dn.abs() < 1e-7 {
+            return None;
+        }
+        x = ray.at(n.dot(avg - ray.origin) / dn);
+        if (x - leaf.centre).length_squared() > leaf.leaf_radius * leaf.leaf_radius {
+            return None;
+        }
+    }
+    None
+}
+
+/// Whether `x` on surfel `s`'s surface lies outside a surface that clips it (§4.3).
+fn clipped(p: &PreparedSurfels, s: usize, x: Vec3, c: &mut SurfelCounters) -> bool {
+    for pair in p.model.clip.row(s) {
+        let mut fresh = false;
+        let a = *p.surfel(pair[0] as usize, &mut fresh);
+        let b = *p.surfel(pair[1] as usize, &mut fresh);
+        c.surfel_updates += fresh as u64;
+        let near = if (x - a.centre).length_squared() <= (x - b.centre).length_squared() {
+            a
+        } else {
+            b
+        };
+        if near.normal.dot(x - near.centre) > 0.0 {
+            c.clipped += 1;
+            return true;
+        }
+    }
+    false
+}

@@ -1,0 +1,153 @@
+//! The surfel kind's side of the kind contract: the queries of [`PreparedKind`] answered by
+//! the lazily updated sphere hierarchy of deforming-point-sampled-surfaces.txt. Primary rays
+//! go through the per-pixel sphere-node cache (§4.2.2) when the scene enables it.
+
+use crate::camera::PrimaryRays;
+use crate::kinds::contract::PreparedKind;
+use crate::kinds::counters::SceneCounters;
+use crate::kinds::surfels::counters::SurfelCounters;
+use crate::kinds::surfels::intersect::LeafHit;
+use crate::kinds::surfels::prepared::{Accel, PreparedSurfels};
+use crate::kinds::surfels::traverse::{self, FixedView, LazyView};
+use crate::ray::{Hit, Ray};
+
+impl PreparedSurfels {
+    /// The nearest hit, starting from `hint` (a cached surfel) if given.
+    #[inline]
+    pub fn nearest(
+        &self,
+        ray: &Ray,
+        t_min: f32,
+        t_max: f32,
+        hint: Option<u32>,
+        c: &mut SurfelCounters,
+    ) -> Option<LeafHit> {
+        c.rays += 1;
+        let hit = match &self.accel {
+            Accel::Lazy { nodes, refined } => {
+                let v = LazyView {
+                    p: self,
+                    nodes,
+                    refined,
+                };
+                traverse::first_hit(&v, self, ray, t_min, t_max, hint, c)
+            }
+            Accel::Fixed(nodes) => {
+                traverse::first_hit(&FixedView(nodes), self, ray, t_min, t_max, hint, c)
+            }
+        };
+        c.hits += hit.is_some() as u64;
+        hit
+    }
+
+    #[inline]
+    fn record(h: LeafHit) -> Hit {
+        Hit {
+            t: h.t,
+            position: h.position,
+            normal: h.normal,
+            albedo: h.colour,
+            primitive: h.surfel,
+        }
+    }
+}
+
+impl PreparedKind for PreparedSurfels {
+    type Counters = SurfelCounters;
+
+    #[inline]
+    fn counters_in(all: &mut SceneCounters) -> &mut SurfelCounters {
+        &mut all.surfels
+    }
+
+    /// The rigid frame and, for eager or rebuild, the whole update.
+    fn build_ms(&self) -> f64 {
+        PreparedSurfels::build_ms(self)
+    }
+
+    #[inline]
+    fn first_hit(
+        &self,
+        ray: &Ray,
+        t_min: f32,
+        t_max: f32,
+        _isovalue: f32,
+        c: &mut SurfelCounters,
+    ) -> Option<Hit> {
+        self.nearest(ray, t_min, t_max, None, c).map(Self::record)
+    }
+
+    #[inline]
+    fn any_hit(
+        &self,
+        ray: &Ray,
+        t_min: f32,
+        t_max: f32,
+        _isovalue: f32,
+        c: &mut SurfelCounters,
+    ) -> Option<f32> {
+        c.rays += 1;
+        let hit = match &self.accel {
+            Accel::Lazy { nodes, refined } => {
+                let v = LazyView {
+                    p: self,
+                    nodes,
+                    refined,
+                };
+                traverse::any_hit(&v, self, ray, t_min, t_max, c)
+            }
+            Accel::Fixed(nodes) => traverse::any_hit(&FixedView(nodes), self, ray, t_min, t_max, c),
+        };
+        c.hits += hit.is_some() as u64;
+        hit
+    }
+
+    /// A surfel surface is a sheet: the way out of a closed object is its next crossing.
+    #[inline]
+    fn exit_hit(
+        &self,
+        ray: &Ray,
+        t_min: f32,
+        t_max: f32,
+        isovalue: f32,
+        c: &mut SurfelCounters,
+    ) -> Option<Hit> {
+        <PreparedSurfels as PreparedKind>::first_hit(self, ray, t_min, t_max, isovalue, c)
+    }
+
+    /// Surfels have no density.
+    fn optical_depth(&self, _ray: &Ray, _t_min: f32, _t_max: f32) -> f32 {
+        0.0
+    }
+
+    /// Ray by ray; with the cache on, each pixel's last nearest surfel is tested first and
+    /// this frame's is remembered (the image is the same either way).
+    fn primary_tile(
+        &self,
+        rays: &PrimaryRays,
+        rect: (u32, u32, u32, u32),
+        _isovalue: f32,
+        t_max: f32,
+        c: &mut SurfelCounters,
+    ) -> Vec<(Ray, Option<Hit>)> {
+        let (x0, y0, x1, y1) = rect;
+        let mut out = Vec::with_capacity(((x1 - x0) * (y1 - y0)) as usize);
+        let cache = self.options.cache;
+        for y in y0..y1 {
+            for x in x0..x1 {
+                let ray = rays.through_pixel(x, y);
+                let hint = if cache {
+                    self.runtime.cached(x, y)
+                } else {
+                    None
+                };
+                let hit = self.nearest(&ray, 0.0, t_max, hint, c);
+                if cache {
+                    self.runtime.remember(x, y, hit.map(|h| h.surfel));
+                }
+                out.push((ray, hit.map(Self::record)));
+            }
+        }
+        out
+    }
+}

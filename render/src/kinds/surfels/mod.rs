@@ -1,0 +1,22 @@
+//! Deforming point-sampled surfaces (deforming-point-sampled-surfaces.txt): surfels embedded
+//! in simulation nodes, a bounding-sphere hierarchy updated lazily while tracing, the MLS
+//! ray–surface intersection, sphere-node caching and clipping.
+
+pub mod counters;
+pub mod deform;
+pub mod demo;
+pub mod intersect;
+pub mod kernel;
+pub mod kind;
+pub mod knn;
+pub mod miniball;
+pub mod model;
+pub mod prepared;
+pub mod rigid;
+pub mod sample;
+pub mod scene;
+pub mod sim;
+#[cfg(test)]
+mod tests;
+pub mod traverse;
+pub mod tree;

@@ -1,0 +1,182 @@
+//! One step of a deforming surfel object: the shared undeformed model, the step's node
+//! displacements and Jacobians, how to update the hierarchy, and the state kept from frame
+//! to frame (the per-pixel sphere-node cache of deforming-point-sampled-surfaces.txt §4.2.2
+//! and the statistics the lazy-or-refit heuristic reads).
+
+use crate::kinds::surfels::deform::check_step;
+use crate::kinds::surfels::model::{SurfelError, SurfelModel};
+use glam::{Mat3, Vec3};
+use std::sync::atomic::{AtomicU32, Ordering};
+use std::sync::Arc;
+
+/// How a step's hierarchy follows the deformation.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum UpdateMode {
+    /// Spheres and surfels updated when a ray first touches them (§4.1.2, §4.4).
+    Lazy,
+    /// Every surfel and sphere updated before tracing (eqs. 4, 9, 11 bottom-up).
+    Eager,
+    /// A new hierarchy built from the deformed surfels (the paper's baseline).
+    Rebuild,
+    /// Lazy or eager per step, by the share of surfels the previous step touched (§6).
+    Auto,
+}
+
+impl UpdateMode {
+    pub fn name(self) -> &'static str {
+        match self {
+            UpdateMode::Lazy => "lazy",
+            UpdateMode::Eager => "eager",
+            UpdateMode::Rebuild => "rebuild",
+            UpdateMode::Auto => "auto",
+        }
+    }
+}
+
+/// Tracing options of a surfel scene.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct SurfelOptions {
+    pub mode: UpdateMode,
+    /// Test each primary ray's cached sphere node first (§4.2.2).
+    pub cache: bool,
+}
+
+impl Default for SurfelOptions {
+    fn default() -> Self {
+        SurfelOptions {
+            mode: UpdateMode::Auto,
+            cache: true,
+        }
+    }
+}
+
+/// Pixels the cache distinguishes: `(y · CACHE_ROW + x) mod CACHE_SLOTS` (other sizes alias,
+/// which costs work, never correctness: a cached node is only a first guess).
+const CACHE_ROW: u32 = 2048;
+const CACHE_SLOTS: usize = 1 << 21;
+
+/// What a surfel scene keeps between steps; shared by all steps of one object.
+pub struct SurfelRuntime {
+    /// Per pixel: 1 + the surfel whose leaf held the last nearest hit, or 0.
+    cache: Vec<AtomicU32>,
+    /// Share of surfels the last lazy step touched, as `f32` bits.
+    touched: AtomicU32,
+}
+
+impl std::fmt::Debug for SurfelRuntime {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("SurfelRuntime")
+            .field("touched", &self.touched_share())
+            .finish_non_exhaustive()
+    }
+}
+
+impl Default for SurfelRuntime {
+    fn default() -> Self {
+        SurfelRuntime {
+            cache: (0..CACHE_SLOTS).map(|_| AtomicU32::new(0)).collect(),
+            touched: AtomicU32::new(0f32.to_bits()),
+        }
+    }
+}
+
+impl SurfelRuntime {
+    #[inline]
+    fn slot(&self, x: u32, y: u32) -> &AtomicU32 {
+        &self.cache[(y.wrapping_mul(CACHE_ROW).wrapping_add(x)) as usize % CACHE_SLOTS]
+    }
+
+    /// The surfel cached for pixel `(x, y)`.
+    #[inline]
+    pub fn cached(&self, x: u32, y: u32) -> Option<u32> {
+        self.slot(x, y).load(Ordering::Relaxed).checked_sub(1)
+    }
+
+    #[inline]
+    pub fn remember(&self, x: u32, y: u32, surfel: Option<u32>) {
+        self.slot(x, y)
+            .store(surfel.map_or(0, |s| s + 1), Ordering::Relaxed);
+    }
+
+    pub fn clear_cache(&self) {
+        for c in &self.cache {
+            c.store(0, Ordering::Relaxed);
+        }
+    }
+
+    pub fn touched_share(&self) -> f32 {
+        f32::from_bits(self.touched.load(Ordering::Relaxed))
+    }
+
+    pub fn set_touched_share(&self, share: f32) {
+        self.touched.store(share.to_bits(), Ordering::Relaxed);
+    }
+}
+
+/// One step of a surfel object.
+#[derive(Clone, Debug)]
+pub struct SurfelScene {
+    pub model: Arc<SurfelModel>,
+    /// Per simulation node: displacement `u_j`.
+    pub displacement: Arc<[Vec3]>,
+    /// Per simulation node: Jacobian `G_j = ∂u/∂x`.
+    pub gradient: Arc<[Mat3]>,
+    pub options: SurfelOptions,
+    pub runtime: Arc<SurfelRuntime>,
+}
+
+impl PartialEq for SurfelScene {
+    fn eq(&self, o: &Self) -> bool {
+        Arc::ptr_eq(&self.model, &o.model)
+            && self.displacement == o.displacement
+            && self.gradient == o.gradient
+            && self.options == o.options
+    }
+}
+
+impl SurfelScene {
+    /// A step, checked against the model.
+    pub fn new(
+        model: Arc<SurfelModel>,
+        displacement: Arc<[Vec3]>,
+        gradient: Arc<[Mat3]>,
+        options: SurfelOptions,
+        runtime: Arc<SurfelRuntime>,
+    ) -> Result<SurfelScene, SurfelError> {
+        check_step(&model, &displacement, &gradient)?;
+        Ok(SurfelScene {
+            model,
+            displacement,
+            gradient,
+            options,
+            runtime,
+        })
+    }
+
+    /// The undeformed object.
+    pub fn rest(model: Arc<SurfelModel>, options: SurfelOptions) -> SurfelScene {
+        let n = model.nodes.len();
+        SurfelScene {
+            model,
+            displacement: vec![Vec3::ZERO; n].into(),
+            gradient: vec![Mat3::ZERO; n].into(),
+            options,
+            runtime: Arc::new(SurfelRuntime::default()),
+        }
+    }
+
+    pub fn validate(&self, primitive_limit: usize) -> Result<(), SurfelError> {
+        if self.model.len() > primitive_limit {
+            return Err(SurfelError::TooMany {
+                count: self.model.len(),
+                limit: primitive_limit,
+            });
+        }
+        check_step(&self.model, &self.displacement, &self.gradient)
+    }
+
+    /// Surfels have no scalar field: every isovalue shows the same surface.
+    pub fn isovalue_range(&self) -> (f32, f32) {
+        (f32::MIN, f32::MAX)
+    }
+}

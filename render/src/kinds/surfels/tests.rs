@@ -1,0 +1,392 @@
+//! Tests of the surfel kind against independent references: eq. 1 in `f64` written here
+//! from the paper (sharing no code with `deform`), containment of every lazily updated
+//! sphere, equal images across update modes and thread counts, and sharp clipped edges.
+
+use crate::camera::Camera;
+use crate::geom::rng::SplitMix64;
+use crate::kinds::dispatch::Geometry;
+use crate::kinds::surfels::counters::SurfelCounters;
+use crate::kinds::surfels::deform::deform_surfel;
+use crate::kinds::surfels::demo::{self, SurfelDemoKind};
+use crate::kinds::surfels::model::{Surfel, SurfelError, SurfelModel, SurfelSet};
+use crate::kinds::surfels::prepared::PreparedSurfels;
+use crate::kinds::surfels::sample;
+use crate::kinds::surfels::scene::{SurfelOptions, SurfelRuntime, SurfelScene, UpdateMode};
+use crate::kinds::surfels::tree::TreeNode;
+use crate::ray::Ray;
+use glam::{DMat3, DVec3, Mat3, Vec3};
+use std::sync::Arc;
+
+fn jittered_nodes(rng: &mut SplitMix64, lo: f32, hi: f32, n: usize) -> Vec<Vec3> {
+    (0..n)
+        .map(|_| Vec3::new(rng.range(lo, hi), rng.range(lo, hi), rng.range(lo, hi)))
+        .collect()
+}
+
+fn ball_model(surfels: usize, seed: u64) -> SurfelModel {
+    let mut rng = SplitMix64(seed);
+    let set = SurfelSet {
+        surfels: sample::sphere(Vec3::new(0.1, -0.2, 0.3), 1.0, surfels, Vec3::ONE, 0),
+        nodes: jittered_nodes(&mut rng, -1.2, 1.2, 60),
+        ..SurfelSet::default()
+    };
+    SurfelModel::new(set, usize::MAX).expect("valid")
+}
+
+/// Eq. 1 and eq. 2 in `f64`, from the rest data alone: the surfel's 8 nearest nodes by brute
+/// force, support 1.5 × the farthest, weights normalised; tangents by `I + Σ w G`.
+fn reference(s: &Surfel, nodes: &[Vec3], u: &[Vec3], g: &[Mat3]) -> (DVec3, DVec3) {
+    let x = s.centre.as_dvec3();
+    let mut order: Vec<(f64, usize)> = nodes
+        .iter()
+        .enumerate()
+        .map(|(j, p)| ((p.as_dvec3() - x).length(), j))
+        .collect();
+    order.sort_by(|a, b| a.0.total_cmp(&b.0));
+    order.truncate(8);
+    let h = 1.5 * order[7].0 + 1e-6;
+    let w2 = |r: f64| {
+        if r >= 1.0 {
+            0.0
+        } else {
+            1.0 - 6.0 * r * r + 8.0 * r.powi(3) - 3.0 * r.powi(4)
+        }
+    };
+    let total: f64 = order.iter().map(|(d, _)| w2(d / h)).sum();
+    let mut pos = x;
+    let mut jac = DMat3::ZERO;
+    for &(d, j) in &order {
+        let w = w2(d / h) / total;
+        let gj = g[j].as_dmat3();
+        pos += w * (u[j].as_dvec3() + gj * (x - nodes[j].as_dvec3()));
+        jac += gj * w;
+    }
+    let t1 = s.t1.as_dvec3() + jac * s.t1.as_dvec3();
+    let t2 = s.t2.as_dvec3() + jac * s.t2.as_dvec3();
+    let mut n = t1.cross(t2).normalize();
+    if n.dot(s.normal.as_dvec3()) < 0.0 && s.normal.dot(s.t1.cross(s.t2)) < 0.0 {
+        n = -n;
+    }
+    (pos, n)
+}
+
+fn random_step(rng: &mut SplitMix64, model: &SurfelModel, scale: f32) -> (Vec<Vec3>, Vec<Mat3>) {
+    let rot = Mat3::from_axis_angle(
+        rng.in_unit_ball().normalize_or(Vec3::X),
+        rng.range(-3.0, 3.0),
+    );
+    let shift = rng.in_unit_ball() * 2.0;
+    let u = model
+        .nodes
+        .iter()
+        .map(|p| rot * *p + shift - *p + scale * rng.in_unit_ball())
+        .collect();
+    let g = model
+        .nodes
+        .iter()
+        .map(|_| {
+            let noise = Mat3::from_cols(rng.in_unit_ball(), rng.in_unit_ball(), rng.in_unit_ball());
+            rot - Mat3::IDENTITY + noise * scale
+        })
+        .collect();
+    (u, g)
+}
+
+#[test]
+fn a_deformed_surfel_matches_eq_1_in_f64() {
+    let model = ball_model(400, 5);
+    let mut rng = SplitMix64(9);
+    for _ in 0..4 {
+        let (u, g) = random_step(&mut rng, &model, 0.2);
+        for s in 0..model.len() {
+            let got = deform_surfel(&model, &u, &g, s);
+            let (pos, n) = reference(&model.surfels[s], &model.nodes, &u, &g);
+            let err = (got.centre.as_dvec3() - pos).length() / pos.length().max(1.0);
+            assert!(
+                err < 1e-5,
+                "surfel {s}: position {:?} vs {pos:?}",
+                got.centre
+            );
+            let nerr = (got.normal.as_dvec3() - n).length();
+            assert!(nerr < 1e-5, "surfel {s}: normal {:?} vs {n:?}", got.normal);
+        }
+    }
+}
+
+/// Every updated sphere holds every deformed surfel disc below it.
+fn check_containment(p: &PreparedSurfels, topology: &[TreeNode]) -> usize {
+    let spheres = p.current_spheres();
+    let mut checked = 0;
+    for (i, sphere) in spheres.iter().enumerate() {
+        let Some((c, r)) = sphere else { continue };
+        let mut stack = vec![i];
+        while let Some(n) = stack.pop() {
+            let node = topology[n];
+            if node.is_leaf() {
+                let d = deform_surfel(&p.model, &p.u, &p.g, node.kids[1] as usize);
+                let reach = (d.centre - *c).length() + d.leaf_radius;
+                assert!(reach <= r * (1.0 + 1e-5) + 1e-5, "node {i}: {reach} > {r}");
+                checked += 1;
+            } else {
+                stack.extend(node.kids.map(|k| k as usize));
+            }
+        }
+    }
+    checked
+}
+
+mod containment {
+    use super::*;
+    use proptest::prelude::*;
+
+    proptest! {
+        #![proptest_config(ProptestConfig { cases: 12, ..ProptestConfig::default() })]
+        #[test]
+        fn every_lazily_updated_sphere_contains_its_surfels(seed in 0u64..1_000_000, scale in 0.0f32..0.4) {
+            let model = Arc::new(ball_model(300, 17));
+            let mut rng = SplitMix64(seed);
+            let (u, g) = random_step(&mut rng, &model, scale);
+            let scene = SurfelScene::new(
+                model.clone(), u.into(), g.into(),
+                SurfelOptions { mode: UpdateMode::Lazy, cache: false },
+                Arc::new(SurfelRuntime::default()),
+            ).expect("valid");
+            let p = PreparedSurfels::new(scene);
+            prop_assume!(p.used == UpdateMode::Lazy);
+            let mut c = SurfelCounters::default();
+            // Rays from around the object touch part of the tree, twice, so that eq. 11
+            // tightens spheres whose children were updated by the first pass.
+            for pass in 0..2 {
+                let mut r = SplitMix64(seed ^ pass);
+                for _ in 0..200 {
+                    let origin = r.in_unit_ball().normalize_or(Vec3::Z) * 6.0;
+                    let target = r.in_unit_ball() * 1.5;
+                    p.nearest(&Ray::new(origin, target - origin), 0.0, 100.0, None, &mut c);
+                }
+            }
+            prop_assert!(c.node_updates > 0);
+            prop_assert!(check_containment(&p, &model.tree.nodes) > 0);
+        }
+    }
+}
+
+fn prepare(
+    demo: &demo::SurfelDemo,
+    step: usize,
+    mode: UpdateMode,
+    cache: bool,
+    rt: &Arc<SurfelRuntime>,
+) -> PreparedSurfels {
+    PreparedSurfels::new(demo.scene(step, SurfelOptions { mode, cache }, rt.clone()))
+}
+
+/// Depth per pixel (primary rays through the kind contract's tile query).
+fn depths(p: &PreparedSurfels, camera: &Camera, w: u32, h: u32) -> Vec<Option<f32>> {
+    use crate::kinds::contract::PreparedKind;
+    let rays = camera.rays(w, h);
+    let mut c = SurfelCounters::default();
+    p.primary_tile(&rays, (0, 0, w, h), 0.0, 1e4, &mut c)
+        .into_iter()
+        .map(|(_, hit)| hit.map(|h| h.t))
+        .collect()
+}
+
+#[test]
+fn lazy_eager_and_rebuild_give_the_same_image_on_every_demo() {
+    let (w, h) = (40, 30);
+    for kind in SurfelDemoKind::ALL {
+        let demo = demo::build(kind, 0.03, 12).expect("demo");
+        for step in [3, 11] {
+            let rt = Arc::new(SurfelRuntime::default());
+            let reference = depths(
+                &prepare(&demo, step, UpdateMode::Rebuild, false, &rt),
+                &demo.camera,
+                w,
+                h,
+            );
+            let hits = reference.iter().filter(|d| d.is_some()).count();
+            assert!(hits > 30, "{kind:?} step {step}: only {hits} hits");
+            for (mode, cache) in [
+                (UpdateMode::Lazy, false),
+                (UpdateMode::Lazy, true),
+                (UpdateMode::Eager, false),
+                (UpdateMode::Auto, true),
+            ] {
+                // Twice, so that the cache has something from the first frame.
+                for _ in 0..2 {
+                    let p = prepare(&demo, step, mode, cache, &rt);
+                    let got = depths(&p, &demo.camera, w, h);
+                    for (i, (a, b)) in got.iter().zip(&reference).enumerate() {
+                        match (a, b) {
+                            (Some(a), Some(b)) => assert!(
+                                (a - b).abs() <= 1e-4 * b.max(1.0),
+                                "{kind:?} {mode:?} pixel {i}: {a} vs {b}"
+                            ),
+                            (None, None) => {}
+                            _ => {
+                                panic!("{kind:?} {mode:?} cache {cache} pixel {i}: {a:?} vs {b:?}")
+                            }
+                        }
+                    }
+                }
+            }
+        }
+    }
+}
+
+#[test]
+fn the_image_with_shadows_is_the_same_on_1_2_and_8_threads() {
+    use crate::effects::toggles::Effects;
+    use crate::scene::Scene;
+    use crate::shade::Lighting;
+    use crate::{CpuBackend, View};
+    let demo = demo::build(SurfelDemoKind::Heads, 0.03, 8).expect("demo");
+    let view = View {
+        width: 48,
+        height: 36,
+        camera: demo.camera,
+        isovalue: 0.0,
+    };
+    let effects = Effects {
+        shadows: true,
+        ..Effects::OFF
+    };
+    let mut images = Vec::new();
+    for threads in [1, 2, 8] {
+        // A fresh runtime each time: the cache starts empty, as for a new viewer.
+        let scene = Scene {
+            geometry: Geometry::Surfels(demo.scene(
+                7,
+                SurfelOptions::default(),
+                Arc::new(SurfelRuntime::default()),
+            )),
+            lighting: Lighting::default(),
+        };
+        let prepared = Arc::new(scene).prepare();
+        let (fb, _) = CpuBackend::new(threads)
+            .expect("pool")
+            .render_effects(&prepared, &view, &effects);
+        images.push(fb);
+    }
+    assert!(images[0].hit_count() > 100);
+    assert_eq!(images[0], images[1]);
+    assert_eq!(images[0], images[2]);
+}
+
+#[test]
+fn clipped_edges_stay_sharp_at_4x_supersampling() {
+    // One cube [-1, 1]³ of six clipped faces seen head on: the front face's right edge is
+    // x = 1 at z = 1, so a pixel's coverage along a row is the share of its 2×2 samples
+    // whose rays cross z = 1 at x ≤ 1. Unclipped, the faces run two spacings past the edge.
+    let (surfels, clip) = sample::cube(Vec3::ZERO, 1.0, 40, [Vec3::ONE; 6], 0);
+    let nodes = sample::lattice(Vec3::splat(-1.0), Vec3::splat(1.0), 0.5, |_| true);
+    let model = Arc::new(
+        SurfelModel::new(
+            SurfelSet {
+                surfels,
+                nodes,
+                clip,
+                ..SurfelSet::default()
+            },
+            usize::MAX,
+        )
+        .expect("valid"),
+    );
+    let scene = SurfelScene::rest(model, SurfelOptions::default());
+    let p = PreparedSurfels::new(scene);
+    let camera = Camera {
+        eye: Vec3::new(0.0, 0.0, 5.0),
+        target: Vec3::ZERO,
+        up: Vec3::Y,
+        fov_y_deg: 40.0,
+    };
+    let (w, h) = (64u32, 48u32);
+    let rays = camera.rays(2 * w, 2 * h);
+    let row = h / 2 + 3;
+    let mut c = SurfelCounters::default();
+    let mut edge_engine = 0.0f32;
+    let mut edge_analytic = 0.0f32;
+    for x in w / 2..w {
+        let (mut engine, mut analytic) = (0.0f32, 0.0f32);
+        for (sx, sy) in [(0, 0), (1, 0), (0, 1), (1, 1)] {
+            let ray = rays.through_pixel(2 * x + sx, 2 * row + sy);
+            if p.nearest(&ray, 0.0, 100.0, None, &mut c).is_some() {
+                engine += 0.25;
+            }
+            let t = (1.0 - ray.origin.z) / ray.dir.z;
+            let at = ray.at(t);
+            if at.x.abs() <= 1.0 && at.y.abs() <= 1.0 {
+                analytic += 0.25;
+            }
+        }
+        assert!(
+            (engine - analytic).abs() <= 0.25,
+            "pixel {x}: coverage {engine} vs analytic {analytic}"
+        );
+        edge_engine += engine;
+        edge_analytic += analytic;
+    }
+    // The edge position along the row (sum of coverages) within a quarter pixel.
+    assert!(
+        (edge_engine - edge_analytic) <= 0.25,
+        "{edge_engine} vs {edge_analytic}"
+    );
+    assert!(c.clipped > 0, "clipping rejected nothing: {c:?}");
+    assert!(edge_analytic > 5.0 && edge_analytic < (w / 2) as f32 - 5.0);
+}
+
+#[test]
+fn bad_surfel_data_is_rejected_with_what_is_wrong() {
+    let good = sample::sphere(Vec3::ZERO, 1.0, 50, Vec3::ONE, 0);
+    let set = |surfels: Vec<Surfel>| SurfelSet {
+        surfels,
+        nodes: vec![Vec3::ZERO, Vec3::X],
+        ..SurfelSet::default()
+    };
+    let mut nan = good.clone();
+    nan[3].centre.y = f32::NAN;
+    assert_eq!(
+        SurfelModel::new(set(nan), 1000).expect_err("NaN"),
+        SurfelError::NotFinite {
+            what: "surfel",
+            index: 3
+        }
+    );
+    let mut flat = good.clone();
+    flat[7].t2 = Vec3::ZERO;
+    assert_eq!(
+        SurfelModel::new(set(flat), 1000).expect_err("zero tangent"),
+        SurfelError::DegenerateTangents { index: 7 }
+    );
+    assert_eq!(
+        SurfelModel::new(set(Vec::new()), 1000).expect_err("empty"),
+        SurfelError::NoSurfels
+    );
+    let model = Arc::new(SurfelModel::new(set(good), 1000).expect("valid"));
+    let err = SurfelScene::new(
+        model.clone(),
+        vec![Vec3::ZERO; 3].into(),
+        vec![Mat3::ZERO; 2].into(),
+        SurfelOptions::default(),
+        Arc::new(SurfelRuntime::default()),
+    )
+    .expect_err("count");
+    assert!(matches!(
+        err,
+        SurfelError::StepCount {
+            got: 3,
+            nodes: 2,
+            ..
+        }
+    ));
+    // A deformation that tears the object apart falls back to a rebuild (documented).
+    let huge = SurfelScene::new(
+        model,
+        vec![Vec3::ZERO, Vec3::new(50.0, 0.0, 0.0)].into(),
+        vec![Mat3::ZERO, Mat3::IDENTITY * 20.0].into(),
+        SurfelOptions::default(),
+        Arc::new(SurfelRuntime::default()),
+    )
+    .expect("finite");
+    assert_eq!(PreparedSurfels::new(huge).used, UpdateMode::Rebuild);
+}
