@@ -75,6 +75,7 @@ impl Geometry {
         match self {
             Geometry::Metaballs(m) => m.bounds(),
             Geometry::Tets(t) => t.bounds(),
+            Geometry::Surfels(s) => s.bounds(),
         }
     }
 

@@ -75,6 +75,7 @@ fn reference(
                 .sum();
             Some((t, (-g).normalize_or_zero()))
         }
+        Geometry::Surfels(_) => unreachable!("the depth test renders metaball and tet scenes"),
     }
 }
 
@@ -133,6 +134,7 @@ pub fn extent(geometry: &Geometry) -> f64 {
             (glam::Vec3::splat(f32::MAX), glam::Vec3::splat(f32::MIN)),
             |(lo, hi), p| (lo.min(*p), hi.max(*p)),
         ),
+        Geometry::Surfels(s) => s.bounds().expect("surfels"),
     };
     (hi - lo).max_element() as f64
 }
@@ -145,6 +147,7 @@ fn compare(demo: DemoScene, values: &[f32]) -> (f64, usize, f64) {
     let vertex = match &state.geometry {
         Geometry::Metaballs(_) => Vec::new(),
         Geometry::Tets(step) => vertex_gradients(step),
+        Geometry::Surfels(_) => unreachable!("the depth test renders metaball and tet scenes"),
     };
     let mut worst = String::new();
     let mut loose = 0usize;

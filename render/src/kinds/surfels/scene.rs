@@ -3,7 +3,7 @@
 //! to frame (the per-pixel sphere-node cache of deforming-point-sampled-surfaces.txt §4.2.2
 //! and the statistics the lazy-or-refit heuristic reads).
 
-use crate::kinds::surfels::deform::check_step;
+use crate::kinds::surfels::deform::{check_step, deform_surfel};
 use crate::kinds::surfels::model::{SurfelError, SurfelModel};
 use glam::{Mat3, Vec3};
 use std::sync::atomic::{AtomicU32, Ordering};
@@ -173,6 +173,20 @@ impl SurfelScene {
             });
         }
         check_step(&self.model, &self.displacement, &self.gradient)
+    }
+
+    /// Axis-aligned bounds of the deformed surfel discs (each centre padded by its disc's
+    /// largest deformed radius), or `None` for an empty object. O(surfels): for the scene
+    /// description, not the hot path.
+    pub fn bounds(&self) -> Option<(Vec3, Vec3)> {
+        let mut lo = Vec3::splat(f32::INFINITY);
+        let mut hi = Vec3::splat(f32::NEG_INFINITY);
+        for s in 0..self.model.len() {
+            let d = deform_surfel(&self.model, &self.displacement, &self.gradient, s);
+            lo = lo.min(d.centre - Vec3::splat(d.leaf_radius));
+            hi = hi.max(d.centre + Vec3::splat(d.leaf_radius));
+        }
+        (lo.cmple(hi).all()).then_some((lo, hi))
     }
 
     /// Surfels have no scalar field: every isovalue shows the same surface.
