@@ -47,6 +47,8 @@ pub enum IngestErrorKind {
     Timeout,
     /// The server could not write (500).
     Io,
+    /// The disk (or the user's quota) is full (507).
+    StorageFull,
 }
 
 impl IngestError {
@@ -71,6 +73,15 @@ impl IngestError {
     }
 
     fn io(e: std::io::Error) -> IngestError {
+        if crate::store::storage_full(&e) {
+            return IngestError {
+                kind: IngestErrorKind::StorageFull,
+                code: "storage_full",
+                message: crate::store::STORAGE_FULL.into(),
+                field: None,
+                offset: None,
+            };
+        }
         IngestError {
             kind: IngestErrorKind::Io,
             code: "store_failed",

@@ -4,7 +4,9 @@
 mod auth;
 mod bad_balls;
 mod cli;
+mod cors;
 mod crash;
+mod disk_full;
 mod limits;
 mod openapi;
 mod push_errors;
