@@ -182,6 +182,20 @@ pub fn default_data_dir() -> Option<PathBuf> {
         .map(|d| d.join("isoray"))
 }
 
+/// Checks that `origin` is `http(s)://host[:port]`, as browsers send it.
+pub fn validate_origin(origin: &str) -> Result<(), String> {
+    let bad = || format!("--allowed-origins `{origin}` is not http(s)://host[:port]");
+    let (scheme, authority) = origin.split_once("://").ok_or_else(bad)?;
+    if !matches!(scheme, "http" | "https")
+        || authority.is_empty()
+        || authority.contains(['/', '?', '#', '@', ' '])
+        || axum::http::HeaderValue::from_str(origin).is_err()
+    {
+        return Err(bad());
+    }
+    Ok(())
+}
+
 impl Default for Config {
     fn default() -> Config {
         Config::parse_from(["isoray"])
@@ -261,7 +275,7 @@ impl Config {
             return Err("--max-scenes must be at least 1".into());
         }
         for origin in &self.allowed_origins {
-            crate::api::origin::validate_origin(origin)?;
+            validate_origin(origin)?;
         }
         for (name, token) in [
             ("--admin-token", &self.admin_token),
@@ -273,5 +287,26 @@ impl Config {
             }
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::validate_origin;
+
+    #[test]
+    fn origins_are_scheme_host_and_port() {
+        for good in ["https://viewer.example", "http://127.0.0.1:8080"] {
+            validate_origin(good).expect(good);
+        }
+        for bad in [
+            "viewer.example",
+            "ftp://x",
+            "https://",
+            "https://a/b",
+            "https://u@h",
+        ] {
+            validate_origin(bad).expect_err(bad);
+        }
     }
 }

@@ -64,11 +64,11 @@ impl AppError {
     /// A store write that failed: 507 when the disk or quota is full (nothing was stored,
     /// what is stored is unchanged), else 500.
     pub fn store_write(e: std::io::Error) -> AppError {
-        if crate::store::storage_full(&e) {
+        if crate::store::ingest::storage_full(&e) {
             AppError::new(
                 StatusCode::INSUFFICIENT_STORAGE,
                 "storage_full",
-                crate::store::STORAGE_FULL,
+                crate::store::ingest::STORAGE_FULL,
             )
         } else {
             AppError::internal(e)

@@ -73,11 +73,11 @@ impl IngestError {
     }
 
     fn io(e: std::io::Error) -> IngestError {
-        if crate::store::storage_full(&e) {
+        if storage_full(&e) {
             return IngestError {
                 kind: IngestErrorKind::StorageFull,
                 code: "storage_full",
-                message: crate::store::STORAGE_FULL.into(),
+                message: STORAGE_FULL.into(),
                 field: None,
                 offset: None,
             };
@@ -602,6 +602,15 @@ pub fn ingest_json_tets(
     };
     let raw = raw_from_json(step, vertices)?;
     ingest_raw(BodyReader::from_bytes(raw.into()), limits, target)
+}
+
+/// What a client is told when the disk is full.
+pub const STORAGE_FULL: &str =
+    "the server's disk (or quota) is full: nothing was stored, and what is stored is unchanged; retry once space is freed";
+
+/// Whether `e` says the disk or the quota is full (ENOSPC, EDQUOT).
+pub fn storage_full(e: &std::io::Error) -> bool {
+    matches!(e.raw_os_error(), Some(28 | 122))
 }
 
 #[cfg(test)]

@@ -594,15 +594,6 @@ fn write_scene_dir(temp: &Path, meta: &SceneMeta) -> std::io::Result<()> {
     sync_dir(temp)
 }
 
-/// What a client is told when the disk is full.
-pub const STORAGE_FULL: &str =
-    "the server's disk (or quota) is full: nothing was stored, and what is stored is unchanged; retry once space is freed";
-
-/// Whether `e` says the disk or the quota is full (ENOSPC, EDQUOT).
-pub fn storage_full(e: &std::io::Error) -> bool {
-    matches!(e.raw_os_error(), Some(28 | 122))
-}
-
 /// fsyncs a directory so renames and unlinks in it are durable.
 fn sync_dir(dir: &Path) -> std::io::Result<()> {
     File::open(dir)?.sync_all()
