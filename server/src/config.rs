@@ -151,6 +151,21 @@ pub struct Config {
     /// connection stays open, before the connection is closed.
     #[arg(long, env = "ISORAY_HEADER_TIMEOUT_SECS", default_value_t = 10)]
     pub header_timeout_secs: u64,
+
+    // --- issue 15: keeping strangers out ---------------------------------------------------
+    /// Origins (`scheme://host[:port]`, comma-separated) whose pages may call the API from a
+    /// browser (CORS) and open websocket viewers. The server's own origin always may. Unset:
+    /// same origin only.
+    #[arg(long, env = "ISORAY_ALLOWED_ORIGINS", value_delimiter = ',')]
+    pub allowed_origins: Vec<String>,
+
+    /// Most stored scenes; creating one more is refused with 409 until one is deleted.
+    #[arg(long, env = "ISORAY_MAX_SCENES", default_value_t = 1000)]
+    pub max_scenes: usize,
+
+    /// Token needed to read `/metrics` (`Authorization: Bearer ...`). Unset: open.
+    #[arg(long, env = "ISORAY_METRICS_TOKEN", hide_env_values = true)]
+    pub metrics_token: Option<String>,
 }
 
 /// `isoray` under the user's data directory: `$XDG_DATA_HOME/isoray`, else
@@ -165,6 +180,20 @@ pub fn default_data_dir() -> Option<PathBuf> {
         .filter(|p| p.is_absolute())
         .or_else(|| from_env("HOME").map(|h| h.join(".local").join("share")))
         .map(|d| d.join("isoray"))
+}
+
+/// Checks that `origin` is `http(s)://host[:port]`, as browsers send it.
+pub fn validate_origin(origin: &str) -> Result<(), String> {
+    let bad = || format!("--allowed-origins `{origin}` is not http(s)://host[:port]");
+    let (scheme, authority) = origin.split_once("://").ok_or_else(bad)?;
+    if !matches!(scheme, "http" | "https")
+        || authority.is_empty()
+        || authority.contains(['/', '?', '#', '@', ' '])
+        || axum::http::HeaderValue::from_str(origin).is_err()
+    {
+        return Err(bad());
+    }
+    Ok(())
 }
 
 impl Default for Config {
@@ -242,14 +271,42 @@ impl Config {
         if self.max_steps_per_scene == 0 {
             return Err("--max-steps-per-scene must be at least 1".into());
         }
+        if self.max_scenes == 0 {
+            return Err("--max-scenes must be at least 1".into());
+        }
+        for origin in &self.allowed_origins {
+            validate_origin(origin)?;
+        }
         for (name, token) in [
             ("--admin-token", &self.admin_token),
             ("--view-token", &self.view_token),
+            ("--metrics-token", &self.metrics_token),
         ] {
             if token.as_ref().is_some_and(|t| t.len() < 16) {
                 return Err(format!("{name} must be at least 16 characters"));
             }
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::validate_origin;
+
+    #[test]
+    fn origins_are_scheme_host_and_port() {
+        for good in ["https://viewer.example", "http://127.0.0.1:8080"] {
+            validate_origin(good).expect(good);
+        }
+        for bad in [
+            "viewer.example",
+            "ftp://x",
+            "https://",
+            "https://a/b",
+            "https://u@h",
+        ] {
+            validate_origin(bad).expect_err(bad);
+        }
     }
 }

@@ -61,6 +61,20 @@ impl AppError {
         )
     }
 
+    /// A store write that failed: 507 when the disk or quota is full (nothing was stored,
+    /// what is stored is unchanged), else 500.
+    pub fn store_write(e: std::io::Error) -> AppError {
+        if crate::store::ingest::storage_full(&e) {
+            AppError::new(
+                StatusCode::INSUFFICIENT_STORAGE,
+                "storage_full",
+                crate::store::ingest::STORAGE_FULL,
+            )
+        } else {
+            AppError::internal(e)
+        }
+    }
+
     /// The same error with another message.
     pub fn with_message(mut self, message: String) -> AppError {
         self.message = message;
@@ -75,6 +89,7 @@ impl From<IngestError> for AppError {
             IngestErrorKind::TooLarge => StatusCode::PAYLOAD_TOO_LARGE,
             IngestErrorKind::Timeout => StatusCode::REQUEST_TIMEOUT,
             IngestErrorKind::Io => StatusCode::INTERNAL_SERVER_ERROR,
+            IngestErrorKind::StorageFull => StatusCode::INSUFFICIENT_STORAGE,
         };
         AppError {
             status,

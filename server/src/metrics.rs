@@ -25,7 +25,8 @@ pub const QUEUE_WAIT_SECONDS: &str = "isoray_render_queue_wait_seconds";
 pub const FRAMES_DROPPED: &str = "isoray_frames_dropped_total";
 /// Bytes of depth channels sent with interactive frames.
 pub const DEPTH_BYTES: &str = "isoray_depth_bytes_total";
-/// Scene states prepared (state update plus acceleration structure), by scene.
+/// Scene states prepared (state update plus acceleration structure), by demo scene; every
+/// stored scene counts under `scene="stored"` (a series per pushed scene would be unbounded).
 pub const STATES_BUILT: &str = "isoray_scene_states_built_total";
 pub const INPUTS_REJECTED: &str = "isoray_inputs_rejected_total";
 /// Always 1, labelled with the version and the cargo features the binary was built with

@@ -6,6 +6,7 @@
 //! the job pool and come back through channels (see `session` and `jobs`).
 
 use crate::api::access::check_stream_view;
+use crate::api::origin::check_upgrade_origin;
 use crate::error::AppError;
 use crate::state::AppState;
 use crate::{metrics, placement, web};
@@ -35,18 +36,33 @@ pub fn app(state: AppState) -> Router {
         .route("/api/v1/scenes/{id}/stream", get(stream))
         .route("/{file}", get(web::asset))
         .merge(crate::api::routes::router(state.config()))
+        .layer(crate::api::origin::cors_layer(
+            &state.config().allowed_origins,
+        ))
         .layer(TraceLayer::new_for_http())
         .with_state(state)
 }
 
-async fn metrics_text() -> impl axum::response::IntoResponse {
-    (
+/// `/metrics`, behind `--metrics-token` when it is set.
+async fn metrics_text(
+    State(state): State<AppState>,
+    headers: axum::http::HeaderMap,
+) -> Result<impl axum::response::IntoResponse, AppError> {
+    if let Some(token) = &state.config().metrics_token {
+        let hash = crate::api::auth::token_hash(token);
+        crate::api::auth::require(
+            crate::api::auth::bearer(&headers),
+            &[&hash],
+            "reading metrics",
+        )?;
+    }
+    Ok((
         [(
             axum::http::header::CONTENT_TYPE,
             "text/plain; version=0.0.4; charset=utf-8",
         )],
         metrics::render(),
-    )
+    ))
 }
 
 async fn stream(
@@ -56,6 +72,9 @@ async fn stream(
     axum::extract::RawQuery(query): axum::extract::RawQuery,
     ws: Result<WebSocketUpgrade, WebSocketUpgradeRejection>,
 ) -> Result<Response, AppError> {
+    // A browser page of another origin may not watch through its visitor (CORS does not
+    // cover websockets).
+    check_upgrade_origin(&state.config().allowed_origins, &headers)?;
     let entry = state.scenes().get(&id).ok_or_else(|| {
         match placement::misrouted(state.config().shard.as_deref(), &id) {
             Some(message) => AppError::new(

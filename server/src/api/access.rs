@@ -18,6 +18,34 @@ use std::sync::Arc;
 pub struct ApiShared {
     pub writes: RateLimiter,
     pub openapi_json: String,
+    /// Scene creations in progress, counted against `--max-scenes` with the stored ones.
+    pub creating: std::sync::Mutex<usize>,
+}
+
+/// A place for one more scene under `--max-scenes`, held while it is created.
+pub struct SceneSlot<'a>(&'a std::sync::Mutex<usize>);
+
+impl Drop for SceneSlot<'_> {
+    fn drop(&mut self) {
+        let mut n = self.0.lock().unwrap_or_else(|e| e.into_inner());
+        *n = n.saturating_sub(1);
+    }
+}
+
+/// Reserves a place for a new scene, or says that `--max-scenes` are stored already.
+pub fn reserve_scene<'a>(app: &AppState, shared: &'a ApiShared) -> Result<SceneSlot<'a>, AppError> {
+    let max = app.config().max_scenes;
+    let mut creating = shared.creating.lock().unwrap_or_else(|e| e.into_inner());
+    let stored = app.scenes().stored_count();
+    if stored + *creating >= max {
+        return Err(AppError::new(
+            StatusCode::CONFLICT,
+            "too_many_scenes",
+            format!("this server holds {stored} scenes, its limit (--max-scenes {max}); delete one first"),
+        ));
+    }
+    *creating += 1;
+    Ok(SceneSlot(&shared.creating))
 }
 
 /// The client's address, when the server was started with connection info.

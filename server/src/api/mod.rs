@@ -12,6 +12,7 @@ pub mod access;
 pub mod auth;
 pub mod client;
 mod histogram;
+pub mod origin;
 mod push;
 mod render;
 pub mod request;

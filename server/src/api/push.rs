@@ -67,7 +67,8 @@ struct PushQuery {
         (status = 409, description = "Different content at this index", body = ApiErrorBody),
         (status = 413, description = "Body too large", body = ApiErrorBody),
         (status = 415, description = "Unsupported media type", body = ApiErrorBody),
-        (status = 429, description = "Too many writes", body = ApiErrorBody)
+        (status = 429, description = "Too many writes", body = ApiErrorBody),
+        (status = 507, description = "The server's disk is full; nothing was stored", body = ApiErrorBody)
     )
 )]
 pub async fn push_step(
@@ -124,11 +125,11 @@ pub async fn push_step(
         // The JSON shape is per kind (rows of balls for metaballs).
         PushFormat::Json => match limits.layout {
             StepLayout::Metaballs => {
-                let step: JsonStep = read_json(&app, body).await?;
+                let step: JsonStep = read_json(&app, &headers, body).await?;
                 blocking(move || ingest_json(&step, &limits, target)).await??
             }
             StepLayout::Tets { .. } => {
-                let step: JsonTetStep = read_json(&app, body).await?;
+                let step: JsonTetStep = read_json(&app, &headers, body).await?;
                 blocking(move || ingest_json_tets(&step, &limits, target)).await??
             }
         },
@@ -159,7 +160,7 @@ pub async fn push_step(
                 AppError::new(StatusCode::CONFLICT, "conflict", e.to_string()).field("index")
             }
             CommitError::SceneGone => AppError::not_found(format!("scene `{id}` was deleted")),
-            CommitError::Io(e) => AppError::internal(e),
+            CommitError::Io(e) => AppError::store_write(e),
         })?;
     let (status, outcome, step) = match outcome {
         CommitOutcome::Created(s) => (StatusCode::CREATED, "created", s),

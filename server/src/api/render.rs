@@ -30,6 +30,7 @@ const DEFAULT_RENDER_SIZE: (u32, u32) = (640, 480);
     responses(
         (status = 200, description = "The image", content(("image/png"), ("image/jpeg"), ("application/x-npy"))),
         (status = 400, description = "Invalid request", body = ApiErrorBody),
+        (status = 415, description = "Content-Type is not application/json", body = ApiErrorBody),
         (status = 404, description = "Not found", body = ApiErrorBody)
     )
 )]
@@ -41,7 +42,7 @@ pub async fn render(
 ) -> Result<Response, AppError> {
     let entry = scene_of(&app, &id)?;
     check_view(&app, &headers, Some(&entry))?;
-    let req: RenderRequest = read_json(&app, body).await?;
+    let req: RenderRequest = read_json(&app, &headers, body).await?;
     let max = app.config().max_size;
     let width = req.width.unwrap_or(DEFAULT_RENDER_SIZE.0);
     let height = req.height.unwrap_or(DEFAULT_RENDER_SIZE.1);

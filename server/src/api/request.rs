@@ -39,10 +39,48 @@ pub fn parse_json<T: serde::de::DeserializeOwned>(bytes: &[u8]) -> Result<T, App
     })
 }
 
+/// A JSON body must say so: `Content-Type: application/json` (parameters such as
+/// `charset` allowed), else 415. A browser page of another origin cannot send that without
+/// a CORS preflight (`api::origin`), so this keeps such pages from posting `text/plain`
+/// bodies that the server would read as JSON.
+pub fn require_json(headers: &HeaderMap) -> Result<(), AppError> {
+    if media_type(headers) == "application/json" {
+        return Ok(());
+    }
+    Err(AppError::new(
+        StatusCode::UNSUPPORTED_MEDIA_TYPE,
+        "unsupported_media_type",
+        format!(
+            "Content-Type `{}`: this body is JSON; send `Content-Type: application/json`",
+            content_type(headers)
+        ),
+    )
+    .field("Content-Type"))
+}
+
+fn content_type(headers: &HeaderMap) -> &str {
+    headers
+        .get(header::CONTENT_TYPE)
+        .and_then(|v| v.to_str().ok())
+        .unwrap_or("")
+}
+
+/// The media type of `Content-Type`, lower case, without parameters.
+fn media_type(headers: &HeaderMap) -> String {
+    content_type(headers)
+        .split(';')
+        .next()
+        .unwrap_or("")
+        .trim()
+        .to_ascii_lowercase()
+}
+
 pub async fn read_json<T: serde::de::DeserializeOwned>(
     app: &AppState,
+    headers: &HeaderMap,
     body: Body,
 ) -> Result<T, AppError> {
+    require_json(headers)?;
     let limit = app.config().max_json_bytes;
     let timeout = Duration::from_secs(app.config().push_timeout_secs);
     let read = axum::body::to_bytes(body, usize::try_from(limit).unwrap_or(usize::MAX));
@@ -127,17 +165,8 @@ pub async fn forward_body(
 }
 
 pub fn push_format(headers: &HeaderMap) -> Result<PushFormat, AppError> {
-    let ct = headers
-        .get(header::CONTENT_TYPE)
-        .and_then(|v| v.to_str().ok())
-        .unwrap_or("");
-    let media = ct
-        .split(';')
-        .next()
-        .unwrap_or("")
-        .trim()
-        .to_ascii_lowercase();
-    match media.as_str() {
+    let ct = content_type(headers);
+    match media_type(headers).as_str() {
         "application/json" => Ok(PushFormat::Json),
         m if m == NPY_MEDIA_TYPE => Ok(PushFormat::Npy),
         m if m == RAW_MEDIA_TYPE => Ok(PushFormat::Raw),

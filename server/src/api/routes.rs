@@ -98,6 +98,7 @@ pub fn router(config: &Config) -> Router<AppState> {
     let (router, doc) = openapi_router().split_for_parts();
     let shared = Arc::new(ApiShared {
         writes: RateLimiter::new(config.write_rate, config.write_burst),
+        creating: std::sync::Mutex::new(0),
         openapi_json: doc
             .to_pretty_json()
             .expect("the generated OpenAPI document serializes"),
@@ -120,7 +121,7 @@ pub fn router(config: &Config) -> Router<AppState> {
         (status = 101, description = "Switching to the websocket protocol"),
         (status = 400, description = "Not a websocket request", body = ApiErrorBody),
         (status = 401, description = "View token missing (header or `?token=`)", body = ApiErrorBody),
-        (status = 403, description = "View token wrong", body = ApiErrorBody),
+        (status = 403, description = "View token wrong, or a browser page whose `Origin` is neither this server's nor one of --allowed-origins", body = ApiErrorBody),
         (status = 404, description = "No such scene", body = ApiErrorBody),
         (status = 421, description = "The id names another shard: the load balancer misrouted the request", body = ApiErrorBody)
     )
@@ -167,7 +168,11 @@ async fn healthz_doc() {}
     get,
     path = "/metrics",
     tag = "server",
-    responses((status = 200, description = "Metrics", content_type = "text/plain"))
+    responses(
+        (status = 200, description = "Metrics", content_type = "text/plain"),
+        (status = 401, description = "Metrics token missing (server started with --metrics-token)", body = ApiErrorBody),
+        (status = 403, description = "Not the metrics token", body = ApiErrorBody)
+    )
 )]
 #[allow(dead_code)] // documentation only: `serve.rs` routes this path
 async fn metrics_doc() {}

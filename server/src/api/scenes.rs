@@ -1,7 +1,8 @@
 //! Scenes: list, create, get, delete.
 
 use crate::api::access::{
-    check_create, check_view, check_write, scene_of, stored_of, ApiShared, ClientAddr,
+    check_create, check_view, check_write, reserve_scene, scene_of, stored_of, ApiShared,
+    ClientAddr,
 };
 use crate::api::auth::token_hash;
 use crate::api::request::{blocking, read_json};
@@ -51,10 +52,13 @@ pub async fn list_scenes(
         (status = 400, description = "Invalid field", body = ApiErrorBody),
         (status = 401, description = "Admin token missing (server started with --admin-token)", body = ApiErrorBody),
         (status = 403, description = "Not the admin token", body = ApiErrorBody),
+        (status = 409, description = "The server holds --max-scenes scenes already", body = ApiErrorBody),
         (status = 413, description = "Body too large", body = ApiErrorBody),
+        (status = 415, description = "Content-Type is not application/json", body = ApiErrorBody),
         (status = 422, description = "Kind not supported yet", body = ApiErrorBody),
         (status = 429, description = "Too many writes", body = ApiErrorBody),
-        (status = 503, description = "No scene store", body = ApiErrorBody)
+        (status = 503, description = "No scene store", body = ApiErrorBody),
+        (status = 507, description = "The server's disk is full; nothing was stored", body = ApiErrorBody)
     )
 )]
 pub async fn create_scene(
@@ -66,7 +70,8 @@ pub async fn create_scene(
 ) -> Result<(StatusCode, Json<CreatedScene>), AppError> {
     shared.writes.check(client)?;
     check_create(&app, &headers)?;
-    let spec: CreateScene = read_json(&app, body).await?;
+    let spec: CreateScene = read_json(&app, &headers, body).await?;
+    let _slot = reserve_scene(&app, &shared)?;
     for (field, text, max) in [
         ("name", &spec.name, 200),
         ("description", &spec.description, 4000),
@@ -102,7 +107,7 @@ pub async fn create_scene(
     };
     let scene = blocking(move || store.create_scene(meta, setup))
         .await?
-        .map_err(AppError::internal)?;
+        .map_err(AppError::store_write)?;
     let entry = app.scenes().add_stored(scene);
     tracing::info!(scene = entry.id(), "scene created");
     Ok((

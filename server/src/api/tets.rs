@@ -93,7 +93,7 @@ pub async fn put_mesh(
     }
     let mesh = match format {
         PushFormat::Json => {
-            let data: TetMeshData = read_json(&app, body).await?;
+            let data: TetMeshData = read_json(&app, &headers, body).await?;
             let n = data.cells.len() as u64;
             if n > limits.max_tets {
                 return Err(too_many_tets(n, limits.max_tets).into());
@@ -133,7 +133,7 @@ pub async fn put_mesh(
                 .field("mesh"))
             };
         }
-        let checksum = crate::store::mesh::write(&dir, &mesh).map_err(AppError::internal)?;
+        let checksum = crate::store::mesh::write(&dir, &mesh).map_err(AppError::store_write)?;
         let mesh = Arc::new(mesh);
         slot.set(Arc::clone(&mesh));
         Ok(("created", checksum, mesh))

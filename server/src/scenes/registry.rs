@@ -117,6 +117,11 @@ impl SceneRegistry {
         self.entries().iter().map(|e| e.summary()).collect()
     }
 
+    /// How many stored scenes there are.
+    pub fn stored_count(&self) -> usize {
+        self.read_stored().len()
+    }
+
     /// Registers a scene just created in the store.
     pub fn add_stored(&self, scene: Arc<StoredScene>) -> Arc<SceneEntry> {
         let entry = Arc::new(SceneEntry::stored(scene, Arc::clone(&self.cache)));

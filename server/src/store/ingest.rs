@@ -47,6 +47,8 @@ pub enum IngestErrorKind {
     Timeout,
     /// The server could not write (500).
     Io,
+    /// The disk (or the user's quota) is full (507).
+    StorageFull,
 }
 
 impl IngestError {
@@ -71,6 +73,15 @@ impl IngestError {
     }
 
     fn io(e: std::io::Error) -> IngestError {
+        if storage_full(&e) {
+            return IngestError {
+                kind: IngestErrorKind::StorageFull,
+                code: "storage_full",
+                message: STORAGE_FULL.into(),
+                field: None,
+                offset: None,
+            };
+        }
         IngestError {
             kind: IngestErrorKind::Io,
             code: "store_failed",
@@ -591,6 +602,15 @@ pub fn ingest_json_tets(
     };
     let raw = raw_from_json(step, vertices)?;
     ingest_raw(BodyReader::from_bytes(raw.into()), limits, target)
+}
+
+/// What a client is told when the disk is full.
+pub const STORAGE_FULL: &str =
+    "the server's disk (or quota) is full: nothing was stored, and what is stored is unchanged; retry once space is freed";
+
+/// Whether `e` says the disk or the quota is full (ENOSPC, EDQUOT).
+pub fn storage_full(e: &std::io::Error) -> bool {
+    matches!(e.raw_os_error(), Some(28 | 122))
 }
 
 #[cfg(test)]

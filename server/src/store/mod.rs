@@ -305,7 +305,8 @@ impl Store {
         self.read_scenes().values().map(|s| s.stored_bytes()).sum()
     }
 
-    /// Writes a new scene's directory crash-safely and registers it.
+    /// Writes a new scene's directory crash-safely and registers it. A failed write (a full
+    /// disk) removes the partial `.tmp-<id>` directory at once.
     pub fn create_scene(
         &self,
         meta: SceneMeta,
@@ -314,13 +315,12 @@ impl Store {
         let scenes_dir = self.root.join("scenes");
         let temp = scenes_dir.join(format!(".tmp-{}", meta.id));
         let dir = scenes_dir.join(&meta.id);
-        std::fs::create_dir_all(temp.join("steps"))?;
-        let json = serde_json::to_vec_pretty(&meta).map_err(std::io::Error::other)?;
-        let mut file = File::create(temp.join("scene.json"))?;
-        file.write_all(&json)?;
-        file.sync_all()?;
-        sync_dir(&temp.join("steps"))?;
-        sync_dir(&temp)?;
+        if let Err(e) = write_scene_dir(&temp, &meta) {
+            if let Err(cleanup) = std::fs::remove_dir_all(&temp) {
+                tracing::warn!(path = %temp.display(), error = %cleanup, "cannot remove a failed scene's directory");
+            }
+            return Err(e);
+        }
         std::fs::rename(&temp, &dir)?;
         sync_dir(&scenes_dir)?;
         let scene = Arc::new(StoredScene {
@@ -581,6 +581,17 @@ fn file_name(path: &Path) -> String {
     path.file_name()
         .map(|n| n.to_string_lossy().into_owned())
         .unwrap_or_default()
+}
+
+/// A new scene's directory under its temporary name: `steps/` and `scene.json`, synced.
+fn write_scene_dir(temp: &Path, meta: &SceneMeta) -> std::io::Result<()> {
+    std::fs::create_dir_all(temp.join("steps"))?;
+    let json = serde_json::to_vec_pretty(meta).map_err(std::io::Error::other)?;
+    let mut file = File::create(temp.join("scene.json"))?;
+    file.write_all(&json)?;
+    file.sync_all()?;
+    sync_dir(&temp.join("steps"))?;
+    sync_dir(temp)
 }
 
 /// fsyncs a directory so renames and unlinks in it are durable.

@@ -108,3 +108,43 @@ async fn a_push_that_arrives_too_slowly_is_abandoned() {
     .await;
     server.stop().await;
 }
+
+/// `--max-scenes` caps the stored scenes; one more is refused with 409 naming the limit, and
+/// deleting one makes room again.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_number_of_scenes_is_limited() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let server = Server::start(dir.path(), &["--max-scenes", "2"]).await;
+    let base = server.base.clone();
+    call(move || {
+        let (first, token) = create(&base);
+        create(&base);
+        let c = Client::new(&base).expect("url");
+        let post = || {
+            c.request(
+                "POST",
+                "/api/v1/scenes",
+                &[("Content-Type", "application/json")],
+                Body::Bytes(br#"{"kind":"metaballs"}"#),
+            )
+            .expect("answer")
+        };
+        let r = post();
+        assert_eq!(r.status, 409, "a third scene: {}", r.text());
+        assert_eq!(json(&r)["code"], "too_many_scenes");
+        assert!(r.text().contains("--max-scenes"), "{}", r.text());
+        let auth = format!("Bearer {token}");
+        let r = c
+            .request(
+                "DELETE",
+                &format!("/api/v1/scenes/{first}"),
+                &[("Authorization", &auth)],
+                Body::Empty,
+            )
+            .expect("delete");
+        assert_eq!(r.status, 204);
+        assert_eq!(post().status, 201, "room again after a delete");
+    })
+    .await;
+    server.stop().await;
+}

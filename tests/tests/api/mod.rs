@@ -4,8 +4,10 @@
 mod auth;
 mod bad_balls;
 mod cli;
+mod cors;
 mod crash;
 mod depth;
+mod disk_full;
 mod limits;
 mod look;
 mod molecules;

@@ -77,3 +77,94 @@ async fn metrics_count_what_a_session_did() {
     drop(ws);
     server.stop().await;
 }
+
+/// `/metrics` needs `--metrics-token` when it is set (and only that token); the series of
+/// states built do not grow with the number of pushed scenes (no label per stored scene).
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn metrics_have_their_own_token_and_bounded_series() {
+    use isoray_server::api::client::{Body, Client};
+    const METRICS: &str = "metrics-token-0123456789";
+    const VIEW: &str = "view-token-0123456789";
+    let server = TestServer::start(&["--metrics-token", METRICS, "--view-token", VIEW]).await;
+    let base = format!("http://{}", server.addr);
+    call_blocking(move || {
+        let c = Client::new(&base).expect("url");
+        let get = |token: Option<&str>| {
+            let auth = token.map(|t| format!("Bearer {t}"));
+            let headers: Vec<(&str, &str)> = auth
+                .as_deref()
+                .map(|a| ("Authorization", a))
+                .into_iter()
+                .collect();
+            c.request("GET", "/metrics", &headers, Body::Empty)
+                .expect("answer")
+        };
+        assert_eq!(get(None).status, 401);
+        assert_eq!(
+            get(Some(VIEW)).status,
+            403,
+            "the view token is not the metrics token"
+        );
+        let r = get(Some(METRICS));
+        assert_eq!(r.status, 200, "{}", r.text());
+
+        // A stored scene, one step, one render: its state is built and counted, without its id.
+        let auth = format!("Bearer {VIEW}");
+        let r = c
+            .request(
+                "POST",
+                "/api/v1/scenes",
+                &[("Content-Type", "application/json")],
+                Body::Bytes(br#"{"kind":"metaballs"}"#),
+            )
+            .expect("create");
+        assert_eq!(r.status, 201, "{}", r.text());
+        let v: serde_json::Value = serde_json::from_slice(&r.body).expect("json");
+        let id = v["scene"]["id"].as_str().expect("id").to_string();
+        let write = format!("Bearer {}", v["write_token"].as_str().expect("token"));
+        let r = c
+            .request(
+                "PUT",
+                &format!("/api/v1/scenes/{id}/steps/0"),
+                &[
+                    ("Content-Type", "application/json"),
+                    ("Authorization", &write),
+                ],
+                Body::Bytes(br#"{"positions":[[0,0,0],[0.5,0,0]],"radii":[0.6,0.6]}"#),
+            )
+            .expect("push");
+        assert_eq!(r.status, 201, "{}", r.text());
+        let r = c
+            .request(
+                "POST",
+                &format!("/api/v1/scenes/{id}/render"),
+                &[
+                    ("Content-Type", "application/json"),
+                    ("Authorization", &auth),
+                ],
+                Body::Bytes(br#"{"width":16,"height":16}"#),
+            )
+            .expect("render");
+        assert_eq!(r.status, 200, "{}", r.text());
+        let text = get(Some(METRICS)).text();
+        assert!(
+            sample(
+                &text,
+                "isoray_scene_states_built_total",
+                &["scene=\"stored\""]
+            )
+            .is_some_and(|n| n >= 1.0),
+            "stored scenes' builds are counted together:\n{text}"
+        );
+        assert!(
+            !text.contains(&id),
+            "no series is labelled with a stored scene's id:\n{text}"
+        );
+    })
+    .await;
+    server.stop().await;
+}
+
+async fn call_blocking<T: Send + 'static>(f: impl FnOnce() -> T + Send + 'static) -> T {
+    tokio::task::spawn_blocking(f).await.expect("client thread")
+}
