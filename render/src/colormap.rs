@@ -111,15 +111,15 @@ impl ColorMap {
         let w = f - i as f32;
         let channel = |c: usize| {
             let srgb = stops[i][c] as f32 * (1.0 - w) + stops[i + 1][c] as f32 * w;
-            srgb8_to_linear_f(srgb)
+            srgb_code_to_linear(srgb)
         };
         Vec3::new(channel(0), channel(1), channel(2))
     }
 }
 
-/// An sRGB code in `[0, 255]`, not necessarily whole, to linear light (IEC 61966-2-1, as
-/// `shade::srgb8_to_linear` for whole codes).
-fn srgb8_to_linear_f(v: f32) -> f32 {
+/// An sRGB code in `[0, 255]`, not necessarily whole, to linear light (IEC 61966-2-1);
+/// `shade::srgb8_to_linear` is this for whole codes.
+pub fn srgb_code_to_linear(v: f32) -> f32 {
     let s = v / 255.0;
     if s <= 0.040_45 {
         s / 12.92

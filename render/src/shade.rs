@@ -9,7 +9,7 @@
 //! light seen whole from above the horizon delivers exactly the irradiance of a point light at
 //! its centre, so unshadowed shading treats both alike; only shadows see the sphere's extent.
 
-use crate::colormap::ColorMap;
+use crate::colormap::{srgb_code_to_linear, ColorMap};
 use crate::effects::toggles::Effects;
 pub use crate::geom::clip::ClipBox;
 use crate::ray::Hit;
@@ -388,12 +388,7 @@ pub fn linear_to_srgb8(v: f32) -> u8 {
 
 /// An 8-bit sRGB value to linear light (the inverse of [`linear_to_srgb8`] up to rounding).
 pub fn srgb8_to_linear(v: u8) -> f32 {
-    let s = v as f32 / 255.0;
-    if s <= 0.040_45 {
-        s / 12.92
-    } else {
-        ((s + 0.055) / 1.055).powf(2.4)
-    }
+    srgb_code_to_linear(v as f32)
 }
 
 #[cfg(test)]
