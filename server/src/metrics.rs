@@ -34,6 +34,12 @@ pub const INPUTS_REJECTED: &str = "isoray_inputs_rejected_total";
 /// that the binary they spawn is the one they were built with.
 pub const BUILD_INFO: &str = "isoray_build_info";
 
+/// Whether this build has the `default` feature (a build with `--no-default-features` lacks
+/// it even when it names every default feature, and cargo then compiles it apart).
+pub fn default_features() -> bool {
+    cfg!(feature = "default")
+}
+
 /// The cargo features of this build, sorted, comma-separated.
 pub fn features() -> String {
     let mut on = Vec::new();

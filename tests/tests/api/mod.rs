@@ -202,7 +202,9 @@ pub fn isoray_binary() -> &'static Path {
         let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
         let mut cmd = std::process::Command::new(cargo);
         cmd.args(["build", "-p", "isoray-server", "--bin", "isoray"]);
-        cmd.arg("--no-default-features");
+        if !isoray_server::metrics::default_features() {
+            cmd.arg("--no-default-features");
+        }
         let features = isoray_server::metrics::features();
         if !features.is_empty() {
             cmd.args(["--features", &features]);
