@@ -78,6 +78,19 @@ impl PrimaryRays {
     pub fn forward(&self) -> Vec3 {
         self.forward
     }
+
+    /// What [`PrimaryRays::through_pixel`] is made of, for a backend that builds the rays
+    /// itself (the GPU's): eye, direction through the top-left corner, one pixel's step right
+    /// and down, and the view axis.
+    pub fn parts(&self) -> [Vec3; 5] {
+        [
+            self.eye,
+            self.top_left,
+            self.right_step,
+            self.down_step,
+            self.forward,
+        ]
+    }
 }
 
 #[cfg(test)]

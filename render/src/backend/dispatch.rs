@@ -2,12 +2,16 @@
 //!
 //! The seam is the pass ([`TracePasses`]): a backend traces a frame of primary rays or one
 //! pass of an effects plan; what is built from passes (effects frames, refinement) lives
-//! above it in [`crate::backend::accumulator`], written once. A wgpu backend is a new
-//! variant here (`Gpu(GpuBackend)`, its type in `backend/gpu.rs` implementing
-//! [`TracePasses`]) and an arm in each `match` below.
+//! above it in [`crate::backend::accumulator`], written once. The wgpu backend (feature
+//! `gpu`) is the variant `Gpu(GpuBackend)`, its type in `backend/gpu/` implementing
+//! [`TracePasses`].
 
 use crate::backend::accumulator::{self, Accumulator, FrameRays, TracePasses};
 use crate::backend::cpu::{CpuBackend, PoolError};
+#[cfg(feature = "gpu")]
+use crate::backend::gpu::backend::GpuBackend;
+#[cfg(feature = "gpu")]
+use crate::backend::gpu::device::{AdapterChoice, GpuError};
 use crate::effects::toggles::Effects;
 use crate::framebuffer::{Framebuffer, SurfaceBuffer};
 use crate::scene::PreparedScene;
@@ -18,6 +22,11 @@ use crate::view::View;
 pub enum Backend {
     /// Tiles traced on a rayon pool of this machine's cores.
     Cpu(CpuBackend),
+    /// Compute shaders on a wgpu device, with a CPU pool beside it for the render jobs and
+    /// for what the kernel does not trace.
+    /// (Boxed: the device and its buffers are far larger than a pool handle.)
+    #[cfg(feature = "gpu")]
+    Gpu(Box<GpuBackend>),
 }
 
 impl Backend {
@@ -26,10 +35,41 @@ impl Backend {
         Ok(Backend::Cpu(CpuBackend::new(threads)?))
     }
 
+    /// The GPU backend on the adapter wgpu prefers (a software one such as lavapipe
+    /// included), beside a CPU pool of `threads` workers.
+    #[cfg(feature = "gpu")]
+    pub fn gpu(threads: usize) -> Result<Backend, GpuError> {
+        Ok(Backend::Gpu(Box::new(GpuBackend::new(
+            threads,
+            AdapterChoice::Any,
+        )?)))
+    }
+
+    /// A hardware GPU when there is one (`device_type` not `Cpu`), else the CPU; with why the
+    /// GPU was not taken.
+    pub fn auto(threads: usize) -> Result<(Backend, Option<String>), PoolError> {
+        #[cfg(feature = "gpu")]
+        {
+            match GpuBackend::new(threads, AdapterChoice::HardwareOnly) {
+                Ok(gpu) => Ok((Backend::Gpu(Box::new(gpu)), None)),
+                Err(e) => Ok((Backend::cpu(threads)?, Some(e.to_string()))),
+            }
+        }
+        #[cfg(not(feature = "gpu"))]
+        {
+            Ok((
+                Backend::cpu(threads)?,
+                Some("built without the `gpu` feature".into()),
+            ))
+        }
+    }
+
     /// The backend's name, for logs and metrics.
     pub fn name(&self) -> &'static str {
         match self {
             Backend::Cpu(_) => "cpu",
+            #[cfg(feature = "gpu")]
+            Backend::Gpu(_) => "gpu",
         }
     }
 
@@ -37,6 +77,8 @@ impl Backend {
     pub fn threads(&self) -> usize {
         match self {
             Backend::Cpu(cpu) => cpu.threads(),
+            #[cfg(feature = "gpu")]
+            Backend::Gpu(gpu) => gpu.cpu().threads(),
         }
     }
 
@@ -45,6 +87,8 @@ impl Backend {
     pub fn spawn(&self, job: impl FnOnce() + Send + 'static) {
         match self {
             Backend::Cpu(cpu) => cpu.spawn(job),
+            #[cfg(feature = "gpu")]
+            Backend::Gpu(gpu) => gpu.cpu().spawn(job),
         }
     }
 
@@ -52,6 +96,8 @@ impl Backend {
     pub fn render(&self, scene: &PreparedScene, view: &View) -> Framebuffer {
         match self {
             Backend::Cpu(cpu) => cpu.render_primary(scene, view),
+            #[cfg(feature = "gpu")]
+            Backend::Gpu(gpu) => gpu.render_primary(scene, view),
         }
     }
 
@@ -60,6 +106,9 @@ impl Backend {
     pub fn render_surface(&self, scene: &PreparedScene, view: &View) -> SurfaceBuffer {
         match self {
             Backend::Cpu(cpu) => cpu.render_surface(scene, view),
+            // Distances and normals are read back from the CPU's trace for now.
+            #[cfg(feature = "gpu")]
+            Backend::Gpu(gpu) => gpu.cpu().render_surface(scene, view),
         }
     }
 
@@ -73,6 +122,8 @@ impl Backend {
     ) -> (Framebuffer, FrameRays) {
         match self {
             Backend::Cpu(cpu) => accumulator::render_effects(cpu, scene, view, effects),
+            #[cfg(feature = "gpu")]
+            Backend::Gpu(gpu) => accumulator::render_effects(gpu.as_ref(), scene, view, effects),
         }
     }
 
@@ -87,6 +138,10 @@ impl Backend {
     ) -> Framebuffer {
         match self {
             Backend::Cpu(cpu) => accumulator::refine(cpu, scene, view, effects, accumulator),
+            #[cfg(feature = "gpu")]
+            Backend::Gpu(gpu) => {
+                accumulator::refine(gpu.as_ref(), scene, view, effects, accumulator)
+            }
         }
     }
 }

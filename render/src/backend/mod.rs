@@ -4,6 +4,8 @@
 pub mod accumulator;
 pub mod cpu;
 pub mod dispatch;
+#[cfg(feature = "gpu")]
+pub mod gpu;
 
 pub use accumulator::{Accumulator, FrameRays, Pass, DEFAULT_MAX_PASSES, DEFAULT_THRESHOLD};
 pub use cpu::{CpuBackend, PoolError};

@@ -35,6 +35,15 @@ impl PreparedMetaballs {
         }
     }
 
+    /// The tree a query at `isovalue` walks, if this state traces with one (what the GPU
+    /// backend uploads).
+    pub fn tree_for(&self, isovalue: f32) -> Option<&Tree> {
+        match self.accel_for(isovalue) {
+            Accel::Tree(tree) => Some(tree),
+            Accel::BruteForce | Accel::ActiveList => None,
+        }
+    }
+
     fn relaxed_accel(&self, opts: &BuildOptions) -> &Accel {
         self.fallback
             .get_or_init(|| build_fallback(&self.scene, opts))

@@ -1,0 +1,153 @@
+//! The WGSL source of the trace kernel, checked by naga in a unit test (no device needed):
+//! it parses, validates, and its structs have the sizes and member offsets of the Rust
+//! structs in [`crate::backend::gpu::layout`].
+
+/// The metaball trace kernel (entry point [`ENTRY`]).
+pub const SOURCE: &str = include_str!("metaballs.wgsl");
+
+/// The kernel's entry point.
+pub const ENTRY: &str = "trace";
+
+/// Pixels per workgroup along x and y (`@workgroup_size(8, 8, 1)` in the source).
+pub const WORKGROUP: u32 = 8;
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::backend::gpu::layout::{
+        GpuBall, GpuFrame, GpuGroup, GpuLight, GpuMaterial, GpuNode,
+    };
+    use std::mem::{offset_of, size_of};
+    use wgpu::naga;
+
+    fn module() -> naga::Module {
+        naga::front::wgsl::parse_str(SOURCE)
+            .unwrap_or_else(|e| panic!("{}", e.emit_to_string(SOURCE)))
+    }
+
+    #[test]
+    fn the_kernel_parses_and_validates() {
+        let module = module();
+        naga::valid::Validator::new(
+            naga::valid::ValidationFlags::all(),
+            naga::valid::Capabilities::empty(),
+        )
+        .validate(&module)
+        .unwrap_or_else(|e| panic!("{}", e.emit_to_string(SOURCE)));
+        let entry = module
+            .entry_points
+            .iter()
+            .find(|e| e.name == ENTRY)
+            .expect("the entry point");
+        assert_eq!(entry.stage, naga::ShaderStage::Compute);
+        assert_eq!(entry.workgroup_size, [WORKGROUP, WORKGROUP, 1]);
+    }
+
+    /// The value of the shader's `u32` constant `name`.
+    fn constant(module: &naga::Module, name: &str) -> u32 {
+        let c = module
+            .constants
+            .iter()
+            .find(|(_, c)| c.name.as_deref() == Some(name))
+            .unwrap_or_else(|| panic!("constant {name} in the shader"))
+            .1;
+        match module.global_expressions[c.init] {
+            naga::Expression::Literal(naga::Literal::U32(v)) => v,
+            ref other => panic!("{name} = {other:?}"),
+        }
+    }
+
+    #[test]
+    fn shader_limits_are_the_ones_the_upload_checks() {
+        use crate::backend::gpu::upload::{MAX_DEPTH, MAX_GATHER};
+        use crate::kinds::metaballs::bezier::ITERATION_CAP;
+        let m = module();
+        assert_eq!(constant(&m, "MAX_GATHER") as usize, MAX_GATHER);
+        assert_eq!(constant(&m, "STACK_SIZE") as usize, MAX_DEPTH + 1);
+        assert_eq!(constant(&m, "ITERATION_CAP"), ITERATION_CAP);
+    }
+
+    /// The struct `name` of the shader: its size and its members' (name, offset).
+    fn layout(module: &naga::Module, name: &str) -> (u32, Vec<(String, u32)>) {
+        let ty = module
+            .types
+            .iter()
+            .find(|(_, t)| t.name.as_deref() == Some(name))
+            .unwrap_or_else(|| panic!("struct {name} in the shader"))
+            .1;
+        match &ty.inner {
+            naga::TypeInner::Struct { members, span } => (
+                *span,
+                members
+                    .iter()
+                    .map(|m| (m.name.clone().unwrap_or_default(), m.offset))
+                    .collect(),
+            ),
+            other => panic!("{name} is not a struct: {other:?}"),
+        }
+    }
+
+    /// Asserts that the shader's struct `name` has `size` bytes and `offsets` (Rust's).
+    fn same_layout(module: &naga::Module, name: &str, size: usize, offsets: &[(&str, usize)]) {
+        let (span, members) = layout(module, name);
+        assert_eq!(span as usize, size, "{name}: WGSL size vs Rust size");
+        assert_eq!(members.len(), offsets.len(), "{name}: member count");
+        for ((wgsl_name, wgsl_offset), (rust_name, rust_offset)) in members.iter().zip(offsets) {
+            assert_eq!(wgsl_name, rust_name, "{name}: member order");
+            assert_eq!(
+                *wgsl_offset as usize, *rust_offset,
+                "{name}.{rust_name}: WGSL offset vs Rust offset"
+            );
+        }
+    }
+
+    #[test]
+    fn shader_structs_match_the_rust_structs_byte_for_byte() {
+        let m = module();
+        macro_rules! offsets {
+            ($t:ty; $($f:ident),*) => {
+                &[$((stringify!($f), offset_of!($t, $f))),*]
+            };
+        }
+        same_layout(
+            &m,
+            "Frame",
+            size_of::<GpuFrame>(),
+            offsets!(GpuFrame; eye, top_left, right_step, down_step, forward, background_top,
+                background_bottom, ambient, mapped_albedo, kernel, floor_color0, floor_color1,
+                kernel_c4, kernel_degree, isovalue, tolerance, width, height, flags, t_max,
+                light_count, group_count, material_count, node_count, floor_height,
+                floor_checker, floor_material, _pad),
+        );
+        same_layout(
+            &m,
+            "Light",
+            size_of::<GpuLight>(),
+            offsets!(GpuLight; position, color),
+        );
+        same_layout(
+            &m,
+            "Material",
+            size_of::<GpuMaterial>(),
+            offsets!(GpuMaterial; diffuse, emission, extra),
+        );
+        same_layout(
+            &m,
+            "Group",
+            size_of::<GpuGroup>(),
+            offsets!(GpuGroup; first, count, material, _pad),
+        );
+        same_layout(
+            &m,
+            "Node",
+            size_of::<GpuNode>(),
+            offsets!(GpuNode; min, first, max, count),
+        );
+        same_layout(
+            &m,
+            "Ball",
+            size_of::<GpuBall>(),
+            offsets!(GpuBall; center, strength, m0, m1, m2, color),
+        );
+    }
+}
