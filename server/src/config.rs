@@ -166,6 +166,21 @@ pub struct Config {
     /// Token needed to read `/metrics` (`Authorization: Bearer ...`). Unset: open.
     #[arg(long, env = "ISORAY_METRICS_TOKEN", hide_env_values = true)]
     pub metrics_token: Option<String>,
+
+    /// Where frames are traced: `cpu`; `gpu` (a wgpu device, software ones such as lavapipe
+    /// included; the server needs the `gpu` feature); `auto`: a hardware GPU when there is
+    /// one, else the CPU. A GPU that cannot start or fails later leaves the CPU tracing, with
+    /// a warning.
+    #[arg(long, env = "ISORAY_BACKEND", value_enum, default_value_t = BackendChoice::Auto)]
+    pub backend: BackendChoice,
+}
+
+/// `--backend`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum BackendChoice {
+    Cpu,
+    Gpu,
+    Auto,
 }
 
 /// `isoray` under the user's data directory: `$XDG_DATA_HOME/isoray`, else

@@ -66,7 +66,11 @@ async fn run(config: Config) -> Result<(), String> {
         .await
         .map_err(|e| format!("cannot listen on {}: {e}", config.listen))?;
     let addr = listener.local_addr().map_err(|e| e.to_string())?;
-    tracing::info!(threads = state.backend().threads(), "render pool started");
+    tracing::info!(
+        threads = state.backend().threads(),
+        backend = state.backend().name(),
+        "render pool started"
+    );
     println!("isoray is serving its demo scenes: open http://{addr}/ in a browser");
     serve(listener, state, shutdown_signal())
         .await

@@ -1,7 +1,7 @@
 //! State shared by every request: configuration, the render pool and its fair scheduler,
 //! the job pool, the scenes, the sessions, and the shutdown signal.
 
-use crate::config::Config;
+use crate::config::{BackendChoice, Config};
 use crate::jobs::{self, JobPool};
 use crate::scenes::registry::SceneRegistry;
 use crate::schedule::RenderScheduler;
@@ -33,7 +33,7 @@ impl AppState {
     pub fn new(config: Config) -> Result<AppState, String> {
         config.validate()?;
         crate::metrics::handle();
-        let backend = Arc::new(Backend::cpu(config.threads).map_err(|e| e.to_string())?);
+        let backend = Arc::new(backend_for(&config)?);
         let jobs = JobPool::new(jobs::threads_for(backend.threads()))?;
         let scheduler = RenderScheduler::new(Arc::clone(&backend));
         let scenes = SceneRegistry::from_config(&config);
@@ -151,5 +151,33 @@ impl SessionTable {
 
     fn lock(&self) -> std::sync::MutexGuard<'_, BTreeMap<u64, Arc<SessionStats>>> {
         self.open.lock().unwrap_or_else(|e| e.into_inner())
+    }
+}
+
+/// The render backend `--backend` asks for; a GPU that cannot start leaves the CPU with a
+/// warning (`gpu`) or an info line (`auto`, where no hardware GPU is the common case).
+pub fn backend_for(config: &Config) -> Result<Backend, String> {
+    let cpu = || Backend::cpu(config.threads).map_err(|e| e.to_string());
+    match config.backend {
+        BackendChoice::Cpu => cpu(),
+        BackendChoice::Auto => {
+            let (backend, why) = Backend::auto(config.threads).map_err(|e| e.to_string())?;
+            if let Some(why) = why {
+                tracing::info!(reason = %why, "tracing on the CPU");
+            }
+            Ok(backend)
+        }
+        #[cfg(feature = "gpu")]
+        BackendChoice::Gpu => match Backend::gpu(config.threads) {
+            Ok(backend) => Ok(backend),
+            Err(e) => {
+                tracing::warn!(error = %e, "--backend gpu: no usable GPU; tracing on the CPU");
+                cpu()
+            }
+        },
+        #[cfg(not(feature = "gpu"))]
+        BackendChoice::Gpu => {
+            Err("--backend gpu: this isoray was built without the `gpu` feature".into())
+        }
     }
 }

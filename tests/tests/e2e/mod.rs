@@ -3,6 +3,8 @@
 mod adaptive;
 mod bad_input;
 mod codecs;
+#[cfg(feature = "gpu")]
+mod gpu;
 mod lifecycle;
 mod metrics;
 mod paper_scenes;
