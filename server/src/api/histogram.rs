@@ -34,7 +34,7 @@ fn parse_query(query: &str) -> Result<Query, AppError> {
     let (mut lo, mut hi) = (None, None);
     // Percent-decoded (`1e%2B36`), as a client's URL encoder writes it.
     for (k, v) in form_urlencoded::parse(query.as_bytes()) {
-        let (k, v) = (k.as_ref(), v.as_ref());
+        let (k, v): (&str, &str) = (&k, &v);
         let number = |name: &'static str| {
             v.parse::<f64>()
                 .ok()

@@ -250,7 +250,7 @@ fn serde_urlencoded_lite(query: &str) -> Result<PushQuery, AppError> {
     };
     // Percent-decoded (`time=1e%2B3`), as a client's URL encoder writes it.
     for (k, v) in form_urlencoded::parse(query.as_bytes()) {
-        let (k, v) = (k.as_ref(), v.as_ref());
+        let (k, v): (&str, &str) = (&k, &v);
         match k {
             "replace" => {
                 q.replace = Some(match v {
