@@ -61,20 +61,16 @@ fn served_kinds() -> Vec<&'static str> {
         .collect()
 }
 
-fn constrain_schemas(doc: &mut Value, config: &Config) {
-    let rgb = numbers(3, 0.0, 1.0);
+/// A property's constraints: (schema, property, what to merge into it).
+type Constraint = (&'static str, &'static str, Value);
+
+/// A scene description's own fields, its kinds' data and steps.
+fn scene_constraints() -> Vec<Constraint> {
     let point = numbers(3, -COORD, COORD);
-    let max_depth = f64::from(config.max_ray_depth);
-    let max_samples = f64::from(config.max_samples);
     let kernels: Vec<&str> = crate::kinds::metaballs::setup::KERNEL_NAMES
         .split(", ")
         .collect();
-    let mut maps: Vec<&str> = isoray_render::colormap::ColorMapKind::ALL
-        .iter()
-        .map(|k| k.name())
-        .collect();
-    maps.push("none");
-    let table: Vec<(&str, &str, Value)> = vec![
+    vec![
         (
             "CreateScene",
             "kind",
@@ -121,6 +117,14 @@ fn constrain_schemas(doc: &mut Value, config: &Config) {
             json!({"items": {"minItems": 4, "maxItems": 4, "items": {"maximum": u64::MAX}},
                    "description": "Four vertex indices per tet, each below the number of vertices, four different vertices of a tet with positive volume (422 otherwise)."}),
         ),
+    ]
+}
+
+/// A scene's lighting: lights, materials, groups, floor, clip box, isosurfaces, volume.
+fn lighting_constraints() -> Vec<Constraint> {
+    let rgb = numbers(3, 0.0, 1.0);
+    let point = numbers(3, -COORD, COORD);
+    vec![
         ("LightingSpec", "lights", json!({"maxItems": 8})),
         ("LightingSpec", "ambient", rgb.clone()),
         ("LightingSpec", "background_top", rgb.clone()),
@@ -217,6 +221,20 @@ fn constrain_schemas(doc: &mut Value, config: &Config) {
             json!({"exclusiveMinimum": 0.0, "maximum": COORD}),
         ),
         ("VolumeSpec", "color", rgb.clone()),
+    ]
+}
+
+/// A viewer's effects and look, and a render request, within this server's limits.
+fn view_constraints(config: &Config) -> Vec<Constraint> {
+    let rgb = numbers(3, 0.0, 1.0);
+    let max_depth = f64::from(config.max_ray_depth);
+    let max_samples = f64::from(config.max_samples);
+    let mut maps: Vec<&str> = isoray_render::colormap::ColorMapKind::ALL
+        .iter()
+        .map(|k| k.name())
+        .collect();
+    maps.push("none");
+    vec![
         ("EffectChanges", "depth", range(0.0, max_depth)),
         ("EffectChanges", "layers", range(0.0, max_depth)),
         ("EffectChanges", "light_samples", range(1.0, max_samples)),
@@ -289,7 +307,13 @@ fn constrain_schemas(doc: &mut Value, config: &Config) {
             json!({"items": range(-F32_MAX, F32_MAX),
                    "description": "One scalar per mesh vertex (422 otherwise, or for a metaball scene)."}),
         ),
-    ];
+    ]
+}
+
+fn constrain_schemas(doc: &mut Value, config: &Config) {
+    let mut table = scene_constraints();
+    table.extend(lighting_constraints());
+    table.extend(view_constraints(config));
     let Some(schemas) = doc
         .pointer_mut("/components/schemas")
         .and_then(Value::as_object_mut)
