@@ -13,7 +13,7 @@
 //! errors) and a line over all sessions, with the machine it ran on. Everything it sends
 //! goes to `--url` only; the run stops by itself after `--seconds`.
 
-use crate::common::Machine;
+use crate::common::{quantile, Machine};
 use futures_util::{SinkExt, StreamExt};
 use isoray_protocol::{FrameHeader, ServerMessage, SessionInfo, FRAME_HEADER_LEN};
 use serde::Serialize;
@@ -130,15 +130,6 @@ struct Report {
     /// Processes whose session count at mid-run differs from the viewers of the scenes
     /// their shard created (a scene served by a process that does not hold it).
     misplaced_processes: usize,
-}
-
-/// The `q` quantile (0..=1) of sorted `v`, nearest rank; 0 when empty.
-pub(crate) fn quantile(sorted: &[f64], q: f64) -> f64 {
-    if sorted.is_empty() {
-        return 0.0;
-    }
-    let rank = (q * sorted.len() as f64).ceil() as usize;
-    sorted[rank.clamp(1, sorted.len()) - 1]
 }
 
 fn parse_size(s: &str) -> Result<(u32, u32), String> {
@@ -423,7 +414,10 @@ fn print_report(r: &Report) {
             p.url,
             p.sessions,
             p.expected_sessions,
-            p.error.as_deref().map(|e| format!(" ({e})")).unwrap_or_default()
+            p.error
+                .as_deref()
+                .map(|e| format!(" ({e})"))
+                .unwrap_or_default()
         );
     }
     if !r.processes.is_empty() {

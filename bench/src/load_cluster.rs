@@ -97,7 +97,10 @@ fn push(c: &Client, scene: &Created, index: u64, balls: usize) -> Result<(), Str
         .request(
             "PUT",
             &format!("/api/v1/scenes/{}/steps/{index}?time={index}", scene.id),
-            &[("Content-Type", "application/json"), ("Authorization", &auth)],
+            &[
+                ("Content-Type", "application/json"),
+                ("Authorization", &auth),
+            ],
             Body::Bytes(body.as_bytes()),
         )
         .map_err(|e| format!("push {index}: {e}"))?;
@@ -108,7 +111,13 @@ fn push(c: &Client, scene: &Created, index: u64, balls: usize) -> Result<(), Str
 }
 
 /// Pushes step 1, 2, … to `scene` every `1/hz` s until `duration` has passed.
-pub fn pusher(url: String, scene: Created, balls: usize, hz: f64, duration: Duration) -> PushReport {
+pub fn pusher(
+    url: String,
+    scene: Created,
+    balls: usize,
+    hz: f64,
+    duration: Duration,
+) -> PushReport {
     let mut report = PushReport {
         scene: scene.id.clone(),
         ..PushReport::default()
@@ -147,8 +156,8 @@ pub fn pusher(url: String, scene: Created, balls: usize, hz: f64, duration: Dura
         }
     }
     latencies.sort_by(f64::total_cmp);
-    report.latency_p50_ms = crate::load::quantile(&latencies, 0.5);
-    report.latency_p95_ms = crate::load::quantile(&latencies, 0.95);
+    report.latency_p50_ms = crate::common::quantile(&latencies, 0.5);
+    report.latency_p95_ms = crate::common::quantile(&latencies, 0.95);
     report.latency_max_ms = latencies.last().copied().unwrap_or(0.0);
     report
 }
@@ -165,12 +174,10 @@ pub fn parse_backend(s: &str) -> Result<(String, String), String> {
 
 /// The value of the unlabelled gauge `name` in a Prometheus text exposition.
 pub fn gauge(text: &str, name: &str) -> Option<f64> {
-    text.lines()
-        .filter(|l| !l.starts_with('#'))
-        .find_map(|l| {
-            let (metric, value) = l.rsplit_once(' ')?;
-            (metric == name).then(|| value.parse().ok())?
-        })
+    text.lines().filter(|l| !l.starts_with('#')).find_map(|l| {
+        let (metric, value) = l.rsplit_once(' ')?;
+        (metric == name).then(|| value.parse().ok())?
+    })
 }
 
 /// Reads `isoray_sessions` from every backend.
@@ -218,8 +225,7 @@ mod tests {
             Ok(("s1".into(), "http://127.0.0.1:8082".into()))
         );
         assert!(parse_backend("http://127.0.0.1:8082").is_err());
-        let step: serde_json::Value =
-            serde_json::from_str(&step_json(5, 3)).expect("a JSON step");
+        let step: serde_json::Value = serde_json::from_str(&step_json(5, 3)).expect("a JSON step");
         assert_eq!(step["positions"].as_array().map(Vec::len), Some(5));
     }
 }

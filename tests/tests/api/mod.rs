@@ -17,7 +17,6 @@ mod push_errors;
 mod python_client;
 mod python_example;
 mod restart;
-mod schemathesis;
 mod slow_headers;
 mod tets;
 mod vtk_files;

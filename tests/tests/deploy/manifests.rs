@@ -251,8 +251,7 @@ fn compose_file_validates_and_matches_the_nginx_shards() {
             .as_array()
             .expect("balancer volumes")
             .iter()
-            .any(|v| v.as_str()
-                == Some("./nginx/isoray.conf:/etc/nginx/conf.d/isoray.conf:ro")),
+            .any(|v| v.as_str() == Some("./nginx/isoray.conf:/etc/nginx/conf.d/isoray.conf:ro")),
         "the balancer mounts the shipped nginx file: {balancer}"
     );
     assert_eq!(balancer["ports"][0], "8080:8080");
@@ -260,8 +259,16 @@ fn compose_file_validates_and_matches_the_nginx_shards() {
     let mut volumes = std::collections::BTreeSet::new();
     for (name, addr) in &shards {
         let s = &services[name.as_str()];
-        assert_eq!(s["environment"]["ISORAY_SHARD"], name.as_str(), "{name}: {s}");
-        assert_eq!(s["environment"]["ISORAY_LISTEN"], addr.as_str(), "{name}: {s}");
+        assert_eq!(
+            s["environment"]["ISORAY_SHARD"],
+            name.as_str(),
+            "{name}: {s}"
+        );
+        assert_eq!(
+            s["environment"]["ISORAY_LISTEN"],
+            addr.as_str(),
+            "{name}: {s}"
+        );
         assert_eq!(s["network_mode"], "service:balancer", "{name}");
         assert_eq!(s["build"]["dockerfile"], "deploy/Dockerfile", "{name}");
         let volume = s["volumes"][0].as_str().expect("a store volume");
@@ -269,6 +276,10 @@ fn compose_file_validates_and_matches_the_nginx_shards() {
         assert_eq!(s["environment"]["ISORAY_DATA_DIR"], "/data");
         volumes.insert(volume.to_string());
     }
-    assert_eq!(volumes.len(), shards.len(), "a volume per shard: {volumes:?}");
+    assert_eq!(
+        volumes.len(),
+        shards.len(),
+        "a volume per shard: {volumes:?}"
+    );
     assert!(repo_root().join("deploy/Dockerfile").exists());
 }

@@ -146,11 +146,7 @@ async fn bad_scene_descriptions_name_the_field_and_create_nothing() {
             "lighting.groups[0].material",
             "lighting.clip_box",
         ];
-        let want = if relational.contains(&field) {
-            422
-        } else {
-            400
-        };
+        let want = if relational.contains(field) { 422 } else { 400 };
         assert_eq!(status, want, "{lighting}: {answer}");
         let named = answer["field"].as_str().unwrap_or_default();
         assert!(
