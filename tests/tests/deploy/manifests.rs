@@ -9,10 +9,12 @@ use serde_json::Value;
 use std::path::Path;
 use std::process::Command;
 
-/// `python -m kubernetes_validate --strict FILE`: (passed, what it printed).
-fn kubernetes_validate(file: &Path) -> (bool, String) {
+/// `python -m MODULE ARGS... FILE` of a validator the CI venv has (`package` names it for the
+/// message when it is missing): (passed, what it printed).
+fn validate(module: &str, package: &str, args: &[&str], file: &Path) -> (bool, String) {
     let out = Command::new(python())
-        .args(["-m", "kubernetes_validate", "--strict", "--no-warn"])
+        .args(["-m", module])
+        .args(args)
         .arg(file)
         .output()
         .expect("python runs");
@@ -23,10 +25,20 @@ fn kubernetes_validate(file: &Path) -> (bool, String) {
     );
     assert!(
         !text.contains("No module named"),
-        "kubernetes-validate is missing: `bash .ci/run` installs it in the test venv \
+        "{package} is missing: `bash .ci/run` installs it in the test venv \
          (ISORAY_PYTHON): {text}"
     );
     (out.status.success(), text)
+}
+
+/// `python -m kubernetes_validate --strict FILE`: (passed, what it printed).
+fn kubernetes_validate(file: &Path) -> (bool, String) {
+    validate(
+        "kubernetes_validate",
+        "kubernetes-validate",
+        &["--strict", "--no-warn"],
+        file,
+    )
 }
 
 /// Every document of a YAML file, as JSON (parsed by PyYAML, which kubernetes-validate uses).
@@ -218,27 +230,13 @@ fn kubernetes_manifests_validate_and_route_each_shard_to_its_pod() {
 #[test]
 fn compose_file_validates_and_matches_the_nginx_shards() {
     let file = repo_root().join("deploy/compose.yaml");
-    let out = Command::new(python())
-        .args([
-            "-m",
-            "check_jsonschema",
-            "--builtin-schema",
-            "vendor.compose-spec",
-        ])
-        .arg(&file)
-        .output()
-        .expect("python runs");
-    let text = format!(
-        "{}{}",
-        String::from_utf8_lossy(&out.stdout),
-        String::from_utf8_lossy(&out.stderr)
+    let (passed, text) = validate(
+        "check_jsonschema",
+        "check-jsonschema",
+        &["--builtin-schema", "vendor.compose-spec"],
+        &file,
     );
-    assert!(
-        !text.contains("No module named"),
-        "check-jsonschema is missing: `bash .ci/run` installs it in the test venv \
-         (ISORAY_PYTHON): {text}"
-    );
-    assert!(out.status.success(), "compose schema:\n{text}");
+    assert!(passed, "compose schema:\n{text}");
 
     let docs = documents(&file);
     let services = docs[0]["services"].as_object().expect("services");
