@@ -39,6 +39,8 @@ pub enum DemoScene {
     Pool,
     /// A tet mesh with a time-varying gyroid field (tetrahedral-isosurface-ray-tracing.txt).
     TetGyroid,
+    /// The deforming bucky ball of tetrahedral-isosurface-ray-tracing.txt Fig. 4, shadows on.
+    TetBucky,
     // The effects demos (see `demo_effects`).
     /// Diffuse, glass and mirror blobs over a floor under a sphere area light.
     Glass,
@@ -49,7 +51,7 @@ pub enum DemoScene {
 }
 
 impl DemoScene {
-    pub const ALL: [DemoScene; 12] = [
+    pub const ALL: [DemoScene; 13] = [
         DemoScene::Blobs,
         DemoScene::Scattered1k,
         DemoScene::Scattered30k,
@@ -59,6 +61,7 @@ impl DemoScene {
         DemoScene::Molecule,
         DemoScene::Pool,
         DemoScene::TetGyroid,
+        DemoScene::TetBucky,
         DemoScene::Glass,
         DemoScene::Clouds,
         DemoScene::Shells,
@@ -89,6 +92,7 @@ impl DemoScene {
             DemoScene::Molecule => "molecule",
             DemoScene::Pool => "pool",
             DemoScene::TetGyroid => "tets-gyroid",
+            DemoScene::TetBucky => "tets-bucky",
             DemoScene::Glass => "glass",
             DemoScene::Clouds => "clouds",
             DemoScene::Shells => "shells",
@@ -106,6 +110,7 @@ impl DemoScene {
             DemoScene::Molecule => "Molecule",
             DemoScene::Pool => "Pool",
             DemoScene::TetGyroid => "Gyroid (tets)",
+            DemoScene::TetBucky => "Deforming bucky ball (tets)",
             DemoScene::Glass => "Glass and mirrors",
             DemoScene::Clouds => "Clouds",
             DemoScene::Shells => "Shells",
@@ -127,6 +132,9 @@ impl DemoScene {
             }
             DemoScene::Pool => "10,000 metaballs of a fluid pool (Fitted BVH paper, Table 1)",
             DemoScene::TetGyroid => "time-varying gyroid field on a ball of 103,000 tets",
+            DemoScene::TetBucky => {
+                "a C60 cage on 146,000 tets whose vertices move every step, with shadows"
+            }
             DemoScene::Glass => {
                 "diffuse, glass and mirror blobs over a floor, lit by a sphere area light"
             }
@@ -147,6 +155,7 @@ impl DemoScene {
             DemoScene::Molecule => 5_440,
             DemoScene::Pool => 10_000,
             DemoScene::TetGyroid => crate::kinds::tets::generate::demo_mesh().tets().len(),
+            DemoScene::TetBucky => crate::kinds::tets::bucky::bucky_tet_count(),
             DemoScene::Glass => demo_effects::GLASS_BALLS,
             DemoScene::Clouds => demo_effects::CLOUD_BALLS,
             DemoScene::Shells => demo_effects::SHELL_BALLS,
@@ -173,6 +182,7 @@ impl DemoScene {
             DemoScene::Molecule => look(Vec3::new(0.0, 10.0, 95.0), Vec3::ZERO, 45.0),
             DemoScene::Pool => look(Vec3::new(0.0, 14.0, 26.0), Vec3::new(0.0, 1.0, 0.0), 50.0),
             DemoScene::TetGyroid => look(Vec3::new(3.0, 2.2, 5.2), Vec3::ZERO, 40.0),
+            DemoScene::TetBucky => look(Vec3::new(3.2, 2.4, 6.4), Vec3::new(0.0, -0.4, 0.0), 40.0),
             DemoScene::Glass => demo_effects::glass_camera(),
             DemoScene::Clouds => demo_effects::clouds_camera(),
             DemoScene::Shells => demo_effects::shells_camera(),
@@ -193,6 +203,7 @@ impl DemoScene {
                 (0.05, 1.5)
             }
             DemoScene::TetGyroid => (-1.5, 1.0),
+            DemoScene::TetBucky => (0.1, 1.0),
             _ => (MIN_ISOVALUE, 1.5),
         }
     }
@@ -213,6 +224,12 @@ impl DemoScene {
                     lighting: self.lighting(),
                 }
             }
+            DemoScene::TetBucky => {
+                return Scene {
+                    geometry: Geometry::Tets(crate::kinds::tets::bucky::bucky_state(time)),
+                    lighting: self.lighting(),
+                }
+            }
             DemoScene::Glass => demo_effects::glass(time),
             DemoScene::Clouds => demo_effects::clouds(time),
             DemoScene::Shells => demo_effects::shells(time),
@@ -230,6 +247,7 @@ impl DemoScene {
             DemoScene::Clouds => demo_effects::clouds_lighting(),
             DemoScene::Shells => demo_effects::shells_lighting(),
             DemoScene::TetGyroid => crate::kinds::tets::generate::demo_lighting(),
+            DemoScene::TetBucky => crate::kinds::tets::bucky::bucky_lighting(),
             _ => Lighting::default(),
         }
     }
