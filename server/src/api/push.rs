@@ -10,10 +10,11 @@ use crate::api::request::{
 };
 use crate::body::BodyReader;
 use crate::error::AppError;
-use crate::kinds::{check_ready, StepLayout};
+use crate::kinds::{check_ready, SceneSetup, StepLayout};
 use crate::state::AppState;
+use crate::store::format::HEADER_LEN;
 use crate::store::ingest::{
-    ingest_json, ingest_json_tets, ingest_npy, ingest_raw, IngestLimits, Target,
+    ingest_json, ingest_json_tets, ingest_npy, ingest_raw, IngestLimits, Target, WrittenStep,
 };
 use crate::store::{CommitError, CommitOutcome};
 use axum::body::Body;
@@ -150,6 +151,14 @@ pub async fn push_step(
             result?
         }
     };
+    // A step that moves a tet mesh is checked as a whole, like the mesh was: the rows passed
+    // one by one, but a tet is inverted only by its four corners together.
+    let written = if limits.layout.checks_whole_step(written.header.columns) {
+        let check_scene = Arc::clone(&scene);
+        blocking(move || check_whole_step(&check_scene.setup, written)).await??
+    } else {
+        written
+    };
     let replace = query.replace.unwrap_or(false);
     let commit_scene = Arc::clone(&scene);
     let commit_store = Arc::clone(&store);
@@ -177,6 +186,16 @@ pub async fn push_step(
         }),
     )
         .into_response())
+}
+
+/// Reads a written (not yet committed) step back and runs its kind's whole-step checks; on
+/// an error the temporary file goes with `written`, so nothing stored changes.
+fn check_whole_step(setup: &SceneSetup, written: WrittenStep) -> Result<WrittenStep, AppError> {
+    let bytes = std::fs::read(written.temp.path())
+        .map_err(|e| AppError::internal(format!("cannot read the written step back: {e}")))?;
+    let payload = bytes.get(HEADER_LEN..).unwrap_or_default();
+    setup.check_step(written.header.columns, payload)?;
+    Ok(written)
 }
 
 /// Parses `replace=true&time=1.5` without another dependency: both values are plain tokens.

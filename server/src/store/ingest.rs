@@ -727,6 +727,7 @@ mod tests {
         let ok = ingest_json_tets(
             &JsonTetStep {
                 scalars: vec![0.0, 1.0, 2.0],
+                positions: None,
             },
             &limits,
             target("a"),
@@ -736,6 +737,7 @@ mod tests {
         let e = ingest_json_tets(
             &JsonTetStep {
                 scalars: vec![0.0, 1e300, 2.0],
+                positions: None,
             },
             &limits,
             target("b"),
@@ -745,6 +747,7 @@ mod tests {
         let e = ingest_json_tets(
             &JsonTetStep {
                 scalars: vec![0.0, 1.0],
+                positions: None,
             },
             &limits,
             target("c"),
