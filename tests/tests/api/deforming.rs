@@ -92,7 +92,7 @@ impl Mesh {
 
 fn camera() -> Camera {
     Camera {
-        eye: glam::Vec3::new(0.6, 1.4, 4.2),
+        eye: glam::Vec3::new(0.3, 0.7, 2.4),
         target: glam::Vec3::new(0.1, 0.0, 0.0),
         up: glam::Vec3::Y,
         fov_y_deg: 45.0,
