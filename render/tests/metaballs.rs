@@ -581,7 +581,9 @@ const PYMOL_DATA: &str = "/usr/share/pymol/data";
 
 #[test]
 fn real_molecules_from_pymol_data_load_and_render_like_brute_force() {
-    use isoray_render::kinds::metaballs::pdb::{molecule_scene, parse_pdb, Element};
+    use isoray_render::kinds::metaballs::pdb::{
+        molecule_scene, read_models, Element, MoleculeOptions,
+    };
     use isoray_render::Camera;
     // HIV-1 protease with an inhibitor (old format: serial numbers where newer files keep the
     // element), and a larger complex with element columns.
@@ -593,20 +595,37 @@ fn real_molecules_from_pymol_data_load_and_render_like_brute_force() {
                 path.display()
             )
         });
+        // The atom records that are not water (these files carry no hydrogens), counted
+        // from the text's columns.
         let records = text
             .lines()
             .take_while(|l| !l.starts_with("ENDMDL"))
             .filter(|l| l.starts_with("ATOM") || l.starts_with("HETATM"))
+            .filter(|l| l.get(17..20) != Some("HOH"))
             .count();
-        let atoms = parse_pdb(&text).expect("a real PDB file parses");
+        let models = read_models(&path, MoleculeOptions::default()).expect("a real PDB file reads");
+        let atoms = &models[0];
         assert_eq!(atoms.len(), records, "{file}: one ball per atom record");
+        if file == "demo/1tii.pdb" {
+            // The Molecule demo shows this structure when pymol-data is installed.
+            let demo = isoray_render::scenes::DemoScene::Molecule;
+            assert_eq!(demo.ball_count(), records, "the Molecule demo is 1TII");
+        }
         assert!(atoms.len() > 1000, "{file}: {} atoms", atoms.len());
-        // Proteins are carbon, nitrogen, oxygen and sulphur (these files carry no hydrogens).
+        // Proteins are carbon, nitrogen, oxygen and sulphur, told apart by their colours.
+        let is = |r: &[f32; 8], e: Element| {
+            let c = e.cpk_color();
+            r[5..8] == [c.x, c.y, c.z] && (r[3] - 2.0 * e.van_der_waals_radius()).abs() < 1e-6
+        };
         let organic = atoms
             .iter()
-            .filter(|a| matches!(a.element, Element::C | Element::N | Element::O | Element::S))
+            .filter(|r| {
+                [Element::C, Element::N, Element::O, Element::S]
+                    .iter()
+                    .any(|&e| is(r, e))
+            })
             .count();
-        let carbon = atoms.iter().filter(|a| a.element == Element::C).count();
+        let carbon = atoms.iter().filter(|r| is(r, Element::C)).count();
         assert!(
             organic * 100 >= atoms.len() * 98,
             "{file}: {organic} of {}",
@@ -616,7 +635,7 @@ fn real_molecules_from_pymol_data_load_and_render_like_brute_force() {
             carbon * 2 > atoms.len(),
             "{file}: carbon is the majority ({carbon})"
         );
-        let scene = molecule_scene(&atoms);
+        let scene = molecule_scene(atoms);
         scene.validate(usize::MAX).expect("valid balls");
         let (lo, hi) = scene.bounds().expect("atoms");
         let center = 0.5 * (lo + hi);

@@ -8,10 +8,11 @@ use crate::api::request::{
 };
 use crate::body::BodyReader;
 use crate::error::AppError;
-use crate::kinds::{check_ready, StepLayout};
+use crate::kinds::{check_ready, SceneSetup, StepLayout};
 use crate::state::AppState;
+use crate::store::format::HEADER_LEN;
 use crate::store::ingest::{
-    ingest_json, ingest_json_tets, ingest_npy, ingest_raw, IngestLimits, Target,
+    ingest_json, ingest_json_tets, ingest_npy, ingest_raw, IngestLimits, Target, WrittenStep,
 };
 use crate::store::{CommitError, CommitOutcome};
 use axum::body::Body;
@@ -161,6 +162,14 @@ pub async fn push_step(
             result?
         }
     };
+    // A step that moves a tet mesh is checked as a whole, like the mesh was: the rows passed
+    // one by one, but a tet is inverted only by its four corners together.
+    let written = if limits.layout.checks_whole_step(written.header.columns) {
+        let check_scene = Arc::clone(&scene);
+        blocking(move || check_whole_step(&check_scene.setup, written)).await??
+    } else {
+        written
+    };
     let replace = query.replace.unwrap_or(false);
     let commit_scene = Arc::clone(&scene);
     let commit_store = Arc::clone(&store);
@@ -208,9 +217,12 @@ struct AnyJsonStep {
 }
 
 impl AnyJsonStep {
-    /// A metaball step (`Ok`) or a tet step (`Err`); neither or both is a 400.
+    /// A metaball step (`Ok`) or a tet step (`Err`): `scalars` makes a tet step (with the
+    /// moved vertex `positions` of a deforming mesh beside them), `positions` alone a
+    /// metaball step; a mixture, or neither, is a 400.
     #[allow(clippy::type_complexity)]
     fn by_kind(self) -> Result<Result<JsonStep, JsonTetStep>, AppError> {
+        let ball_fields = self.radii.is_some() || self.strengths.is_some() || self.colors.is_some();
         match (self.positions, self.scalars) {
             (Some(positions), None) => Ok(Ok(JsonStep {
                 positions,
@@ -218,19 +230,13 @@ impl AnyJsonStep {
                 strengths: self.strengths,
                 colors: self.colors,
             })),
-            (None, Some(scalars))
-                if self.radii.is_none() && self.strengths.is_none() && self.colors.is_none() =>
-            {
-                Ok(Err(JsonTetStep { scalars }))
+            (positions, Some(scalars)) if !ball_fields => {
+                Ok(Err(JsonTetStep { scalars, positions }))
             }
-            (None, Some(_)) => Err(AppError::bad_request(
+            (_, Some(_)) => Err(AppError::bad_request(
                 "invalid_json",
-                "a tet step is {\"scalars\": [...]} only",
-            )
-            .field("scalars")),
-            (Some(_), Some(_)) => Err(AppError::bad_request(
-                "invalid_json",
-                "a step has `positions` (metaballs) or `scalars` (tets), not both",
+                "a tet step is {\"scalars\": [...]} with optional moved vertex \"positions\"; \
+                 `radii`, `strengths` and `colors` belong to metaball steps",
             )
             .field("scalars")),
             (None, None) => Err(AppError::bad_request(
@@ -240,6 +246,16 @@ impl AnyJsonStep {
             .field("positions")),
         }
     }
+}
+
+/// Reads a written (not yet committed) step back and runs its kind's whole-step checks; on
+/// an error the temporary file goes with `written`, so nothing stored changes.
+fn check_whole_step(setup: &SceneSetup, written: WrittenStep) -> Result<WrittenStep, AppError> {
+    let bytes = std::fs::read(written.temp.path())
+        .map_err(|e| AppError::internal(format!("cannot read the written step back: {e}")))?;
+    let payload = bytes.get(HEADER_LEN..).unwrap_or_default();
+    setup.check_step(written.header.columns, payload)?;
+    Ok(written)
 }
 
 /// Parses `replace=true&time=1.5` without another dependency: both values are plain tokens.

@@ -4,6 +4,7 @@
 pub mod push;
 pub mod push_args;
 pub mod push_molecule;
+pub mod push_points;
 pub mod push_vtu;
 pub mod render;
 pub mod vtk_grid;

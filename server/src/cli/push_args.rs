@@ -50,7 +50,9 @@ pub struct PushArgs {
     pub radius_scale: f32,
     /// The step files: `.npy` (float32 or float64, shape (rows, columns)), raw arrays with
     /// the 16-byte `ISRA` header (any other extension), a VTK series (`.vtu`, `.pvd`,
-    /// `.vtk`), or one molecule (`.pdb`, `.cif`: its models are the steps).
+    /// `.vtk`), one molecule (`.pdb`, `.cif`: its models are the steps), or particle files
+    /// (`.csv` with a header naming x, y, z [radius, strength, red, green, blue]; `.xyz`
+    /// frames; `.npz` with the array `positions` and optional `radius`, `strength`, `color`).
     #[arg(required = true)]
     pub files: Vec<PathBuf>,
 }

@@ -43,8 +43,8 @@ use std::sync::Arc;
 pub enum StepLayout {
     /// Rows are balls: `x y z [radius [strength [r g b]]]`.
     Metaballs,
-    /// Rows are the mesh's vertices, one column: the scalar (`vertices`: how many, once the
-    /// mesh is there).
+    /// Rows are the mesh's vertices: the scalar, and for a deforming mesh the vertex's
+    /// position this step (`scalar [x y z]`; `vertices`: how many, once the mesh is there).
     Tets { vertices: Option<u64> },
 }
 
@@ -62,7 +62,7 @@ impl StepLayout {
     pub fn allowed_columns(self) -> &'static [u32] {
         match self {
             StepLayout::Metaballs => &ball_setup::COLUMNS,
-            StepLayout::Tets { .. } => &[1],
+            StepLayout::Tets { .. } => &tet_step::COLUMNS,
         }
     }
 
@@ -78,7 +78,7 @@ impl StepLayout {
     pub fn column_name(self, col: usize) -> &'static str {
         match self {
             StepLayout::Metaballs => ball_setup::column_name(col),
-            StepLayout::Tets { .. } => tet_step::COLUMN_NAME,
+            StepLayout::Tets { .. } => tet_step::column_name(col),
         }
     }
 
@@ -98,6 +98,15 @@ impl StepLayout {
         match self {
             StepLayout::Metaballs => None,
             StepLayout::Tets { vertices } => tet_step::check_rows(vertices, rows),
+        }
+    }
+
+    /// Whether a step of `columns` columns needs [`SceneSetup::check_step`] once its values
+    /// passed one by one: a tet step that moves the vertices does.
+    pub fn checks_whole_step(self, columns: u32) -> bool {
+        match self {
+            StepLayout::Metaballs => false,
+            StepLayout::Tets { .. } => columns == 4,
         }
     }
 
@@ -249,6 +258,19 @@ impl SceneSetup {
         }
     }
 
+    /// The checks of a whole step, once its values passed one by one: a tet step that moves
+    /// the vertices may not invert or flatten a tet ([`tet_step::check_moved`]). `payload`
+    /// holds `rows × columns` little-endian f32, as stored.
+    pub fn check_step(&self, columns: u32, payload: &[u8]) -> Result<(), KindError> {
+        match &self.kind {
+            KindSetup::Metaballs(_) => Ok(()),
+            KindSetup::Tets(t) => match t.mesh.get() {
+                Some(mesh) => tet_step::check_moved(mesh, columns, payload),
+                None => Ok(()),
+            },
+        }
+    }
+
     /// The slot of the static mesh, for a kind that has one (tets); `None` for the others.
     pub fn mesh_slot(&self) -> Option<&Arc<MeshSlot>> {
         match &self.kind {
@@ -294,7 +316,7 @@ pub fn histogram_of(geometry: &Geometry, lo: f32, hi: f32, bins: usize) -> Histo
 /// is a compile error here rather than a metaball scene by default.
 pub fn demo_kind(demo: DemoScene) -> SceneKind {
     match demo {
-        DemoScene::TetGyroid => SceneKind::Tets,
+        DemoScene::TetGyroid | DemoScene::TetBucky => SceneKind::Tets,
         DemoScene::Blobs
         | DemoScene::Scattered30k
         | DemoScene::Scattered100k

@@ -739,6 +739,7 @@ mod tests {
         let ok = ingest_json_tets(
             &JsonTetStep {
                 scalars: vec![0.0, 1.0, 2.0],
+                positions: None,
             },
             &limits,
             target("a"),
@@ -748,6 +749,7 @@ mod tests {
         let e = ingest_json_tets(
             &JsonTetStep {
                 scalars: vec![0.0, 1e300, 2.0],
+                positions: None,
             },
             &limits,
             target("b"),
@@ -757,6 +759,7 @@ mod tests {
         let e = ingest_json_tets(
             &JsonTetStep {
                 scalars: vec![0.0, 1.0],
+                positions: None,
             },
             &limits,
             target("c"),

@@ -1,7 +1,7 @@
-//! `isoray push` of molecules: a real PDB entry from Debian's pymol-data (1TII, 5,565 atoms
+//! `isoray push` of molecules: a real PDB entry from Debian's pymol-data (1TII, 5,469 atoms
 //! without waters) and the same structure as mmCIF, written by gemmi from it, push as
 //! metaball scenes and render the molecule; a truncated file and a malformed coordinate are
-//! refused naming the line.
+//! refused naming the line. `isoray render` of the file gives the server's image.
 
 use super::*;
 use crate::e2e::support::pixel_stddev;
@@ -88,10 +88,31 @@ async fn pdb_and_mmcif_files_push_and_render_and_bad_lines_are_named() {
 
     let server = Server::start(&dir.path().join("data"), &[]).await;
     let base = server.base.clone();
+    let dir_path = dir.path().to_path_buf();
     call(move || {
         let (atoms, pdb_image) = push_and_render(&base, Path::new(PDB));
-        assert_eq!(atoms, 5565, "1TII's atoms without hydrogens and waters");
+        // 5,684 atom records, 215 of them waters (counted from the file's columns by grep).
+        assert_eq!(atoms, 5469, "1TII's atoms without hydrogens and waters");
         assert!(pixel_stddev(&pdb_image) > 5.0, "the molecule shows");
+        // `isoray render` of the same file, offline, gives the server's image byte for byte.
+        let png = dir_path.join("1tii.png");
+        let out = Command::new(isoray_binary())
+            .arg("render")
+            .arg(PDB)
+            .args(["--width", "48", "--height", "36", "--output"])
+            .arg(&png)
+            .output()
+            .expect("isoray render runs");
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let offline = image::open(&png).expect("a png").to_rgb8();
+        assert!(
+            offline == pdb_image,
+            "isoray render and POST .../render differ"
+        );
         let (cif_atoms, cif_image) = push_and_render(&base, &cif);
         assert!(cif_atoms > 5000, "{cif_atoms}");
         assert!(pixel_stddev(&cif_image) > 5.0, "the molecule shows");
@@ -110,6 +131,18 @@ async fn pdb_and_mmcif_files_push_and_render_and_bad_lines_are_named() {
             text.contains("malformed.pdb") && text.contains(&line),
             "{line}: {text}"
         );
+        // `isoray render` names the line too, and writes no image.
+        let out = Command::new(isoray_binary())
+            .arg("render")
+            .arg(&malformed)
+            .arg("--output")
+            .arg(dir_path.join("bad.png"))
+            .output()
+            .expect("isoray render runs");
+        let text = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success());
+        assert!(text.contains(&line), "{line}: {text}");
+        assert!(!dir_path.join("bad.png").exists());
     })
     .await;
     server.stop().await;
