@@ -22,7 +22,7 @@ use axum::extract::{Path, RawQuery, State};
 use axum::http::{HeaderMap, StatusCode};
 use axum::response::{IntoResponse, Response};
 use axum::{Extension, Json};
-use isoray_protocol::api::{ApiErrorBody, JsonStep, JsonTetStep, PushResult};
+use isoray_protocol::api::{ApiErrorBody, JsonStep, JsonSurfelStep, JsonTetStep, PushResult};
 use std::sync::Arc;
 use std::time::Duration;
 
@@ -52,6 +52,7 @@ struct PushQuery {
         description = "The step: JSON for small data; .npy or raw (16-byte ISRA header) for large",
         content(
             (JsonStep = "application/json"),
+            (JsonSurfelStep = "application/json"),
             ("application/x-npy"),
             ("application/octet-stream")
         )
@@ -131,6 +132,17 @@ pub async fn push_step(
             StepLayout::Tets { .. } => {
                 let step: JsonTetStep = read_json(&app, &headers, body).await?;
                 blocking(move || ingest_json_tets(&step, &limits, target)).await??
+            }
+            // Node positions: the shape of a metaball step without its optional columns.
+            StepLayout::Surfels { .. } => {
+                let step: JsonSurfelStep = read_json(&app, &headers, body).await?;
+                let step = JsonStep {
+                    positions: step.positions,
+                    radii: None,
+                    strengths: None,
+                    colors: None,
+                };
+                blocking(move || ingest_json(&step, &limits, target)).await??
             }
         },
         PushFormat::Npy | PushFormat::Raw => {

@@ -599,6 +599,13 @@ pub fn ingest_json_tets(
             )
             .at_field("scalars"))
         }
+        StepLayout::Surfels { .. } => {
+            return Err(IngestError::invalid(
+                "bad_shape",
+                "scalars: a surfel step is the simulation nodes' positions, not scalars",
+            )
+            .at_field("scalars"))
+        }
     };
     let raw = raw_from_json(step, vertices)?;
     ingest_raw(BodyReader::from_bytes(raw.into()), limits, target)
