@@ -22,6 +22,13 @@ pub fn run(args: PushArgs) -> Result<(), String> {
     if args
         .files
         .iter()
+        .any(|f| super::surfel_files::is_surfel_input(f))
+    {
+        return super::push_surfels::run(&args);
+    }
+    if args
+        .files
+        .iter()
         .any(|f| super::push_molecule::is_molecule(f))
     {
         return super::push_molecule::run(&args);

@@ -17,6 +17,7 @@ mod python_client;
 mod python_example;
 mod restart;
 mod slow_headers;
+mod surfel_files;
 mod surfels;
 mod tets;
 mod vtk_files;
