@@ -57,13 +57,14 @@ fn refused(r: &Response, field: &str, says: &str, root: &Path, before: &BTreeMap
     assert!(temp_files(root).is_empty(), "no temporary file left");
 }
 
-/// Columns of the image whose pixels differ from the corner (the background): their mean.
-fn covered(img: &image::RgbImage) -> (usize, f64) {
-    let bg = *img.get_pixel(0, 0);
+/// Pixels that differ from the background (`bg`: per row, the sky's colour; it depends only
+/// on the ray) and the mean column of those pixels.
+fn covered(img: &image::RgbImage, bg: &[image::Rgb<u8>]) -> (usize, f64) {
     let mut n = 0usize;
     let mut sx = 0.0;
-    for (x, _, p) in img.enumerate_pixels() {
-        let d: i32 = (0..3).map(|c| (p[c] as i32 - bg[c] as i32).abs()).sum();
+    for (x, y, p) in img.enumerate_pixels() {
+        let b = bg[y as usize];
+        let d: i32 = (0..3).map(|c| (p[c] as i32 - b[c] as i32).abs()).sum();
         if d > 30 {
             n += 1;
             sx += x as f64;
@@ -214,8 +215,11 @@ async fn surfel_scenes_are_validated_stored_rendered_and_streamed() {
             assert_eq!(r.status, 200, "{}", r.text());
             image::load_from_memory(&r.body).expect("PNG").to_rgb8()
         };
-        let (n0, x0) = covered(&render(0));
-        let (n1, _) = covered(&render(1));
+        // Step 0 leaves the left edge clear: the background of every row.
+        let img0 = render(0);
+        let bg: Vec<image::Rgb<u8>> = (0..img0.height()).map(|y| *img0.get_pixel(0, y)).collect();
+        let (n0, x0) = covered(&img0, &bg);
+        let (n1, _) = covered(&render(1), &bg);
         // The unit sphere at 4.5 covers about a sixth of the frame, moved right of centre.
         assert!(n0 > 200, "the sphere shows: {n0} pixels");
         assert!(x0 > 33.0, "moved right: mean column {x0:.1}");
