@@ -7,6 +7,7 @@ mod common;
 mod effects;
 mod ingest;
 mod load;
+mod load_cluster;
 mod metaballs;
 mod stream;
 mod surfels;

@@ -235,7 +235,7 @@ fn measure(
             let scene = Scene {
                 geometry: Geometry::Surfels(demo.scene(
                     k,
-                    SurfelOptions { mode, cache },
+                    SurfelOptions::new(mode, cache),
                     runtime.clone(),
                 )),
                 lighting: Lighting::default(),
@@ -291,7 +291,7 @@ fn cache_savings(
             let scene = Scene {
                 geometry: Geometry::Surfels(demo.scene(
                     k,
-                    SurfelOptions { mode, cache },
+                    SurfelOptions::new(mode, cache),
                     runtime.clone(),
                 )),
                 lighting: Lighting::default(),
@@ -317,10 +317,7 @@ fn tightness(demo: &SurfelDemo, step: usize, scene: &'static str) -> Vec<Tightne
     let runtime = Arc::new(SurfelRuntime::default());
     let p = PreparedSurfels::new(demo.scene(
         step,
-        SurfelOptions {
-            mode: UpdateMode::Lazy,
-            cache: false,
-        },
+        SurfelOptions::new(UpdateMode::Lazy, false),
         runtime,
     ));
     let model = &p.model;

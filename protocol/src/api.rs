@@ -277,6 +277,10 @@ pub struct SceneBounds {
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 pub struct SceneInfoList {
     pub scenes: Vec<SceneInfo>,
+    /// Peers (`--peers`) that did not answer in time, by base URL (or `dns://` name, when it
+    /// did not resolve): their scenes are missing from `scenes`. Empty when all answered.
+    #[serde(default)]
+    pub unreachable_shards: Vec<String>,
 }
 
 /// One stored step.

@@ -1,9 +1,7 @@
 //! Pushing a step: `PUT /api/v1/scenes/{id}/steps/{index}` with a JSON, `.npy` or raw body,
 //! read as a stream, checked value by value and written crash-safely.
 
-use crate::api::access::{
-    check_write, parse_index, path_error, scene_of, stored_of, ApiShared, ClientAddr,
-};
+use crate::api::access::{parse_index, path_error, writable_scene, ApiShared, ClientAddr};
 use crate::api::request::{
     blocking, declared_length, forward_body, push_format, read_json, too_large, PushFormat,
     BODY_QUEUE,
@@ -22,7 +20,7 @@ use axum::extract::{Path, RawQuery, State};
 use axum::http::{HeaderMap, StatusCode};
 use axum::response::{IntoResponse, Response};
 use axum::{Extension, Json};
-use isoray_protocol::api::{ApiErrorBody, JsonStep, JsonSurfelStep, JsonTetStep, PushResult};
+use isoray_protocol::api::{ApiErrorBody, JsonStep, JsonTetStep, PushResult};
 use std::sync::Arc;
 use std::time::Duration;
 
@@ -52,7 +50,6 @@ struct PushQuery {
         description = "The step: JSON for small data; .npy or raw (16-byte ISRA header) for large",
         content(
             (JsonStep = "application/json"),
-            (JsonSurfelStep = "application/json"),
             ("application/x-npy"),
             ("application/octet-stream")
         )
@@ -81,11 +78,9 @@ pub async fn push_step(
     RawQuery(query): RawQuery,
     body: Body,
 ) -> Result<Response, AppError> {
-    shared.writes.check(client)?;
     let Path((id, index)) = path.map_err(path_error)?;
-    let entry = scene_of(&app, &id)?;
-    let scene = stored_of(&entry)?;
-    check_write(&app, &headers, &scene)?;
+    let scene = writable_scene(&app, &headers, &id)?;
+    shared.writes.check(client)?;
     check_ready(&scene.setup)?;
     let index = parse_index(&app, &index)?;
     let query: PushQuery = serde_urlencoded_lite(query.as_deref().unwrap_or(""))?;
@@ -124,27 +119,40 @@ pub async fn push_step(
     };
     let written = match format {
         // The JSON shape is per kind (rows of balls for metaballs).
-        PushFormat::Json => match limits.layout {
-            StepLayout::Metaballs => {
-                let step: JsonStep = read_json(&app, &headers, body).await?;
-                blocking(move || ingest_json(&step, &limits, target)).await??
+        PushFormat::Json => {
+            let step: AnyJsonStep = read_json(&app, &headers, body).await?;
+            match (limits.layout, step.by_kind()?) {
+                (StepLayout::Metaballs, Ok(step)) => {
+                    blocking(move || ingest_json(&step, &limits, target)).await??
+                }
+                (StepLayout::Tets { .. }, Err(step)) => {
+                    blocking(move || ingest_json_tets(&step, &limits, target)).await??
+                }
+                // Node positions: a metaball step's shape without its optional columns.
+                (StepLayout::Surfels { .. }, Ok(step)) => {
+                    let step = surfel_step(step)?;
+                    blocking(move || ingest_json(&step, &limits, target)).await??
+                }
+                (StepLayout::Metaballs, Err(_))
+                | (StepLayout::Tets { .. }, Ok(_))
+                | (StepLayout::Surfels { .. }, Err(_)) => {
+                    return Err(AppError::relational(
+                        "wrong_kind",
+                        format!(
+                            "scene `{id}` is of kind `{}`: {}",
+                            scene.meta.kind.as_str(),
+                            match limits.layout {
+                                StepLayout::Metaballs => "its JSON steps are {\"positions\": ...}",
+                                StepLayout::Tets { .. } =>
+                                    "its JSON steps are {\"scalars\": [...]}",
+                                StepLayout::Surfels { .. } =>
+                                    "its JSON steps are {\"positions\": ...} (node positions only)",
+                            }
+                        ),
+                    ))
+                }
             }
-            StepLayout::Tets { .. } => {
-                let step: JsonTetStep = read_json(&app, &headers, body).await?;
-                blocking(move || ingest_json_tets(&step, &limits, target)).await??
-            }
-            // Node positions: the shape of a metaball step without its optional columns.
-            StepLayout::Surfels { .. } => {
-                let step: JsonSurfelStep = read_json(&app, &headers, body).await?;
-                let step = JsonStep {
-                    positions: step.positions,
-                    radii: None,
-                    strengths: None,
-                    colors: None,
-                };
-                blocking(move || ingest_json(&step, &limits, target)).await??
-            }
-        },
+        }
         PushFormat::Npy | PushFormat::Raw => {
             let (tx, rx) = tokio::sync::mpsc::channel(BODY_QUEUE);
             let worker = tokio::task::spawn_blocking(move || {
@@ -191,14 +199,93 @@ pub async fn push_step(
         .into_response())
 }
 
+/// A JSON step of any kind, as the document says (`oneOf` JsonStep, JsonTetStep; a surfel
+/// scene's step is a JsonStep with positions only, JsonSurfelStep): which one is decided by
+/// its fields, then checked against the scene's kind (422 if it is another's).
+#[derive(serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+struct AnyJsonStep {
+    #[serde(default)]
+    positions: Option<Vec<[f64; 3]>>,
+    #[serde(default)]
+    radii: Option<Vec<f64>>,
+    #[serde(default)]
+    strengths: Option<Vec<f64>>,
+    #[serde(default)]
+    colors: Option<Vec<[f64; 3]>>,
+    #[serde(default)]
+    scalars: Option<Vec<f64>>,
+}
+
+impl AnyJsonStep {
+    /// A metaball step (`Ok`) or a tet step (`Err`); neither or both is a 400.
+    #[allow(clippy::type_complexity)]
+    fn by_kind(self) -> Result<Result<JsonStep, JsonTetStep>, AppError> {
+        match (self.positions, self.scalars) {
+            (Some(positions), None) => Ok(Ok(JsonStep {
+                positions,
+                radii: self.radii,
+                strengths: self.strengths,
+                colors: self.colors,
+            })),
+            (None, Some(scalars))
+                if self.radii.is_none() && self.strengths.is_none() && self.colors.is_none() =>
+            {
+                Ok(Err(JsonTetStep { scalars }))
+            }
+            (None, Some(_)) => Err(AppError::bad_request(
+                "invalid_json",
+                "a tet step is {\"scalars\": [...]} only",
+            )
+            .field("scalars")),
+            (Some(_), Some(_)) => Err(AppError::bad_request(
+                "invalid_json",
+                "a step has `positions` (metaballs) or `scalars` (tets), not both",
+            )
+            .field("scalars")),
+            (None, None) => Err(AppError::bad_request(
+                "invalid_json",
+                "a step needs `positions` (metaballs) or `scalars` (tets)",
+            )
+            .field("positions")),
+        }
+    }
+}
+
+/// A surfel step is the nodes' positions only: a metaball step's radii, strengths or colours
+/// fit the document's `JsonStep` but not a surfel scene (422 naming the column).
+fn surfel_step(step: JsonStep) -> Result<JsonStep, AppError> {
+    let extra = [
+        ("radii", step.radii.is_some()),
+        ("strengths", step.strengths.is_some()),
+        ("colors", step.colors.is_some()),
+    ]
+    .into_iter()
+    .find(|(_, present)| *present);
+    match extra {
+        Some((name, _)) => Err(AppError::relational(
+            "wrong_kind",
+            format!("a surfel scene's step is the node positions only, without `{name}`"),
+        )
+        .field(name)),
+        None => Ok(JsonStep {
+            positions: step.positions,
+            radii: None,
+            strengths: None,
+            colors: None,
+        }),
+    }
+}
+
 /// Parses `replace=true&time=1.5` without another dependency: both values are plain tokens.
 fn serde_urlencoded_lite(query: &str) -> Result<PushQuery, AppError> {
     let mut q = PushQuery {
         replace: None,
         time: None,
     };
-    for pair in query.split('&').filter(|p| !p.is_empty()) {
-        let (k, v) = pair.split_once('=').unwrap_or((pair, ""));
+    // Percent-decoded (`time=1e%2B3`), as a client's URL encoder writes it.
+    for (k, v) in form_urlencoded::parse(query.as_bytes()) {
+        let (k, v): (&str, &str) = (&k, &v);
         match k {
             "replace" => {
                 q.replace = Some(match v {

@@ -7,6 +7,7 @@
 
 use crate::api::access::ApiShared;
 use crate::api::auth::RateLimiter;
+use crate::api::contract;
 use crate::api::histogram;
 use crate::api::push;
 use crate::api::render;
@@ -105,13 +106,21 @@ pub fn openapi() -> utoipa::openapi::OpenApi {
 pub fn router(config: &Config) -> Router<AppState> {
     let (router, doc) = openapi_router().split_for_parts();
     let shared = Arc::new(ApiShared {
-        writes: RateLimiter::new(config.write_rate, config.write_burst),
+        writes: RateLimiter::new(config.write_rate, config.write_burst, "writes"),
+        renders: RateLimiter::new(config.render_rate, config.render_burst, "renders"),
+        trusted_proxies: crate::clients::trusted(&config.trusted_proxy),
         creating: std::sync::Mutex::new(0),
-        openapi_json: doc
-            .to_pretty_json()
-            .expect("the generated OpenAPI document serializes"),
+        openapi_json: served_document(&doc, config),
     });
     router.layer(Extension(shared))
+}
+
+/// The document as served: the generated one completed with this server's constraints
+/// (`api::contract`).
+fn served_document(doc: &utoipa::openapi::OpenApi, config: &Config) -> String {
+    let mut value = serde_json::to_value(doc).expect("the generated OpenAPI document serializes");
+    contract::apply(&mut value, config);
+    serde_json::to_string_pretty(&value).expect("a JSON value serializes")
 }
 
 /// The websocket that streams frames of a scene (protocol v1, see PROTOCOL.md). Served by

@@ -173,9 +173,11 @@ impl SceneSetup {
             StepLayout::Tets { .. } | StepLayout::Surfels { .. } => false,
         };
         if positive && isovalue <= 0.0 {
-            return Err(
-                KindError::invalid("invalid_value", "isovalue must be positive").field("isovalue"),
-            );
+            return Err(KindError::relational(
+                "invalid_value",
+                "isovalue must be positive in a metaball scene",
+            )
+            .field("isovalue"));
         }
         let slider = match spec.isovalue_slider {
             Some([lo, hi]) => {
@@ -185,7 +187,7 @@ impl SceneSetup {
                 );
                 if !(lo < hi && (!positive || 0.0 < lo)) {
                     let rule = if positive { "0 < lo < hi" } else { "lo < hi" };
-                    return Err(KindError::invalid(
+                    return Err(KindError::relational(
                         "invalid_value",
                         format!("isovalue_slider must be [lo, hi] with {rule}"),
                     )

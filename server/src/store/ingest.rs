@@ -11,7 +11,7 @@
 //! `descr`, `positions[3][1]`, …) or the byte offset in the body where the input went wrong.
 
 use crate::body::{BodyAbort, BodyError, BodyReader};
-use crate::kinds::error::KindError;
+use crate::kinds::error::{KindError, KindErrorKind};
 use crate::kinds::metaballs::step as ball_step;
 use crate::kinds::tets::step::raw_from_json;
 use crate::kinds::StepLayout;
@@ -49,6 +49,9 @@ pub enum IngestErrorKind {
     Io,
     /// The disk (or the user's quota) is full (507).
     StorageFull,
+    /// Values that break a rule between them, or with the scene (422; see
+    /// `KindErrorKind::Relational`).
+    Relational,
 }
 
 impl IngestError {
@@ -136,8 +139,14 @@ impl From<BodyError> for IngestError {
 /// What a kind's step check found, as a push error.
 impl From<KindError> for IngestError {
     fn from(e: KindError) -> IngestError {
+        let kind = match e.kind {
+            KindErrorKind::Relational => IngestErrorKind::Relational,
+            KindErrorKind::Invalid | KindErrorKind::Unsupported | KindErrorKind::NotReady => {
+                IngestErrorKind::Invalid
+            }
+        };
         IngestError {
-            kind: IngestErrorKind::Invalid,
+            kind,
             code: e.code,
             message: e.message,
             field: e.field,
@@ -593,11 +602,14 @@ pub fn ingest_json_tets(
     let vertices = match limits.layout {
         StepLayout::Tets { vertices } => vertices,
         StepLayout::Metaballs => {
-            return Err(IngestError::invalid(
-                "bad_shape",
-                "scalars: a metaball step is rows of balls, not scalars",
-            )
-            .at_field("scalars"))
+            return Err(IngestError {
+                kind: IngestErrorKind::Relational,
+                ..IngestError::invalid(
+                    "bad_shape",
+                    "scalars: a metaball step is rows of balls, not scalars",
+                )
+                .at_field("scalars")
+            })
         }
         StepLayout::Surfels { .. } => {
             return Err(IngestError::invalid(

@@ -12,6 +12,7 @@ mod limits;
 mod look;
 mod molecules;
 mod openapi;
+mod peers;
 mod push_errors;
 mod python_client;
 mod python_example;

@@ -21,6 +21,8 @@ pub struct SurfelCounters {
     pub cache_hits: u64,
     /// Intersections rejected by a clipping surface (§4.3).
     pub clipped: u64,
+    /// Intersections that ran out of MLS iterations without converging (a miss, counted).
+    pub capped: u64,
 }
 
 impl KindCounters for SurfelCounters {
@@ -34,6 +36,7 @@ impl KindCounters for SurfelCounters {
         self.surfel_updates += o.surfel_updates;
         self.cache_hits += o.cache_hits;
         self.clipped += o.clipped;
+        self.capped += o.capped;
     }
 
     fn totals(&self) -> RayTotals {

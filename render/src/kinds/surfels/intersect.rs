@@ -16,11 +16,6 @@ use crate::kinds::surfels::prepared::PreparedSurfels;
 use crate::ray::Ray;
 use glam::Vec3;
 
-/// MLS iterations before a leaf gives up.
-pub const MAX_ITERATIONS: u32 = 12;
-/// Convergence: `|f(x)| < EPSILON · h`.
-pub const EPSILON: f32 = 1e-4;
-
 /// A converged, unclipped intersection with one leaf.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct LeafHit {
@@ -78,7 +73,8 @@ pub fn intersect_leaf(
     let h = p.model.support[s] * stretch.max(1e-3);
     let neighbours = p.model.neighbours.row(s);
     let mut x = ray.at(t0);
-    for _ in 0..MAX_ITERATIONS {
+    let (iterations, epsilon) = (p.options.mls_iterations, p.options.mls_epsilon);
+    for _ in 0..iterations {
         c.iterations += 1;
         let (mut sw, mut sp, mut sn, mut sc) = (0.0f32, Vec3::ZERO, Vec3::ZERO, Vec3::ZERO);
         for &k in neighbours {
@@ -99,7 +95,7 @@ pub fn intersect_leaf(
         if n == Vec3::ZERO {
             return None;
         }
-        if n.dot(x - avg).abs() < EPSILON * h {
+        if n.dot(x - avg).abs() < epsilon * h {
             let t = (x - ray.origin).dot(ray.dir);
             if !(t >= t_min && t <= t_max) || clipped(p, s, x, c) {
                 return None;
@@ -121,6 +117,7 @@ pub fn intersect_leaf(
             return None;
         }
     }
+    c.capped += 1;
     None
 }
 

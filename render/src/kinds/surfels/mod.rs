@@ -13,6 +13,7 @@ pub mod knn;
 pub mod miniball;
 pub mod model;
 pub mod prepared;
+pub mod reference;
 pub mod rigid;
 pub mod sample;
 pub mod scene;

@@ -34,11 +34,26 @@ impl UpdateMode {
 }
 
 /// Tracing options of a surfel scene.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SurfelOptions {
     pub mode: UpdateMode,
     /// Test each primary ray's cached sphere node first (§4.2.2).
     pub cache: bool,
+    /// MLS iterations (§4.2.1) before a leaf gives up (counted as capped).
+    pub mls_iterations: u32,
+    /// Convergence: `|f(x)| < mls_epsilon · h`.
+    pub mls_epsilon: f32,
+}
+
+impl SurfelOptions {
+    /// `mode` and `cache` with the default MLS settings.
+    pub fn new(mode: UpdateMode, cache: bool) -> SurfelOptions {
+        SurfelOptions {
+            mode,
+            cache,
+            ..SurfelOptions::default()
+        }
+    }
 }
 
 impl Default for SurfelOptions {
@@ -46,9 +61,16 @@ impl Default for SurfelOptions {
         SurfelOptions {
             mode: UpdateMode::Auto,
             cache: true,
+            mls_iterations: MLS_ITERATIONS,
+            mls_epsilon: MLS_EPSILON,
         }
     }
 }
+
+/// MLS iterations before a leaf gives up, by default (the accuracy study: docs/accuracy.md).
+pub const MLS_ITERATIONS: u32 = 12;
+/// Default convergence threshold, relative to the support radius `h`.
+pub const MLS_EPSILON: f32 = 1e-4;
 
 /// Pixels the cache distinguishes: `(y · CACHE_ROW + x) mod CACHE_SLOTS` (other sizes alias,
 /// which costs work, never correctness: a cached node is only a first guess).

@@ -121,7 +121,7 @@ fn surfel_from(i: usize, d: &SurfelData) -> Result<Surfel, KindError> {
     let t1 = get(d.t1, "t1")?;
     let t2 = get(d.t2, "t2")?;
     for (axis, name) in [(t1, "t1"), (t2, "t2")] {
-        if !(axis.length_squared() > 1e-20) {
+        if axis.length_squared() <= 1e-20 {
             return Err(KindError::invalid(
                 "degenerate_surfel",
                 format!("{} is a zero-length tangent axis", field(name)),
@@ -348,7 +348,7 @@ pub fn setup_from_spec(spec: Option<&SurfelSpec>) -> Result<SurfelSetup, KindErr
     let model = SurfelModel::new(set, MAX_SURFELS).map_err(model_error)?;
     Ok(SurfelSetup {
         model: Arc::new(model),
-        options: SurfelOptions { mode, cache: true },
+        options: SurfelOptions::new(mode, true),
         runtime: Arc::new(SurfelRuntime::default()),
     })
 }

@@ -100,7 +100,7 @@ pub fn setup_from_spec(spec: &TetSpec, slider: (f32, f32)) -> Result<TetSetup, K
                 finite(hi, "tets.color_range[1]")?,
             );
             if lo == hi {
-                return Err(KindError::invalid(
+                return Err(KindError::relational(
                     "invalid_value",
                     "tets.color_range must be two different values",
                 )

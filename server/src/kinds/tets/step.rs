@@ -28,7 +28,7 @@ pub fn check_rows(vertices: Option<u64>, rows: u64) -> Option<String> {
 pub fn raw_from_json(step: &JsonTetStep, vertices: Option<u64>) -> Result<Vec<u8>, KindError> {
     let rows = step.scalars.len() as u64;
     if let Some(why) = check_rows(vertices, rows) {
-        return Err(KindError::invalid("bad_shape", format!("scalars: {why}")).field("scalars"));
+        return Err(KindError::relational("bad_shape", format!("scalars: {why}")).field("scalars"));
     }
     let mut raw = Vec::with_capacity(RAW_STEP_HEADER_LEN + step.scalars.len() * 4);
     raw.extend_from_slice(&RAW_STEP_MAGIC);
@@ -36,7 +36,7 @@ pub fn raw_from_json(step: &JsonTetStep, vertices: Option<u64>) -> Result<Vec<u8
     raw.extend_from_slice(&1u16.to_le_bytes());
     raw.extend_from_slice(&rows.to_le_bytes());
     for (i, &v) in step.scalars.iter().enumerate() {
-        let f = v as f32;
+        let f = crate::kinds::convert::to_f32(v);
         if !f.is_finite() {
             return Err(KindError::invalid(
                 "invalid_value",

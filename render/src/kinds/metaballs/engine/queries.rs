@@ -46,6 +46,7 @@ impl PreparedMetaballs {
             isovalue,
             tolerance: self.options.tolerance,
             owners_only: false,
+            step: self.options.step,
         }
     }
 
@@ -107,6 +108,7 @@ impl PreparedMetaballs {
             isovalue: -isovalue,
             tolerance: self.options.tolerance,
             owners_only: false,
+            step: self.options.step,
         };
         SCRATCH.with(|cell| {
             let mut guard = cell.borrow_mut();
@@ -144,6 +146,7 @@ impl PreparedMetaballs {
                     counters.leaf_tests += 1;
                     counters.metaballs_considered += gathered.len() as u64;
                     counters.iterations += found.iterations as u64;
+                    counters.capped += found.capped as u64;
                     found.t?
                 }
             };
@@ -212,6 +215,7 @@ impl PreparedMetaballs {
                 counters.leaf_tests += 1;
                 counters.metaballs_considered += gathered.len() as u64;
                 counters.iterations += found.iterations as u64;
+                counters.capped += found.capped as u64;
                 let t = found.t?;
                 counters.hit_iterations += found.hit_iterations as u64;
                 if first_leaf {
