@@ -45,8 +45,17 @@ fn post(base: &str, path: &str, body: &Value) -> Response {
         .expect("answer")
 }
 
-fn refused(r: &Response, field: &str, says: &str, root: &Path, before: &BTreeMap<String, u128>) {
-    assert!((400..500).contains(&r.status), "{}", r.text());
+/// `r` is the error `status` (400: the body breaks the schema; 422: a rule between values),
+/// naming `field`, and nothing stored changed.
+fn refused(
+    r: &Response,
+    status: u16,
+    field: &str,
+    says: &str,
+    root: &Path,
+    before: &BTreeMap<String, u128>,
+) {
+    assert_eq!(r.status, status, "{field}: {}", r.text());
     let body = json(r);
     assert_eq!(body["field"], field, "{body}");
     assert!(
@@ -86,39 +95,68 @@ async fn surfel_scenes_are_validated_stored_rendered_and_streamed() {
         let mut bad = good.clone();
         bad["surfels"]["surfels"][5]["t2"] = j!([0.0, 0.0, 0.0]);
         let r = post(&base, "/api/v1/scenes", &bad);
-        refused(&r, "surfels.surfels[5].t2", "zero-length", &root, &before);
+        refused(
+            &r,
+            422,
+            "surfels.surfels[5].t2",
+            "zero-length",
+            &root,
+            &before,
+        );
         let mut bad = good.clone();
         bad["surfels"]["surfels"][7]["centre"][1] = j!(1e39);
         let r = post(&base, "/api/v1/scenes", &bad);
-        refused(&r, "surfels.surfels[7].centre[1]", "finite", &root, &before);
+        refused(
+            &r,
+            400,
+            "surfels.surfels[7].centre[1]",
+            "finite",
+            &root,
+            &before,
+        );
         let mut bad = good.clone();
         bad["surfels"]["surfels"][2]["radius"] = j!(0.0);
         let r = post(&base, "/api/v1/scenes", &bad);
-        refused(&r, "surfels.surfels[2].radius", "radius", &root, &before);
+        refused(
+            &r,
+            400,
+            "surfels.surfels[2].radius",
+            "radius",
+            &root,
+            &before,
+        );
         let mut bad = good.clone();
         bad["surfels"]["nodes"] = j!([]);
         let r = post(&base, "/api/v1/scenes", &bad);
-        refused(&r, "surfels.nodes", "node", &root, &before);
+        refused(&r, 400, "surfels.nodes", "node", &root, &before);
         let mut bad = good.clone();
         bad["surfels"]["clip"] = j!([[0, 3]]);
         let r = post(&base, "/api/v1/scenes", &bad);
-        refused(&r, "surfels.clip", "group 3", &root, &before);
+        refused(&r, 422, "surfels.clip", "group 3", &root, &before);
         let mut bad = good.clone();
         bad["surfels"]["update"] = j!("fast");
         let r = post(&base, "/api/v1/scenes", &bad);
-        refused(&r, "surfels.update", "fast", &root, &before);
+        refused(&r, 400, "surfels.update", "fast", &root, &before);
         let r = post(&base, "/api/v1/scenes", &j!({"kind": "surfels"}));
-        refused(&r, "surfels", "surfels", &root, &before);
+        refused(&r, 422, "surfels", "surfels", &root, &before);
         // Meshes to sample: no faces, a face naming a missing vertex.
         let tetra = j!([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]]);
         let mut bad = good.clone();
         bad["surfels"]["mesh"] = j!({"vertices": tetra, "triangles": []});
         let r = post(&base, "/api/v1/scenes", &bad);
-        refused(&r, "surfels.mesh.triangles", "no faces", &root, &before);
+        refused(
+            &r,
+            400,
+            "surfels.mesh.triangles",
+            "no faces",
+            &root,
+            &before,
+        );
         bad["surfels"]["mesh"] = j!({"vertices": tetra, "triangles": [[0, 2, 1], [0, 1, 4]]});
         let r = post(&base, "/api/v1/scenes", &bad);
         refused(
             &r,
+            422,
             "surfels.mesh.triangles[1][2]",
             "vertex 4",
             &root,
@@ -156,6 +194,7 @@ async fn surfel_scenes_are_validated_stored_rendered_and_streamed() {
         let r = push(&base, &id, "0", &token, NPY, &npy(&flat(&extra), 3));
         refused(
             &r,
+            400,
             "shape",
             &format!("{} simulation nodes", nodes.len()),
             &root,
@@ -181,7 +220,19 @@ async fn surfel_scenes_are_validated_stored_rendered_and_streamed() {
             "application/json",
             js.to_string().as_bytes(),
         );
-        refused(&r, "shape", "simulation nodes", &root, &before);
+        refused(&r, 422, "positions", "simulation nodes", &root, &before);
+        // A metaball step's columns fit the document's JsonStep, not a surfel scene.
+        let js = j!({"positions": nodes.iter().map(|p| p.to_array()).collect::<Vec<_>>(),
+                     "radii": vec![0.1; nodes.len()]});
+        let r = push(
+            &base,
+            &id,
+            "0",
+            &token,
+            "application/json",
+            js.to_string().as_bytes(),
+        );
+        refused(&r, 422, "radii", "node positions only", &root, &before);
 
         // Good steps: the object moved right (JSON); then stretched sixfold along x (.npy), a
         // deformation far beyond what the hierarchy's bounds prune: drawn through the
@@ -250,6 +301,37 @@ async fn surfel_scenes_are_validated_stored_rendered_and_streamed() {
     );
     assert!(pixel_stddev(&frame.image) > 2.0, "the surface shows");
     drop(ws);
+
+    // The served OpenAPI document describes surfel scenes with the constraints checked here.
+    let base = server.base.clone();
+    let doc = call(move || json(&get(&base, "/api/v1/openapi.json"))).await;
+    let schemas = &doc["components"]["schemas"];
+    let kinds = schemas["CreateScene"]["properties"]["kind"]["enum"].to_string();
+    assert!(
+        kinds.contains("\"surfels\""),
+        "surfels is a served kind: {kinds}"
+    );
+    let spec = &schemas["SurfelSpec"]["properties"];
+    assert_eq!(spec["nodes"]["minItems"], 1, "{spec}");
+    assert_eq!(spec["update"]["enum"][3], "rebuild", "{spec}");
+    let data = &schemas["SurfelData"]["properties"];
+    assert_eq!(data["radius"]["maximum"], 1.0e6, "{data}");
+    assert!(
+        data["t2"]["description"].to_string().contains("422"),
+        "{data}"
+    );
+    assert_eq!(
+        schemas["SurfelMesh"]["properties"]["triangles"]["minItems"],
+        1
+    );
+    assert!(
+        schemas["JsonSurfelStep"].is_object(),
+        "the step schema is listed"
+    );
+    let step_body = doc["paths"]["/api/v1/scenes/{id}/steps/{index}"]["put"]["requestBody"]
+        ["content"]["application/json"]["schema"]["description"]
+        .to_string();
+    assert!(step_body.contains("surfel"), "{step_body}");
 
     // The surfel demos are listed; the small one streams.
     let base = server.base.clone();

@@ -18,6 +18,9 @@ use std::sync::Arc;
 pub const MAX_SURFELS: usize = 2_000_000;
 /// Most simulation nodes a scene may have (each step estimates a gradient per node).
 pub const MAX_NODES: usize = 200_000;
+/// Smallest radius and node mass (the document's `minimum`): positive and still positive as
+/// an `f32`.
+pub const MIN_POSITIVE: f64 = 1.0e-30;
 /// Surfels sampled from a mesh that does not say how many.
 const DEFAULT_MESH_SURFELS: u64 = 20_000;
 /// Colour of a surfel that names none.
@@ -122,7 +125,7 @@ fn surfel_from(i: usize, d: &SurfelData) -> Result<Surfel, KindError> {
     let t2 = get(d.t2, "t2")?;
     for (axis, name) in [(t1, "t1"), (t2, "t2")] {
         if axis.length_squared() <= 1e-20 {
-            return Err(KindError::invalid(
+            return Err(KindError::relational(
                 "degenerate_surfel",
                 format!("{} is a zero-length tangent axis", field(name)),
             )
@@ -139,11 +142,7 @@ fn surfel_from(i: usize, d: &SurfelData) -> Result<Surfel, KindError> {
         }
         c => colour_of(c, &field("color"))?,
     };
-    let radius = if d.radius.is_finite() && d.radius.abs() <= 1.0e6 {
-        d.radius as f32
-    } else {
-        finite(d.radius, &field("radius"))?
-    };
+    let radius = positive(d.radius, &field("radius"))?;
     Ok(Surfel {
         centre,
         t1,
@@ -153,6 +152,28 @@ fn surfel_from(i: usize, d: &SurfelData) -> Result<Surfel, KindError> {
         radius,
         group: d.group.unwrap_or(0),
     })
+}
+
+/// A radius or mass in `[MIN_POSITIVE, 1e6]`, or the error naming `field`.
+fn positive(v: f64, field: &str) -> Result<f32, KindError> {
+    if (MIN_POSITIVE..=1.0e6).contains(&v) {
+        return Ok(v as f32);
+    }
+    let v = finite(v, field)?;
+    Err(KindError::invalid(
+        "invalid_value",
+        format!("{field} is {v}; it must be positive (at least {MIN_POSITIVE})"),
+    )
+    .field(field))
+}
+
+/// More than the limit of `what` in `field` (the document's `maxItems`).
+fn too_many(count: usize, limit: usize, field: &str) -> KindError {
+    KindError::invalid(
+        "too_many",
+        format!("{field}: {count} entries exceed the limit of {limit}"),
+    )
+    .field(field)
 }
 
 /// `v` as a vector, or the error naming `field[i]`.
@@ -189,16 +210,17 @@ fn colour_of(c: Option<[f64; 3]>, field: &str) -> Result<Vec3, KindError> {
 /// The surfels of a point cloud, normals estimated where it has none.
 fn from_cloud(points: &SurfelPoints) -> Result<Vec<Surfel>, KindError> {
     if points.positions.len() > MAX_SURFELS {
-        return Err(model_error(SurfelError::TooMany {
-            count: points.positions.len(),
-            limit: MAX_SURFELS,
-        }));
+        return Err(too_many(
+            points.positions.len(),
+            MAX_SURFELS,
+            "surfels.points.positions",
+        ));
     }
     let positions = checked(&points.positions, "surfels.points.positions")?;
     let normals = match &points.normals {
         Some(n) => {
             if n.len() != positions.len() {
-                return Err(KindError::invalid(
+                return Err(KindError::relational(
                     "bad_shape",
                     format!(
                         "surfels.points.normals has {} entries for {} positions",
@@ -214,8 +236,14 @@ fn from_cloud(points: &SurfelPoints) -> Result<Vec<Surfel>, KindError> {
     };
     let colour = colour_of(points.color, "surfels.points.color")?;
     from_points(&positions, normals.as_deref(), colour).map_err(|e| {
-        KindError::invalid("invalid_points", format!("surfels.points: {e}"))
-            .field("surfels.points.positions")
+        let error = match e {
+            InputError::NormalCount { .. } | InputError::ZeroArea => KindError::relational,
+            InputError::NoPoints
+            | InputError::NoFaces
+            | InputError::BadIndex { .. }
+            | InputError::NotFinite { .. } => KindError::invalid,
+        };
+        error("invalid_points", format!("surfels.points: {e}")).field("surfels.points.positions")
     })
 }
 
@@ -242,7 +270,16 @@ fn sampled(mesh: &SurfelMesh) -> Result<Vec<Surfel>, KindError> {
             | InputError::NotFinite { .. }
             | InputError::NormalCount { .. } => "surfels.mesh".to_string(),
         };
-        KindError::invalid("invalid_mesh", format!("{field}: {e}")).field(field)
+        // No faces breaks the schema (minItems); the others break a rule between values.
+        let error = match &e {
+            InputError::NoPoints | InputError::NoFaces | InputError::NotFinite { .. } => {
+                KindError::invalid
+            }
+            InputError::BadIndex { .. } | InputError::ZeroArea | InputError::NormalCount { .. } => {
+                KindError::relational
+            }
+        };
+        error("invalid_mesh", format!("{field}: {e}")).field(field)
     };
     let (points, normals) =
         sample_mesh(&vertices, &mesh.triangles, count as usize, 0x5EED).map_err(named)?;
@@ -269,34 +306,42 @@ fn model_error(e: SurfelError) -> KindError {
             "positions".to_string()
         }
     };
-    KindError::invalid("invalid_surfels", format!("{field}: {e}")).field(field)
+    // What the document's schema states (a node, a limit, a range) is a 400; a rule between
+    // values that it states in prose (tangent axes not parallel, counts that agree, a group
+    // that exists, at least one surfel from any source) a 422.
+    let error = match &e {
+        SurfelError::NoNodes
+        | SurfelError::NotFinite { .. }
+        | SurfelError::BadRadius { .. }
+        | SurfelError::BadMass { .. }
+        | SurfelError::StepNotFinite { .. } => KindError::invalid,
+        SurfelError::NoSurfels
+        | SurfelError::TooMany { .. }
+        | SurfelError::DegenerateTangents { .. }
+        | SurfelError::DegenerateNormal { .. }
+        | SurfelError::MassCount { .. }
+        | SurfelError::BodyCount { .. }
+        | SurfelError::UnknownGroup { .. }
+        | SurfelError::StepCount { .. } => KindError::relational,
+    };
+    error("invalid_surfels", format!("{field}: {e}")).field(field)
 }
 
 /// The surfel part of a scene description, checked and precomputed: this embeds the surfels
 /// and builds the hierarchy (seconds for a large object: call it off the async runtime).
 pub fn setup_from_spec(spec: Option<&SurfelSpec>) -> Result<SurfelSetup, KindError> {
     let Some(spec) = spec else {
-        return Err(KindError::invalid(
+        return Err(KindError::relational(
             "missing_field",
             "a surfel scene needs `surfels`: its surfels and simulation nodes",
         )
         .field("surfels"));
     };
     if spec.surfels.len() > MAX_SURFELS {
-        return Err(model_error(SurfelError::TooMany {
-            count: spec.surfels.len(),
-            limit: MAX_SURFELS,
-        }));
+        return Err(too_many(spec.surfels.len(), MAX_SURFELS, "surfels.surfels"));
     }
     if spec.nodes.len() > MAX_NODES {
-        return Err(KindError::invalid(
-            "too_many",
-            format!(
-                "{} simulation nodes exceed the limit of {MAX_NODES}",
-                spec.nodes.len()
-            ),
-        )
-        .field("surfels.nodes"));
+        return Err(too_many(spec.nodes.len(), MAX_NODES, "surfels.nodes"));
     }
     let mut surfels = spec
         .surfels
@@ -320,7 +365,7 @@ pub fn setup_from_spec(spec: Option<&SurfelSpec>) -> Result<SurfelSetup, KindErr
         Some(m) => m
             .iter()
             .enumerate()
-            .map(|(i, &v)| finite(v, &format!("surfels.node_mass[{i}]")))
+            .map(|(i, &v)| positive(v, &format!("surfels.node_mass[{i}]")))
             .collect::<Result<Vec<_>, _>>()?,
         None => Vec::new(),
     };
