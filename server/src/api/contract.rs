@@ -16,6 +16,7 @@
 //! `api::schemathesis` test runs schemathesis against a live server and this document.
 
 use crate::config::Config;
+use crate::kinds::surfels::setup::{MAX_NODES, MAX_SURFELS, MIN_POSITIVE};
 use isoray_protocol::api::SceneKind;
 use serde_json::{json, Map, Value};
 
@@ -310,8 +311,101 @@ fn view_constraints(config: &Config) -> Vec<Constraint> {
     ]
 }
 
+/// A surfel scene's object (`kinds::surfels::setup`): what the schema can state, and in
+/// prose the rules between values (422).
+fn surfel_constraints() -> Vec<Constraint> {
+    let point = numbers(3, -COORD, COORD);
+    let colour = numbers(3, 0.0, 1.0);
+    let positive = json!({"minimum": MIN_POSITIVE, "maximum": COORD});
+    let group = json!({"minimum": 0, "maximum": u16::MAX});
+    vec![
+        (
+            "CreateScene",
+            "surfels",
+            json!({"description": "Static data of a surfel scene: its surfels and simulation nodes; required for a surfel scene (422 otherwise)."}),
+        ),
+        (
+            "SurfelSpec",
+            "surfels",
+            json!({"maxItems": MAX_SURFELS,
+                   "description": "The surfels; with those of `points` and `mesh`, at least one and at most the limit of this list (422 otherwise)."}),
+        ),
+        (
+            "SurfelSpec",
+            "nodes",
+            json!({"minItems": 1, "maxItems": MAX_NODES, "items": point.clone(),
+                   "description": "Rest positions of the simulation nodes; each step moves them, one row per node (a step with another row count is a 422)."}),
+        ),
+        (
+            "SurfelSpec",
+            "node_mass",
+            json!({"items": positive.clone(),
+                   "description": "Masses of the nodes (default all 1): one per node (422 otherwise)."}),
+        ),
+        (
+            "SurfelSpec",
+            "clip",
+            json!({"items": {"minItems": 2, "maxItems": 2, "items": group.clone()},
+                   "description": "Clipping relations [a, b]: surfels of group a are cut by the surface of group b; both groups have surfels (422 otherwise)."}),
+        ),
+        (
+            "SurfelSpec",
+            "update",
+            json!({"enum": ["auto", "lazy", "eager", "rebuild", null]}),
+        ),
+        ("SurfelData", "centre", point.clone()),
+        (
+            "SurfelData",
+            "t1",
+            json!({"minItems": 3, "maxItems": 3, "items": range(-COORD, COORD),
+                   "description": "First tangent axis: not of zero length (422 otherwise)."}),
+        ),
+        (
+            "SurfelData",
+            "t2",
+            json!({"minItems": 3, "maxItems": 3, "items": range(-COORD, COORD),
+                   "description": "Second tangent axis: not of zero length, not parallel to t1 (422 otherwise)."}),
+        ),
+        (
+            "SurfelData",
+            "normal",
+            json!({"minItems": 3, "maxItems": 3, "items": range(-COORD, COORD),
+                   "description": "Outward normal (default t1 × t2): not of zero length, not in the tangent plane (422 otherwise)."}),
+        ),
+        ("SurfelData", "radius", positive.clone()),
+        ("SurfelData", "color", colour.clone()),
+        ("SurfelData", "group", group),
+        (
+            "SurfelPoints",
+            "positions",
+            json!({"minItems": 1, "maxItems": MAX_SURFELS, "items": point.clone()}),
+        ),
+        (
+            "SurfelPoints",
+            "normals",
+            json!({"items": point.clone(),
+                   "description": "One per position (422 otherwise); a zero normal is estimated like a missing one."}),
+        ),
+        ("SurfelPoints", "color", colour.clone()),
+        ("SurfelMesh", "vertices", json!({"items": point})),
+        (
+            "SurfelMesh",
+            "triangles",
+            json!({"minItems": 1, "items": {"minItems": 3, "maxItems": 3, "items": {"maximum": u64::MAX}},
+                   "description": "Vertex indices of each triangle, each below the number of vertices; not every face of zero area (422 otherwise)."}),
+        ),
+        (
+            "SurfelMesh",
+            "count",
+            json!({"minimum": 1, "maximum": MAX_SURFELS}),
+        ),
+        ("SurfelMesh", "color", colour),
+    ]
+}
+
 fn constrain_schemas(doc: &mut Value, config: &Config) {
     let mut table = scene_constraints();
+    table.extend(surfel_constraints());
     table.extend(lighting_constraints());
     table.extend(view_constraints(config));
     let Some(schemas) = doc
@@ -506,7 +600,7 @@ fn complete_operations(doc: &mut Value, config: &Config) {
                     json_body["schema"] = json!({"oneOf": [
                         {"$ref": "#/components/schemas/JsonStep"},
                         {"$ref": "#/components/schemas/JsonTetStep"}
-                    ], "description": "JsonStep for a metaball scene, JsonTetStep for a tet scene (the other is a 422)"});
+                    ], "description": "JsonStep for a metaball scene, JsonTetStep for a tet scene, JsonStep with `positions` only (JsonSurfelStep: the nodes' positions) for a surfel scene (another kind's step is a 422)"});
                 }
             }
             if INDEXED.contains(&id) {

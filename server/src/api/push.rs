@@ -129,7 +129,14 @@ pub async fn push_step(
                 (StepLayout::Tets { .. }, Err(step)) => {
                     blocking(move || ingest_json_tets(&step, &limits, target)).await??
                 }
-                (StepLayout::Metaballs, Err(_)) | (StepLayout::Tets { .. }, Ok(_)) => {
+                // Node positions: a metaball step's shape without its optional columns.
+                (StepLayout::Surfels { .. }, Ok(step)) => {
+                    let step = surfel_step(step)?;
+                    blocking(move || ingest_json(&step, &limits, target)).await??
+                }
+                (StepLayout::Metaballs, Err(_))
+                | (StepLayout::Tets { .. }, Ok(_))
+                | (StepLayout::Surfels { .. }, Err(_)) => {
                     return Err(AppError::relational(
                         "wrong_kind",
                         format!(
@@ -138,7 +145,10 @@ pub async fn push_step(
                             match limits.layout {
                                 StepLayout::Metaballs => "its JSON steps are {\"positions\": ...}",
                                 StepLayout::Tets { .. } =>
-                                    "its JSON steps are {\"scalars\": [...]}",
+                                    "its JSON steps are {\"scalars\": [...]} (and, for a \
+                                     deforming mesh, \"positions\")",
+                                StepLayout::Surfels { .. } =>
+                                    "its JSON steps are {\"positions\": ...} (node positions only)",
                             }
                         ),
                     ))
@@ -199,8 +209,9 @@ pub async fn push_step(
         .into_response())
 }
 
-/// A JSON step of either kind, as the document says (`oneOf` JsonStep, JsonTetStep): which one
-/// is decided by its fields, then checked against the scene's kind (422 if it is the other).
+/// A JSON step of any kind, as the document says (`oneOf` JsonStep, JsonTetStep; a surfel
+/// scene's step is a JsonStep with positions only, JsonSurfelStep): which one is decided by
+/// its fields, then checked against the scene's kind (422 if it is another's).
 #[derive(serde::Deserialize)]
 #[serde(deny_unknown_fields)]
 struct AnyJsonStep {
@@ -256,6 +267,31 @@ fn check_whole_step(setup: &SceneSetup, written: WrittenStep) -> Result<WrittenS
     let payload = bytes.get(HEADER_LEN..).unwrap_or_default();
     setup.check_step(written.header.columns, payload)?;
     Ok(written)
+}
+
+/// A surfel step is the nodes' positions only: a metaball step's radii, strengths or colours
+/// fit the document's `JsonStep` but not a surfel scene (422 naming the column).
+fn surfel_step(step: JsonStep) -> Result<JsonStep, AppError> {
+    let extra = [
+        ("radii", step.radii.is_some()),
+        ("strengths", step.strengths.is_some()),
+        ("colors", step.colors.is_some()),
+    ]
+    .into_iter()
+    .find(|(_, present)| *present);
+    match extra {
+        Some((name, _)) => Err(AppError::relational(
+            "wrong_kind",
+            format!("a surfel scene's step is the node positions only, without `{name}`"),
+        )
+        .field(name)),
+        None => Ok(JsonStep {
+            positions: step.positions,
+            radii: None,
+            strengths: None,
+            colors: None,
+        }),
+    }
 }
 
 /// Parses `replace=true&time=1.5` without another dependency: both values are plain tokens.

@@ -24,6 +24,9 @@ use isoray_protocol::api::{
     LightSpec, LightingSpec, MeshInfo, MetaballDefaults, PushResult, RenderRequest, SceneBounds,
     SceneInfo, SceneInfoList, SceneKind, StepInfo, StepList, TetMeshData, TetSpec,
 };
+use isoray_protocol::api_surfels::{
+    JsonSurfelStep, SurfelData, SurfelMesh, SurfelPoints, SurfelSpec,
+};
 use isoray_protocol::effects::{ClipBoxSpec, ColorMapSpec, SurfaceStyleSpec};
 use std::sync::Arc;
 use utoipa::OpenApi;
@@ -39,8 +42,11 @@ use utoipa_axum::routes;
             images. Binary steps are NumPy .npy arrays or raw little-endian arrays with a \
             16-byte header (magic `ISRA`, version 1, dtype 1=f32/2=f64, u16 columns, u64 rows); \
             rows are `x y z [radius [strength [r g b]]]` for metaballs, one scalar per mesh \
-            vertex for tets (whose mesh is sent once, inline or with PUT .../mesh). Errors are \
-            JSON `{code, message, field?, offset?}`."
+            vertex for tets (whose mesh is sent once, inline or with PUT .../mesh), each \
+            simulation node's position x y z for surfels (whose surfels and rest nodes come \
+            inline at creation; the server embeds them and builds the sphere hierarchy once; a \
+            step deformed so far that the hierarchy stops pruning falls back to a rebuild for \
+            that step). Errors are JSON `{code, message, field?, offset?}`."
     ),
     paths(stream_doc, index_doc, asset_doc, healthz_doc, metrics_doc),
     components(schemas(
@@ -48,7 +54,9 @@ use utoipa_axum::routes;
         PushResult, JsonStep, RenderRequest, ApiCamera, LightingSpec, LightSpec,
         MetaballDefaults, SceneKind, ImageFormat, TetSpec, TetMeshData, JsonTetStep, MeshInfo,
         // A viewer's look (in `effects` of a render request) and a scene's bounds.
-        SceneBounds, ClipBoxSpec, SurfaceStyleSpec, ColorMapSpec
+        SceneBounds, ClipBoxSpec, SurfaceStyleSpec, ColorMapSpec,
+        // Surfel scenes: the object at creation, node positions per step.
+        SurfelSpec, SurfelData, SurfelPoints, SurfelMesh, JsonSurfelStep
     )),
     modifiers(&BearerSecurity),
     tags(

@@ -89,7 +89,7 @@ pub async fn list_scenes(
     security((), ("bearer" = [])),
     responses(
         (status = 201, description = "Created", body = CreatedScene),
-        (status = 400, description = "Invalid field", body = ApiErrorBody),
+        (status = 400, description = "Invalid field (a surfel scene: NaN, zero-length tangent axes, no nodes ...)", body = ApiErrorBody),
         (status = 401, description = "Admin token missing (server started with --admin-token)", body = ApiErrorBody),
         (status = 403, description = "Not the admin token", body = ApiErrorBody),
         (status = 409, description = "The server holds --max-scenes scenes already", body = ApiErrorBody),
@@ -124,10 +124,15 @@ pub async fn create_scene(
             .field(field));
         }
     }
-    let setup = SceneSetup::from_spec(
-        &spec,
-        &crate::effects::EffectLimits::from_config(app.config()),
-    )?;
+    // A surfel scene's object is embedded and its hierarchy built here: seconds for a large
+    // one, so off the async runtime.
+    let limits = crate::effects::EffectLimits::from_config(app.config());
+    let (spec, setup) = blocking(move || {
+        let setup = SceneSetup::from_spec(&spec, &limits);
+        (spec, setup)
+    })
+    .await?;
+    let setup = setup?;
     let store = app.scenes().store().cloned().ok_or_else(|| {
         AppError::new(
             StatusCode::SERVICE_UNAVAILABLE,

@@ -6,7 +6,8 @@
 //!   lines starting with `#` skipped): `x`, `y`, `z` and, optionally, `radius`, `strength`
 //!   and `red`, `green`, `blue`; other columns are passed over. One file is one step.
 //! - XYZ: frames of a count line, a comment line and one `label x y z` line per particle
-//!   (further columns passed over); every frame is a step.
+//!   (further columns passed over); every frame is a step. (An `.xyz` file without the
+//!   count line is a point cloud: `isoray push` makes it a surfel scene.)
 //! - NPZ (`np.savez`): the array `positions` (also `points`, `pos` or `xyz`), `(N, 3)` for one
 //!   step or `(S, N, 3)` for `S` steps, with optional `radius` (`(N,)` / `(S, N)`),
 //!   `strength` (same) and `color` (`(N, 3)` / `(S, N, 3)`); float or integer dtypes.
@@ -79,14 +80,32 @@ pub struct PointStep {
     pub columns: u32,
 }
 
-/// Whether `path` names a particle file this module reads.
+/// Whether `path` names a particle file this module reads. An `.xyz` file is one when its
+/// first line is a count (XYZ frames, as chemistry codes write them); `x y z` lines make
+/// it a point cloud, for a surfel scene.
 pub fn is_points(path: &Path) -> bool {
-    matches!(
-        path.extension()
-            .map(|e| e.to_string_lossy().to_ascii_lowercase())
-            .as_deref(),
-        Some("csv" | "xyz" | "npz")
-    )
+    match path
+        .extension()
+        .map(|e| e.to_string_lossy().to_ascii_lowercase())
+        .as_deref()
+    {
+        Some("csv" | "npz") => true,
+        Some("xyz") => xyz_has_frames(path),
+        _ => false,
+    }
+}
+
+/// Whether an `.xyz` file's first non-blank line is a single count.
+fn xyz_has_frames(path: &Path) -> bool {
+    use std::io::BufRead;
+    let Ok(file) = std::fs::File::open(path) else {
+        return true; // read_steps names the error
+    };
+    std::io::BufReader::new(file)
+        .lines()
+        .map_while(Result::ok)
+        .find(|l| !l.trim().is_empty())
+        .is_some_and(|l| l.trim().parse::<u64>().is_ok())
 }
 
 /// The steps of one particle file; errors name the file and where in it.

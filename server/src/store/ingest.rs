@@ -557,6 +557,14 @@ pub fn ingest_json(
 ) -> Result<WrittenStep, IngestError> {
     let columns = ball_step::json_columns(step)?;
     let rows = step.positions.len();
+    // A surfel step's rows against the scene's nodes: a rule between the body and the scene
+    // (422), as a tet step's scalars against its vertices.
+    if let Some(why) = limits.layout.check_rows(rows as u64) {
+        return Err(IngestError {
+            kind: IngestErrorKind::Relational,
+            ..IngestError::invalid("bad_shape", format!("positions: {why}")).at_field("positions")
+        });
+    }
     let columns_u32 = check_shape(rows as u64, columns as u64, limits)?;
     let values = ball_step::json_rows(step, columns);
     check_rows(limits.layout, &values, columns, 0, |_| 0).map_err(|mut e| {
@@ -607,6 +615,16 @@ pub fn ingest_json_tets(
                 ..IngestError::invalid(
                     "bad_shape",
                     "scalars: a metaball step is rows of balls, not scalars",
+                )
+                .at_field("scalars")
+            })
+        }
+        StepLayout::Surfels { .. } => {
+            return Err(IngestError {
+                kind: IngestErrorKind::Relational,
+                ..IngestError::invalid(
+                    "bad_shape",
+                    "scalars: a surfel step is the simulation nodes' positions, not scalars",
                 )
                 .at_field("scalars")
             })

@@ -20,6 +20,8 @@ mod python_client;
 mod python_example;
 mod restart;
 mod slow_headers;
+mod surfel_files;
+mod surfels;
 mod tets;
 mod vtk_files;
 

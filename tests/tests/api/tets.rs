@@ -487,7 +487,7 @@ async fn isoray_push_sends_a_vtu_series_as_a_tet_scene() {
         let text = String::from_utf8_lossy(&out.stderr).to_string();
         assert!(!out.status.success());
         assert!(
-            text.contains("changed.vtu") && text.contains("differs"),
+            text.contains("changed.vtu") && text.contains("cells differ"),
             "{text}"
         );
     })

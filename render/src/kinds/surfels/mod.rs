@@ -5,6 +5,7 @@
 pub mod counters;
 pub mod deform;
 pub mod demo;
+pub mod input;
 pub mod intersect;
 pub mod kernel;
 pub mod kind;
