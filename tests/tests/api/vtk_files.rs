@@ -1,10 +1,12 @@
 //! `isoray push` of VTK files as the tools scientists use write them: a fixture script
 //! (`tests/fixtures/vtk_meshes.py`, VTK's Python package and meshio) writes a mesh of
 //! 215,622 tets in every encoding they offer (raw, base64 and appended data; zlib, LZ4 and
-//! xz blocks; UInt32 and UInt64 headers; ASCII; legacy `.vtk` ASCII and binary; a `.pvd`
+//! xz blocks; UInt32 and UInt64 headers; ASCII; legacy `.vtk` ASCII and binary, versions
+//! 4.2 and 5.1; a `.pvd`
 //! series), and every file pushes through the real binary and renders the same image as
 //! the raw, uncompressed one. Hexahedra with cell data push and render alike from both
-//! tools; a legacy 5.1 file is refused, naming the line and what to write instead.
+//! tools; legacy files in each tool's default version (5.1) push like 4.2 ones, and a
+//! truncated 5.1 file is refused naming the array it ends in.
 
 use super::*;
 use crate::e2e::support::pixel_stddev;
@@ -91,6 +93,8 @@ async fn vtk_files_in_every_encoding_render_the_same_image() {
             "meshio_lzma.vtu",
             "meshio_ascii.vtu",
             "meshio_legacy.vtk",
+            "vtk_legacy_default.vtk",
+            "meshio_legacy_default.vtk",
         ] {
             let (ok, text) = push_files(&base, &[f(name)]);
             assert!(ok, "{name}: {text}");
@@ -128,10 +132,17 @@ async fn vtk_files_in_every_encoding_render_the_same_image() {
         assert!(ok, "{text}");
         assert!(render(&base, &scene_id(&text), 0) == hex);
 
-        let (ok, text) = push_files(&base, &[f("legacy51.vtk")]);
+        // A version 5.1 file cut inside its connectivity is refused, naming the array.
+        let whole = std::fs::read(f("meshio_legacy_default.vtk")).expect("read");
+        let conn = whole
+            .windows(12)
+            .position(|w| w == b"CONNECTIVITY")
+            .expect("a CONNECTIVITY array");
+        std::fs::write(f("cut51.vtk"), &whole[..conn + 4_000]).expect("write");
+        let (ok, text) = push_files(&base, &[f("cut51.vtk")]);
         assert!(!ok);
         assert!(
-            text.contains("legacy51.vtk") && text.contains("line 1") && text.contains("4.2"),
+            text.contains("cut51.vtk") && text.contains("CONNECTIVITY") && text.contains("ends"),
             "{text}"
         );
     })
