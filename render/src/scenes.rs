@@ -159,7 +159,7 @@ impl DemoScene {
             DemoScene::Tornado128k => "128,000 metaballs in a tornado (Fitted BVH paper, Table 1)",
             DemoScene::Molecule => match real_molecule() {
                 Some(_) => {
-                    "1TII from the PDB (pymol-data), CPK colours (Fitted BVH paper, Table 1)"
+                    "the 1TII molecule from the PDB (pymol-data), CPK colours (Fitted BVH paper, Table 1)"
                 }
                 None => "5,440-atom synthetic molecule, CPK colours (Fitted BVH paper, Table 1)",
             },
