@@ -220,7 +220,8 @@ pub(crate) fn pick(scenes: &[String]) -> Result<Vec<DemoScene>, String> {
 
 /// Traces every `stride`-th row of the 640×480 image: (ms, counters).
 pub(crate) fn render(prepared: &PreparedScene, demo: DemoScene, stride: u32) -> (f64, RayCounters) {
-    let rays = demo.default_camera().rays(WIDTH, HEIGHT);
+    // In the prepared scene's frame (the world's for every demo scene, which lie near it).
+    let rays = prepared.primary_rays(&demo.default_camera(), WIDTH, HEIGHT);
     let isovalue = demo.default_isovalue();
     let rows: Vec<u32> = (0..HEIGHT).step_by(stride as usize).collect();
     let started = Instant::now();

@@ -123,7 +123,7 @@ pub fn rows(demos: &[DemoScene], settings: &Settings, runs: usize, sample: u32) 
             let answers: Vec<Answer> = pixels
                 .par_iter()
                 .map(|&(x, y)| {
-                    let ray = rays.through_pixel(x, y);
+                    let ray = rays.through_pixel(x, y).in_frame(prepared.frame());
                     prepared
                         .first_hit_counted(&ray, 0.0, T_MAX, isovalue, &mut RayCounters::default())
                         .map(|h| (h.t as f64, h.normal.as_dvec3()))

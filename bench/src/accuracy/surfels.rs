@@ -137,6 +137,7 @@ pub fn rows(backend: &Backend, detail: f32, runs: usize, sample: u32) -> Result<
                     .collect();
                 // Capped searches: counted by tracing the compared rays once more.
                 if let PreparedGeometry::Surfels(p) = prepared.geometry() {
+                    let rays = prepared.primary_rays(&view.camera, WIDTH, HEIGHT);
                     capped = count_capped(p, &rays, &pixels);
                 }
             }

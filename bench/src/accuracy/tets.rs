@@ -135,7 +135,7 @@ fn single_frame(prepared: &PreparedScene, view: &View) -> Result<Vec<Answer>, St
         return Err("not a tet scene".into());
     };
     let q = TetQuery::single(view.isovalue);
-    let rays = view.camera.rays(view.width, view.height);
+    let rays = prepared.primary_rays(&view.camera, view.width, view.height);
     Ok((0..view.height)
         .into_par_iter()
         .flat_map_iter(|y| {

@@ -123,6 +123,10 @@ pub fn intersect_leaf(
 
 /// Whether `x` on surfel `s`'s surface lies outside a surface that clips it (§4.3).
 fn clipped(p: &PreparedSurfels, s: usize, x: Vec3, c: &mut SurfelCounters) -> bool {
+    // Test-only mutation (issue 13): clipping relations ignored; the stability suite's
+    // `sharp_clipped_corners` must fail.
+    #[cfg(isoray_mutation = "surfel-clip")]
+    return false;
     for pair in p.model.clip.row(s) {
         let mut fresh = false;
         let a = *p.surfel(pair[0] as usize, &mut fresh);

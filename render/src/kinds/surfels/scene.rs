@@ -3,6 +3,7 @@
 //! to frame (the per-pixel sphere-node cache of deforming-point-sampled-surfaces.txt §4.2.2
 //! and the statistics the lazy-or-refit heuristic reads).
 
+use crate::geom::frame::LocalFrame;
 use crate::kinds::surfels::deform::{check_step, deform_surfel};
 use crate::kinds::surfels::model::{SurfelError, SurfelModel};
 use glam::{Mat3, Vec3};
@@ -211,8 +212,55 @@ impl SurfelScene {
         (lo.cmple(hi).all()).then_some((lo, hi))
     }
 
+    /// The world bounds of the deformed simulation nodes (rest position plus displacement):
+    /// O(nodes), what the [`LocalFrame`] of a step is chosen from (the surfels follow the
+    /// nodes they are embedded in).
+    pub fn node_bounds(&self) -> Option<(Vec3, Vec3)> {
+        let moved: Vec<Vec3> = (self.model.nodes.iter())
+            .zip(self.displacement.iter())
+            .map(|(p, u)| *p + *u)
+            .collect();
+        bounds_of(&moved)
+    }
+
+    /// This step moved into `frame`, the move split where the magnitude is: a rest model far
+    /// from the origin is moved by its own frame (a new model, O(surfels)), the rest of the
+    /// move is taken off the displacements (O(nodes)), each in `f64`. Jacobians are
+    /// translation-invariant. A displacement that carries the object far away thus never
+    /// meets a rest position of the opposite sign in `f32` (eq. 1 sums them).
+    pub fn in_frame(&self, frame: &LocalFrame) -> SurfelScene {
+        let mut s = self.clone();
+        if frame.is_world() {
+            return s;
+        }
+        let rest = LocalFrame::for_bounds(bounds_of(&self.model.nodes));
+        if !rest.is_world() {
+            s.model = Arc::new(self.model.in_frame(&rest));
+        }
+        let shift = LocalFrame {
+            origin: frame.origin - rest.origin,
+        };
+        s.displacement = self
+            .displacement
+            .iter()
+            .map(|&u| shift.local_from_world(u))
+            .collect();
+        s
+    }
+
     /// Surfels have no scalar field: every isovalue shows the same surface.
     pub fn isovalue_range(&self) -> (f32, f32) {
         (f32::MIN, f32::MAX)
     }
+}
+
+/// Axis-aligned bounds of `points`, or `None` for none.
+fn bounds_of(points: &[Vec3]) -> Option<(Vec3, Vec3)> {
+    let lo = points
+        .iter()
+        .fold(Vec3::splat(f32::INFINITY), |a, p| a.min(*p));
+    let hi = points
+        .iter()
+        .fold(Vec3::splat(f32::NEG_INFINITY), |a, p| a.max(*p));
+    (lo.cmple(hi).all()).then_some((lo, hi))
 }

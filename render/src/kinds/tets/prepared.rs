@@ -10,6 +10,7 @@
 //! per-vertex gradients, the volume-weighted mean of the incident tets' gradients; faceted
 //! normals use the hit tet's own gradient (the "per-tet gradients" of §8.6).
 
+use crate::geom::frame::LocalFrame;
 use crate::kinds::tets::bvh::{BuildKind, Bvh};
 use crate::kinds::tets::counters::TetCounters;
 use crate::kinds::tets::march::{barycentric, gradient};
@@ -75,13 +76,19 @@ pub struct PreparedTets {
 
 impl PreparedTets {
     pub fn new(scene: TetScene, options: TetOptions) -> PreparedTets {
+        PreparedTets::new_in_frame(scene, options, &LocalFrame::WORLD)
+    }
+
+    /// [`PreparedTets::new`] with the step's vertices moved into `frame` (in `f64`, as they
+    /// become the 4-D vertices every query reads; the shared BVH is refitted to them).
+    pub fn new_in_frame(scene: TetScene, options: TetOptions, frame: &LocalFrame) -> PreparedTets {
         let started = Instant::now();
         let verts: Vec<Vec4> = scene
             .positions()
             .par_iter()
             .with_min_len(4096)
             .zip(scene.scalars().par_iter())
-            .map(|(p, &s)| p.extend(s))
+            .map(|(p, &s)| frame.local_from_world(*p).extend(s))
             .collect();
         let (bvh, rebuilt) = match options.time {
             TimeScheme::Rebuild => (
