@@ -38,13 +38,19 @@ fn values(arrays: &[Attribute], name: &str) -> Option<Vec<f64>> {
     None
 }
 
-/// Whether the file is legacy version 5 (its first line says so).
-fn is_version_5(bytes: &[u8]) -> bool {
-    let first = bytes.split(|&b| b == b'\n').next().unwrap_or_default();
-    String::from_utf8_lossy(first)
+/// Whether the file is legacy version 5 (its first line says so); reads only that line.
+fn is_version_5(path: &Path) -> Result<bool, String> {
+    use std::io::{BufRead, Read};
+    let file = std::fs::File::open(path).map_err(|e| e.to_string())?;
+    let mut first = Vec::new();
+    std::io::BufReader::new(file)
+        .take(256)
+        .read_until(b'\n', &mut first)
+        .map_err(|e| e.to_string())?;
+    Ok(String::from_utf8_lossy(&first)
         .trim()
         .strip_prefix("# vtk DataFile Version ")
-        .is_some_and(|v| v.trim_start().starts_with('5'))
+        .is_some_and(|v| v.trim_start().starts_with('5')))
 }
 
 /// A cursor over a legacy file's bytes: keyword lines, and numbers in ASCII or binary
@@ -134,8 +140,10 @@ fn int_width(header: &str, keyword: &str) -> Result<usize, String> {
 /// arrays, OFFSETS and CONNECTIVITY; vtkio 0.6.3 reads only the older layout, one list of
 /// `count id id ...` rows. This rewrites the CELLS section into that layout (checking the
 /// offsets: from 0, not decreasing, ending at the connectivity's length) and the first line
-/// to version 4.2; every other byte stays as it was.
-fn downgrade_version_5(bytes: &[u8]) -> Result<Vec<u8>, String> {
+/// to version 4.2; every other byte stays as it was. The answer is a reader over the file's
+/// own bytes with the new first line and cells section spliced in, so the file is not
+/// copied again before vtkio reads it.
+fn downgrade_version_5(bytes: &[u8]) -> Result<impl std::io::Read + '_, String> {
     let binary = bytes.split(|&b| b == b'\n').nth(2).is_some_and(|l| {
         String::from_utf8_lossy(l)
             .trim()
@@ -174,10 +182,7 @@ fn downgrade_version_5(bytes: &[u8]) -> Result<Vec<u8>, String> {
         ));
     }
     let cells = n_offsets.saturating_sub(1);
-    let mut out = Vec::with_capacity(bytes.len() + 4 * cells);
-    let first_line = bytes.iter().position(|&b| b == b'\n').unwrap_or(0);
-    out.extend_from_slice(b"# vtk DataFile Version 4.2");
-    out.extend_from_slice(&bytes[first_line..cells_at]);
+    let mut out = Vec::with_capacity(4 * (cells + n_conn) + 32);
     out.extend_from_slice(format!("CELLS {cells} {}\n", cells + n_conn).as_bytes());
     for (c, pair) in offsets.windows(2).enumerate() {
         let (a, b) = (pair[0], pair[1]);
@@ -205,19 +210,23 @@ fn downgrade_version_5(bytes: &[u8]) -> Result<Vec<u8>, String> {
         }
     }
     out.push(b'\n');
-    out.extend_from_slice(&bytes[cur.pos..]);
-    Ok(out)
+    use std::io::Read;
+    let first_line = bytes.iter().position(|&b| b == b'\n').unwrap_or(0);
+    Ok((&b"# vtk DataFile Version 4.2"[..])
+        .chain(&bytes[first_line..cells_at])
+        .chain(std::io::Cursor::new(out))
+        .chain(&bytes[cur.pos..]))
 }
 
 /// Reads a legacy `.vtk` unstructured grid with the scalar array `wanted` (or the first
 /// one-component point array, else cell array).
 pub fn read(path: &Path, wanted: Option<&str>) -> Result<Grid, String> {
-    let bytes = std::fs::read(path).map_err(|e| e.to_string())?;
-    let vtk = if is_version_5(&bytes) {
+    let vtk = if is_version_5(path)? {
+        let bytes = std::fs::read(path).map_err(|e| e.to_string())?;
         let older = downgrade_version_5(&bytes).map_err(|e| format!("legacy VTK 5.1: {e}"))?;
-        Vtk::parse_legacy_be(older.as_slice())
+        Vtk::parse_legacy_be(older)
     } else {
-        Vtk::parse_legacy_be(bytes.as_slice())
+        Vtk::import(path)
     }
     .map_err(|e| e.to_string())?;
     let DataSet::UnstructuredGrid { pieces, .. } = vtk.data else {
