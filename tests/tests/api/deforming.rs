@@ -144,19 +144,6 @@ fn residuals(mesh: &Mesh, values: &[f32]) -> Vec<Option<f64>> {
     out
 }
 
-/// Runs `isoray push --server base files...`; returns (success, stdout + stderr).
-fn push_files(base: &str, files: &[PathBuf]) -> (bool, String) {
-    let out = Command::new(isoray_binary())
-        .arg("push")
-        .args(["--server", base])
-        .args(files)
-        .output()
-        .expect("isoray push runs");
-    let text =
-        String::from_utf8_lossy(&out.stdout).to_string() + &String::from_utf8_lossy(&out.stderr);
-    (out.status.success(), text)
-}
-
 fn line_after<'a>(text: &'a str, prefix: &str) -> &'a str {
     text.lines()
         .find_map(|l| l.strip_prefix(prefix))
@@ -170,17 +157,7 @@ fn line_after<'a>(text: &'a str, prefix: &str) -> &'a str {
 async fn a_deforming_vtu_series_renders_every_step_on_its_moved_isosurface() {
     let dir = tempfile::tempdir().expect("temp dir");
     let files = dir.path().join("files");
-    let out = Command::new(python())
-        .arg(repo_root().join("tests/fixtures/deforming_vtu.py"))
-        .arg(&files)
-        .output()
-        .expect("python runs (CI installs meshio into ISORAY_PYTHON)");
-    assert!(
-        out.status.success(),
-        "the fixture script ran: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let printed = String::from_utf8_lossy(&out.stdout).to_string();
+    let printed = run_fixture("deforming_vtu.py", &files);
     let invert_vertex = line_after(&printed, "points 1331 tets 6000 invert_vertex ").to_string();
     let server = Server::start(&dir.path().join("data"), &[]).await;
     let base = server.base.clone();

@@ -8,43 +8,19 @@ use crate::e2e::support::pixel_stddev;
 
 const PDB: &str = "/usr/share/pymol/test/dat/1tii.pdb";
 
-fn push_file(base: &str, file: &Path) -> (bool, String) {
-    let out = Command::new(isoray_binary())
-        .args(["push", "--server", base])
-        .arg(file)
-        .output()
-        .expect("isoray push runs");
-    let text =
-        String::from_utf8_lossy(&out.stdout).to_string() + &String::from_utf8_lossy(&out.stderr);
-    (out.status.success(), text)
-}
-
 /// Pushes `file`, renders step 0 small; returns the atoms pushed and the image.
 fn push_and_render(base: &str, file: &Path) -> (u64, image::RgbImage) {
-    let (ok, text) = push_file(base, file);
+    let (ok, text) = push_files(base, &[file]);
     assert!(ok, "{}: {text}", file.display());
-    let id = text
-        .lines()
-        .find_map(|l| l.strip_prefix("created scene "))
-        .expect("the new scene's id is printed")
-        .trim()
-        .to_string();
+    let id = created_scene_id(&text);
     let atoms: u64 = text
         .split(", ")
         .find_map(|p| p.strip_suffix(" atoms"))
         .and_then(|n| n.parse().ok())
         .unwrap_or_else(|| panic!("the atom count is printed: {text}"));
-    let r = Client::new(base)
-        .expect("url")
-        .request(
-            "POST",
-            &format!("/api/v1/scenes/{id}/render"),
-            &[("Content-Type", "application/json")],
-            Body::Bytes(br#"{"step":0,"width":48,"height":36}"#),
-        )
-        .expect("answer");
-    assert_eq!(r.status, 200, "{}", r.text());
-    let img = image::load_from_memory(&r.body).expect("png").to_rgb8();
+    let img = image::load_from_memory(&render_png(base, &id, 0))
+        .expect("png")
+        .to_rgb8();
     (atoms, img)
 }
 
@@ -117,14 +93,14 @@ async fn pdb_and_mmcif_files_push_and_render_and_bad_lines_are_named() {
         assert!(cif_atoms > 5000, "{cif_atoms}");
         assert!(pixel_stddev(&cif_image) > 5.0, "the molecule shows");
 
-        let (ok, text) = push_file(&base, &truncated);
+        let (ok, text) = push_files(&base, &[&truncated]);
         assert!(!ok);
         let line = format!("line {}", first_atom + 3);
         assert!(
             text.contains("truncated.pdb") && text.contains(&line),
             "{line}: {text}"
         );
-        let (ok, text) = push_file(&base, &malformed);
+        let (ok, text) = push_files(&base, &[&malformed]);
         assert!(!ok);
         let line = format!("line {}", first_atom + 2);
         assert!(

@@ -7,67 +7,29 @@
 use super::*;
 use crate::e2e::support::pixel_stddev;
 
-fn push_files(base: &str, files: &[PathBuf]) -> (bool, String) {
-    let out = Command::new(isoray_binary())
-        .arg("push")
-        .args(["--server", base])
-        .args(files)
-        .output()
-        .expect("isoray push runs");
-    let text =
-        String::from_utf8_lossy(&out.stdout).to_string() + &String::from_utf8_lossy(&out.stderr);
-    (out.status.success(), text)
-}
-
-fn scene_id(text: &str) -> String {
-    text.lines()
-        .find_map(|l| l.strip_prefix("created scene "))
-        .unwrap_or_else(|| panic!("the new scene's id is printed: {text}"))
-        .trim()
-        .to_string()
-}
-
 fn render(base: &str, id: &str, step: u64) -> Vec<u8> {
-    let r = Client::new(base)
-        .expect("url")
-        .request(
-            "POST",
-            &format!("/api/v1/scenes/{id}/render"),
-            &[("Content-Type", "application/json")],
-            Body::Bytes(format!(r#"{{"step":{step},"width":48,"height":36}}"#).as_bytes()),
-        )
-        .expect("answer");
-    assert_eq!(r.status, 200, "{}", r.text());
-    let img = image::load_from_memory(&r.body).expect("a PNG").to_rgb8();
+    let png = render_png(base, id, step);
+    let img = image::load_from_memory(&png).expect("a PNG").to_rgb8();
     assert!(pixel_stddev(&img) > 5.0, "step {step} shows something");
-    r.body
+    png
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn csv_npz_and_xyz_particles_push_and_render_as_metaballs() {
     let dir = tempfile::tempdir().expect("temp dir");
     let files = dir.path().join("files");
-    let out = Command::new(python())
-        .arg(repo_root().join("tests/fixtures/particles.py"))
-        .arg(&files)
-        .output()
-        .expect("python runs (CI installs numpy into ISORAY_PYTHON)");
-    assert!(
-        out.status.success(),
-        "the fixture script ran: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    run_fixture("particles.py", &files);
     let server = Server::start(&dir.path().join("data"), &[]).await;
     let base = server.base.clone();
     call(move || {
         let f = |name: &str| files.join(name);
         let (ok, text) = push_files(&base, &[f("balls.csv")]);
         assert!(ok && text.contains("300 balls, 4 columns"), "{text}");
-        let csv = render(&base, &scene_id(&text), 0);
+        let csv = render(&base, &created_scene_id(&text), 0);
 
         let (ok, text) = push_files(&base, &[f("balls.npz")]);
         assert!(ok && text.contains("2 steps of 300 particles"), "{text}");
-        let id = scene_id(&text);
+        let id = created_scene_id(&text);
         assert!(
             render(&base, &id, 0) == csv,
             "the .npz's first step is the CSV's balls"
@@ -79,7 +41,7 @@ async fn csv_npz_and_xyz_particles_push_and_render_as_metaballs() {
             ok && text.contains("step 1: created (300 balls, 3 columns"),
             "{text}"
         );
-        render(&base, &scene_id(&text), 1);
+        render(&base, &created_scene_id(&text), 1);
 
         let scenes_before = get(&base, "/api/v1/scenes").body;
         for (name, says) in [

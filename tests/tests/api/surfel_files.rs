@@ -8,32 +8,16 @@
 use super::*;
 use crate::e2e::support::pixel_stddev;
 
-fn push_file(base: &str, file: &Path) -> (bool, String) {
-    let out = Command::new(isoray_binary())
-        .arg("push")
-        .args(["--server", base, "--surfels", "3000"])
-        .arg(file)
-        .output()
-        .expect("isoray push runs");
-    let text =
-        String::from_utf8_lossy(&out.stdout).to_string() + &String::from_utf8_lossy(&out.stderr);
-    (out.status.success(), text)
+/// `isoray push --surfels 3000 FILE`.
+fn push_surfels(base: &str, file: &Path) -> (bool, String) {
+    push_files(base, &[Path::new("--surfels"), Path::new("3000"), file])
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn point_clouds_and_meshes_from_meshio_push_and_render() {
     let dir = tempfile::tempdir().expect("temp dir");
     let files = dir.path().join("files");
-    let out = Command::new(python())
-        .arg(repo_root().join("tests/fixtures/surfel_files.py"))
-        .arg(&files)
-        .output()
-        .expect("the fixture script runs");
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    run_fixture("surfel_files.py", &files);
     let data = dir.path().join("data");
     let server = Server::start(&data, &[]).await;
     let base = server.base.clone();
@@ -46,14 +30,9 @@ async fn point_clouds_and_meshes_from_meshio_push_and_render() {
             ("cloud_bare.ply", 1500),
             ("cloud.xyz", 1500),
         ] {
-            let (ok, text) = push_file(&base, &files.join(name));
+            let (ok, text) = push_surfels(&base, &files.join(name));
             assert!(ok, "{name}: {text}");
-            let id = text
-                .lines()
-                .find_map(|l| l.strip_prefix("created scene "))
-                .unwrap_or_else(|| panic!("{name}: the id is printed: {text}"))
-                .trim()
-                .to_string();
+            let id = created_scene_id(&text);
             let scene = json(&get(&base, &format!("/api/v1/scenes/{id}")));
             assert_eq!(scene["kind"], "surfels", "{name}: {scene}");
             assert_eq!(
@@ -81,7 +60,7 @@ async fn point_clouds_and_meshes_from_meshio_push_and_render() {
             );
         }
         let before = store_snapshot(&data);
-        let (ok, text) = push_file(&base, &files.join("no_faces.off"));
+        let (ok, text) = push_surfels(&base, &files.join("no_faces.off"));
         assert!(!ok, "a mesh without faces is refused: {text}");
         assert!(
             text.contains("400")

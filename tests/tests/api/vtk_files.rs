@@ -11,42 +11,6 @@
 use super::*;
 use crate::e2e::support::pixel_stddev;
 
-/// Runs `isoray push --server base files...`; returns (success, stdout + stderr).
-fn push_files(base: &str, files: &[PathBuf]) -> (bool, String) {
-    let out = Command::new(isoray_binary())
-        .arg("push")
-        .args(["--server", base])
-        .args(files)
-        .output()
-        .expect("isoray push runs");
-    let text =
-        String::from_utf8_lossy(&out.stdout).to_string() + &String::from_utf8_lossy(&out.stderr);
-    (out.status.success(), text)
-}
-
-fn scene_id(text: &str) -> String {
-    text.lines()
-        .find_map(|l| l.strip_prefix("created scene "))
-        .unwrap_or_else(|| panic!("the new scene's id is printed: {text}"))
-        .trim()
-        .to_string()
-}
-
-/// A small PNG of `step` with the scene's own camera and isovalue.
-fn render(base: &str, id: &str, step: u64) -> Vec<u8> {
-    let r = Client::new(base)
-        .expect("url")
-        .request(
-            "POST",
-            &format!("/api/v1/scenes/{id}/render"),
-            &[("Content-Type", "application/json")],
-            Body::Bytes(format!(r#"{{"step":{step},"width":48,"height":36}}"#).as_bytes()),
-        )
-        .expect("answer");
-    assert_eq!(r.status, 200, "{}", r.text());
-    r.body
-}
-
 fn not_blank(png: &[u8]) {
     let img = image::load_from_memory(png).expect("a PNG").to_rgb8();
     assert!(pixel_stddev(&img) > 5.0, "the image shows something");
@@ -56,16 +20,7 @@ fn not_blank(png: &[u8]) {
 async fn vtk_files_in_every_encoding_render_the_same_image() {
     let dir = tempfile::tempdir().expect("temp dir");
     let files = dir.path().join("files");
-    let out = Command::new(python())
-        .arg(repo_root().join("tests/fixtures/vtk_meshes.py"))
-        .arg(&files)
-        .output()
-        .expect("python runs (CI installs vtk and meshio into ISORAY_PYTHON)");
-    assert!(
-        out.status.success(),
-        "the fixture script ran: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    run_fixture("vtk_meshes.py", &files);
     let server = Server::start(&dir.path().join("data"), &[]).await;
     let base = server.base.clone();
     call(move || {
@@ -73,7 +28,7 @@ async fn vtk_files_in_every_encoding_render_the_same_image() {
         let (ok, text) = push_files(&base, &[f("vtk_raw.vtu")]);
         assert!(ok, "{text}");
         assert!(text.contains("215622 tets"), "{text}");
-        let reference = render(&base, &scene_id(&text), 0);
+        let reference = render_png(&base, &created_scene_id(&text), 0);
         not_blank(&reference);
         for name in [
             "vtk_default.vtu",
@@ -98,14 +53,14 @@ async fn vtk_files_in_every_encoding_render_the_same_image() {
         ] {
             let (ok, text) = push_files(&base, &[f(name)]);
             assert!(ok, "{name}: {text}");
-            let png = render(&base, &scene_id(&text), 0);
+            let png = render_png(&base, &created_scene_id(&text), 0);
             assert!(png == reference, "{name} renders as the raw file does");
         }
 
         // A .pvd series: two steps at the collection's times, the first the same image.
         let (ok, text) = push_files(&base, &[f("series.pvd")]);
         assert!(ok, "{text}");
-        let id = scene_id(&text);
+        let id = created_scene_id(&text);
         let listed = steps(&base, &id);
         let times: Vec<f64> = listed
             .as_array()
@@ -114,9 +69,9 @@ async fn vtk_files_in_every_encoding_render_the_same_image() {
             .map(|s| s["time"].as_f64().expect("time"))
             .collect();
         assert_eq!(times, vec![0.0, 0.5]);
-        assert!(render(&base, &id, 0) == reference);
+        assert!(render_png(&base, &id, 0) == reference);
         assert!(
-            render(&base, &id, 1) != reference,
+            render_png(&base, &id, 1) != reference,
             "step 1's field is scaled"
         );
 
@@ -126,11 +81,11 @@ async fn vtk_files_in_every_encoding_render_the_same_image() {
             ok && text.contains("hexahedra") && text.contains("cell array"),
             "{text}"
         );
-        let hex = render(&base, &scene_id(&text), 0);
+        let hex = render_png(&base, &created_scene_id(&text), 0);
         not_blank(&hex);
         let (ok, text) = push_files(&base, &[f("hex_meshio.vtu")]);
         assert!(ok, "{text}");
-        assert!(render(&base, &scene_id(&text), 0) == hex);
+        assert!(render_png(&base, &created_scene_id(&text), 0) == hex);
 
         // A version 5.1 file cut inside its connectivity is refused, naming the array.
         let whole = std::fs::read(f("meshio_legacy_default.vtk")).expect("read");
