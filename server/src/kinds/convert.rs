@@ -381,3 +381,20 @@ fn isosurfaces(surfaces: &[IsosurfaceSpec], count: usize) -> Result<Vec<Isosurfa
         })
         .collect()
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_largest_f32_written_in_json_is_a_finite_f32() {
+        // Python's repr of float(numpy.float32 max), as schemathesis sent it; serde_json
+        // without `float_roundtrip` read it one ulp high, beyond f32, and the vertex was
+        // refused as not finite.
+        let v: f64 = serde_json::from_str("3.4028234663852886e38").expect("a number");
+        assert_eq!(v, f64::from(f32::MAX));
+        assert_eq!(to_f32(v), f32::MAX);
+        let next: f64 = serde_json::from_str("3.4028234663852889e38").expect("a number");
+        assert!(next > f64::from(f32::MAX) && to_f32(next).is_infinite());
+    }
+}

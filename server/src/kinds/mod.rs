@@ -207,6 +207,23 @@ impl SceneSetup {
             None => (0.05, 1.5),
         };
         let lighting = lighting(&spec.lighting.clone().unwrap_or_default(), limits)?;
+        // Another kind's settings are refused rather than ignored (they would go unchecked).
+        let others = [
+            ("metaballs", spec.metaballs.is_some(), SceneKind::Metaballs),
+            ("tets", spec.tets.is_some(), SceneKind::Tets),
+            ("surfels", spec.surfels.is_some(), SceneKind::Surfels),
+        ];
+        let this = spec.kind;
+        if let Some((field, _, _)) = others.iter().find(|(_, given, k)| *given && *k != this) {
+            return Err(KindError::relational(
+                "wrong_kind",
+                format!(
+                    "`{field}` holds the settings of {field} scenes; this scene's kind is `{}`",
+                    this.as_str()
+                ),
+            )
+            .field(*field));
+        }
         let kind = match layout {
             StepLayout::Metaballs => KindSetup::Metaballs(ball_setup::setup_from_spec(
                 &spec.metaballs.clone().unwrap_or_default(),

@@ -1,5 +1,6 @@
 //! Scenes and steps survive a clean restart; a kind's scene without its data (a surfel scene
-//! without its object) and an unknown kind are refused with the field named; a one-shot render
+//! without its object), an unknown kind and another kind's settings are refused with the
+//! field named; a one-shot render
 //! answers a PNG.
 
 use super::*;
@@ -32,6 +33,17 @@ async fn scenes_without_their_kind_are_refused_and_steps_survive_a_restart() {
             .expect("answer");
         assert_eq!(r.status, 400, "not a kind of the schema: {}", r.text());
         assert!(r.text().contains("kind"), "{}", r.text());
+        // Another kind's settings beside a kind are refused, not ignored unchecked.
+        let r = c
+            .request(
+                "POST",
+                "/api/v1/scenes",
+                &[("Content-Type", "application/json")],
+                Body::Bytes(br#"{"kind":"metaballs","tets":{"color_range":[0,1]}}"#),
+            )
+            .expect("answer");
+        assert_eq!(r.status, 422, "{}", r.text());
+        assert_eq!(json(&r)["field"], "tets");
         let (id, token) = create(&base);
         let js = br#"{"positions":[[0,0,0],[0.4,0,0]],"radii":[0.5,0.5]}"#;
         assert_eq!(
