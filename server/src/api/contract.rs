@@ -279,7 +279,7 @@ fn view_constraints(config: &Config) -> Vec<Constraint> {
         (
             "RenderRequest",
             "step",
-            json!({"description": "Stored step to render (default: the newest). Stored scenes only (422 for a built-in demo); 404 if the scene has no such step."}),
+            json!({"description": "Stored step to render (default: the newest). Stored scenes only (422 for a built-in demo), and one the scene holds (422 otherwise)."}),
         ),
         (
             "JsonStep",
@@ -301,6 +301,12 @@ fn view_constraints(config: &Config) -> Vec<Constraint> {
             "JsonStep",
             "colors",
             json!({"items": numbers(3, -F32_MAX, F32_MAX)}),
+        ),
+        (
+            "JsonTetStep",
+            "positions",
+            json!({"items": numbers(3, -F32_MAX, F32_MAX),
+                   "description": "This step's vertex positions, one row per mesh vertex (default: the mesh's own); no tet may become inverted or degenerate (422 otherwise)."}),
         ),
         (
             "JsonTetStep",

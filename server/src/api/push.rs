@@ -223,8 +223,15 @@ struct AnyJsonStep {
     strengths: Option<Vec<f64>>,
     #[serde(default)]
     colors: Option<Vec<[f64; 3]>>,
-    #[serde(default)]
+    /// Absent, or an array: the document's JsonTetStep requires the array and JsonStep has
+    /// no such field, so `"scalars": null` matches neither and is refused (400).
+    #[serde(default, deserialize_with = "present_array")]
     scalars: Option<Vec<f64>>,
+}
+
+/// A field that may be left out but, when given, must be an array (not `null`).
+fn present_array<'de, D: serde::Deserializer<'de>>(d: D) -> Result<Option<Vec<f64>>, D::Error> {
+    <Vec<f64> as serde::Deserialize>::deserialize(d).map(Some)
 }
 
 impl AnyJsonStep {

@@ -95,8 +95,11 @@ pub async fn render(
         );
     }
     let step = match (entry.stored_scene(), req.step) {
+        // The scene (the URL's resource) exists; a body naming a step it does not hold is a
+        // request whose fields disagree with the store: 422, like `step` on a built-in scene.
         (Some(scene), Some(i)) => Some(scene.step(i).ok_or_else(|| {
-            AppError::not_found(format!("scene `{id}` has no step {i}")).field("step")
+            AppError::relational("invalid_value", format!("scene `{id}` has no step {i}"))
+                .field("step")
         })?),
         (Some(scene), None) => scene.latest(),
         (None, Some(_)) => {

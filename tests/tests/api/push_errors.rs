@@ -259,6 +259,14 @@ async fn every_wrong_push_is_a_4xx_naming_where_and_changes_nothing() {
                 400,
                 Where::Field("scalars[2]"),
             ),
+            (
+                // Neither JsonStep (no `scalars`) nor JsonTetStep (`scalars` is an array): the
+                // document forbids it, so it is not read as "absent" (schemathesis, ST201).
+                "scalars: null beside a metaball step's positions",
+                push(&base, &id, "1", &token, "application/json", br#"{"positions":[],"scalars":null}"#),
+                400,
+                Where::Field("scalars"),
+            ),
         ];
         // An oversized body without a declared length: cut off while streaming.
         let mut chunked = String::new();

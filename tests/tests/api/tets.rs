@@ -279,6 +279,23 @@ async fn tet_scenes_are_validated_stored_streamed_and_reloaded() {
             centre, corner,
             "the sphere covers the middle, not the corner"
         );
+        // A step the scene does not hold: the scene exists, so the body's `step` is what is
+        // wrong (422 naming it), not a missing resource (a 404 here broke schemathesis's
+        // "created resource not found" check).
+        let missing = post_json(
+            &base,
+            &format!("/api/v1/scenes/{id}/render"),
+            r#"{"step":7,"width":64,"height":48}"#,
+        );
+        assert_eq!(missing.status, 422, "{}", missing.text());
+        let err = json(&missing);
+        assert_eq!(err["field"], "step", "{err}");
+        assert!(
+            err["message"]
+                .as_str()
+                .is_some_and(|m| m.contains("no step 7")),
+            "{err}"
+        );
         (id, token, r.body, listed)
     })
     .await;
