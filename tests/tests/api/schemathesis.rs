@@ -90,7 +90,7 @@ async fn schemathesis_finds_nothing_against_the_served_document() {
         // name a scene, so without them pushes and mesh uploads would only ever meet 404s
         // and 409s and never reach the body checks (schemathesis's "missing test data").
         let admin_auth = format!("Bearer {admin}");
-        let mut scene = |kind: &str| {
+        let scene = |kind: &str| {
             let r = Client::new(&base)
                 .expect("url")
                 .request(
