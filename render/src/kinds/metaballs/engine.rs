@@ -25,6 +25,8 @@ use std::sync::{Arc, OnceLock};
 mod packet;
 #[cfg(test)]
 mod packet_tests;
+// Shadow rays towards one point light traced as one packet.
+mod shadows;
 // Secondary-ray queries (any hit, exit from the solid, optical depth): the effects layer's.
 mod queries;
 

@@ -4,9 +4,12 @@
 use crate::kinds::dispatch::PreparedGeometry;
 use crate::kinds::metaballs::counters::MetaballCounters;
 use crate::kinds::metaballs::engine::PreparedMetaballs;
+use crate::ray::Ray;
+use crate::scene::PreparedScene;
 use crate::scenes::DemoScene;
+use glam::Vec3;
 use rayon::prelude::*;
-use std::sync::Arc;
+use std::sync::{Arc, OnceLock};
 
 const WIDTH: u32 = 48;
 const HEIGHT: u32 = 40;
@@ -24,16 +27,31 @@ fn tiles() -> Vec<(u32, u32, u32, u32)> {
         .collect()
 }
 
+/// Every metaball demo prepared with the defaults, once for the tests of this file.
+fn demos() -> &'static [(DemoScene, PreparedScene, Arc<PreparedMetaballs>)] {
+    static DEMOS: OnceLock<Vec<(DemoScene, PreparedScene, Arc<PreparedMetaballs>)>> =
+        OnceLock::new();
+    DEMOS.get_or_init(|| {
+        DemoScene::ALL
+            .iter()
+            .filter_map(|&demo| {
+                let prepared = Arc::new(demo.state_at(1.0)).prepare();
+                let m = match prepared.geometry() {
+                    PreparedGeometry::Metaballs(m) => m.clone(),
+                    PreparedGeometry::Tets(_) | PreparedGeometry::Surfels(_) => return None,
+                };
+                Some((demo, prepared, m))
+            })
+            .collect()
+    })
+}
+
 #[test]
 fn packets_match_single_rays_on_every_demo_at_1_2_and_8_threads() {
-    let mut demos = 0;
-    for demo in DemoScene::ALL {
-        let prepared = Arc::new(demo.state_at(1.0)).prepare();
-        let m: Arc<PreparedMetaballs> = match prepared.geometry() {
-            PreparedGeometry::Metaballs(m) => m.clone(),
-            PreparedGeometry::Tets(_) | PreparedGeometry::Surfels(_) => continue,
-        };
-        demos += 1;
+    let mut count = 0;
+    for (demo, prepared, m) in demos() {
+        let demo = *demo;
+        count += 1;
         assert!(m.options().packets, "packets are the default");
         let rays = prepared.primary_rays(&demo.default_camera(), WIDTH, HEIGHT);
         let isovalue = demo.default_isovalue();
@@ -85,7 +103,7 @@ fn packets_match_single_rays_on_every_demo_at_1_2_and_8_threads() {
             }
         }
     }
-    assert!(demos >= 10, "only {demos} metaball demos");
+    assert!(count >= 10, "only {count} metaball demos");
 }
 
 #[test]
@@ -106,4 +124,58 @@ fn packets_switched_off_leave_the_tile_to_single_rays() {
     assert!(m
         .primary_tile_packet(&rays, tile, demo.default_isovalue(), T_MAX, &mut c)
         .is_none());
+}
+
+/// Shadow rays from every primary hit towards one point light: the packet's any-hit roots
+/// equal the single rays' (hit/miss identical, roots within the tolerance).
+#[test]
+fn shadow_packets_match_single_rays_on_every_demo() {
+    let mut shadowed = 0;
+    for (demo, prepared, m) in demos() {
+        let demo = *demo;
+        let camera = demo.default_camera();
+        let rays = prepared.primary_rays(&camera, WIDTH, HEIGHT);
+        let isovalue = demo.default_isovalue();
+        let tolerance = m.options().tolerance;
+        // A light above and beside the eye.
+        let eye = rays.through_pixel(0, 0).origin;
+        let light = eye + Vec3::new(3.0, 5.0, 1.0) * (1.0 + eye.length() * 0.2);
+        for rect in tiles() {
+            let mut c = MetaballCounters::default();
+            let hits = m
+                .primary_tile_packet(&rays, rect, isovalue, T_MAX, &mut c)
+                .expect("a packet");
+            let (shadow_rays, t_max): (Vec<Ray>, Vec<f32>) = hits
+                .iter()
+                .filter_map(|(_, h)| h.as_ref())
+                .map(|h| {
+                    let origin = h.position + h.normal * 1e-3;
+                    let to = light - origin;
+                    (Ray::new(origin, to), to.length())
+                })
+                .unzip();
+            if shadow_rays.is_empty() {
+                continue;
+            }
+            let packet = m
+                .any_hits_packet(&shadow_rays, 0.0, &t_max, light, isovalue, &mut c)
+                .expect("a shadow packet");
+            for (k, (ray, &hi)) in shadow_rays.iter().zip(&t_max).enumerate() {
+                let single = m.any_hit_counted(ray, 0.0, hi, isovalue, &mut c);
+                match (packet[k], single) {
+                    (Some(p), Some(s)) => {
+                        shadowed += 1;
+                        assert!(
+                            (p - s).abs() <= tolerance,
+                            "{} shadow ray {k}: {p} against {s}",
+                            demo.id()
+                        );
+                    }
+                    (None, None) => {}
+                    (p, s) => panic!("{} shadow ray {k}: packet {p:?}, single {s:?}", demo.id()),
+                }
+            }
+        }
+    }
+    assert!(shadowed > 0, "no shadow ray was blocked");
 }
