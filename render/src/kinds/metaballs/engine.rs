@@ -157,7 +157,10 @@ impl PreparedMetaballs {
             })
             .collect();
         let accel = build_accel(&scene, options.accel);
-        let nested = packet::boxes_nest(&accel);
+        let nested = match &accel {
+            Accel::Tree(tree) => tree.kind == TreeKind::Fitted && tree.boxes_nest(),
+            Accel::BruteForce | Accel::ActiveList => false,
+        };
         PreparedMetaballs {
             scene,
             balls,

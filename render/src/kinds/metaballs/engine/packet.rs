@@ -19,7 +19,7 @@
 //!
 //! Why the hits equal the single ray's: the single-ray walk searches a leaf on its slab range
 //! clamped to the ancestors' entries and to `[t_min, t_max]`; when every box lies inside its
-//! parent's (checked once per build, [`boxes_nest`]) the slab entry only grows downwards, so
+//! parent's (checked once per build by `Tree::boxes_nest`) the slab entry only grows downwards, so
 //! that range is the leaf's own slab range on `[t_min, t_max]`, which the packet computes per
 //! ray; the leaf search is the same function. Where the condition fails (or the tree is not
 //! a Fitted BVH, or the query needs the relaxed fallback tree) the tile falls back to single
@@ -29,32 +29,8 @@ use super::{Accel, PreparedMetaballs, SCRATCH};
 use crate::camera::PrimaryRays;
 use crate::geom::aabb::Aabb;
 use crate::kinds::metaballs::counters::MetaballCounters;
-use crate::kinds::metaballs::tree::{Tree, TreeKind};
 use crate::ray::{Hit, Ray};
 use glam::Vec3;
-
-/// Whether `accel` is a Fitted BVH whose every non-empty child box lies inside its parent's
-/// (exact float comparisons; the build intersects half boxes of the parent, so it holds
-/// unless a box was widened).
-pub(super) fn boxes_nest(accel: &Accel) -> bool {
-    let tree = match accel {
-        Accel::Tree(tree) => tree,
-        Accel::BruteForce | Accel::ActiveList => return false,
-    };
-    tree.kind == TreeKind::Fitted && !tree.nodes.is_empty() && nests(tree)
-}
-
-fn nests(tree: &Tree) -> bool {
-    tree.nodes.iter().all(|n| {
-        n.is_leaf()
-            || [n.first, n.first + 1].iter().all(|&c| {
-                let child = &tree.nodes[c as usize];
-                (child.is_leaf() && child.count == 0)
-                    || (child.bounds.min.cmpge(n.bounds.min).all()
-                        && child.bounds.max.cmple(n.bounds.max).all())
-            })
-    })
-}
 
 /// The pixels of a tile: `width × height` from `(x0, y0)` of a camera's image.
 struct Tile<'a> {

@@ -6,9 +6,10 @@
 //! 1. Interval culling (Reshetov et al.'s interval arithmetic): per axis the range of
 //!    `A_i − L` over the packet bounds the `s` for which a segment can lie in a box's slab;
 //!    a node whose three ranges do not meet within `[0, 1]` is skipped for the whole packet.
-//! 2. First active ray: as for primary packets ([`super::packet`]), rays are slab-tested in
-//!    turn until one meets the node (and enters it before the leaf of its best root); the skipped ones
-//!    are inactive below.
+//! 2. First and last active ray: as for primary packets ([`super::packet`]), rays are
+//!    slab-tested in turn from the front until one meets the node (and enters it before the
+//!    leaf of its best root), and from the back likewise; the rays outside the two are
+//!    inactive below.
 //! 3. Leaves: each active ray's own slab range and the single-ray leaf search. A ray's answer
 //!    is the root of the leaf it enters first among the leaves with a root — what the
 //!    single-ray walk returns, since a ray crosses disjoint leaves in the order of their
@@ -104,7 +105,6 @@ impl PreparedMetaballs {
         SCRATCH.with(|cell| {
             let mut guard = cell.borrow_mut();
             let (gathered, scratch, _) = &mut *guard;
-            let mut stack: Vec<(u32, u32)> = vec![(0, 0)];
             // The ray's range in a box, if the box starts before the leaf of its best root.
             let range = |b: &Aabb, r: usize, best: &[Option<(f32, f32)>]| {
                 if !(t_min < t_max[r]) {
@@ -116,14 +116,16 @@ impl PreparedMetaballs {
                     _ => Some((near, far)),
                 }
             };
-            while let Some((i, from)) = stack.pop() {
+            let mut stack: Vec<(u32, u32, u32)> = vec![(0, 0, n as u32)];
+            while let Some((i, from, to)) = stack.pop() {
+                let (from, to) = (from as usize, to as usize);
                 let node = &tree.nodes[i as usize];
                 if (node.is_leaf() && node.count == 0) || cone.misses(&node.bounds) {
                     continue;
                 }
                 counters.node_traversals += 1;
                 if node.is_leaf() {
-                    for r in from as usize..n {
+                    for r in from..to {
                         let Some((near, far)) = range(&node.bounds, r, &best) else {
                             continue;
                         };
@@ -137,14 +139,16 @@ impl PreparedMetaballs {
                     }
                     continue;
                 }
-                let Some(fa) =
-                    (from as usize..n).find(|&r| range(&node.bounds, r, &best).is_some())
-                else {
+                // The first and the last active ray: the rays outside them miss the box.
+                let active = |r: &usize| range(&node.bounds, *r, &best).is_some();
+                let Some(fa) = (from..to).find(active) else {
                     continue;
                 };
+                let la = (fa..to).rfind(active).unwrap_or(fa);
                 let c = node.first;
-                stack.push((c + 1, fa as u32));
-                stack.push((c, fa as u32));
+                let span = (fa as u32, la as u32 + 1);
+                stack.push((c + 1, span.0, span.1));
+                stack.push((c, span.0, span.1));
             }
         });
         let hits: Vec<Option<f32>> = best.into_iter().map(|b| b.map(|(_, t)| t)).collect();
