@@ -8,6 +8,7 @@ mod effects;
 mod ingest;
 mod load;
 mod load_cluster;
+mod metaball_packets;
 mod metaballs;
 mod stream;
 mod surfels;

@@ -21,6 +21,12 @@ use glam::{Mat3, Vec3};
 use std::cell::RefCell;
 use std::sync::{Arc, OnceLock};
 
+// Tiles of primary rays traced as one packet through the Fitted BVH.
+mod packet;
+#[cfg(test)]
+mod packet_tests;
+// Shadow rays towards one point light traced as one packet.
+mod shadows;
 // Secondary-ray queries (any hit, exit from the solid, optical depth): the effects layer's.
 mod queries;
 
@@ -53,6 +59,9 @@ pub struct PrepareOptions {
     /// Refine each `f32` hit in `f64` (bisection on the exact field of the balls that hit,
     /// from the `f32` bracket to `1e-12` relative), at the price of an `f64` search per hit.
     pub refine_f64: bool,
+    /// Trace a tile of primary rays as one packet through the Fitted BVH (the default;
+    /// same hits ray for ray), or every ray alone (for comparison).
+    pub packets: bool,
 }
 
 impl PrepareOptions {
@@ -64,6 +73,7 @@ impl PrepareOptions {
             tolerance: 1e-4,
             step: RootFinder::BezierClipping.default_step(),
             refine_f64: false,
+            packets: true,
         }
     }
 
@@ -105,6 +115,9 @@ pub struct PreparedMetaballs {
     /// Built on first use when a query's isovalue is below the one the §5.3 optimisations
     /// were built for: the same structure without them.
     fallback: OnceLock<Accel>,
+    /// Whether `accel` is a Fitted BVH whose every box lies inside its parent's, the
+    /// condition under which a packet's per-ray leaf ranges equal the single ray's.
+    nested: bool,
 }
 
 /// Per-thread buffers of a ray query: the balls along the ray, the root finder's scratch and
@@ -144,6 +157,10 @@ impl PreparedMetaballs {
             })
             .collect();
         let accel = build_accel(&scene, options.accel);
+        let nested = match &accel {
+            Accel::Tree(tree) => tree.kind == TreeKind::Fitted && tree.boxes_nest(),
+            Accel::BruteForce | Accel::ActiveList => false,
+        };
         PreparedMetaballs {
             scene,
             balls,
@@ -152,6 +169,7 @@ impl PreparedMetaballs {
             accel,
             build_ms: started.elapsed().as_secs_f64() * 1e3,
             fallback: OnceLock::new(),
+            nested,
         }
     }
 
