@@ -19,6 +19,7 @@ mod push_errors;
 mod python_client;
 mod python_example;
 mod restart;
+mod slow_body;
 mod slow_headers;
 mod surfel_files;
 mod surfels;
