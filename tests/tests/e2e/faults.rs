@@ -300,6 +300,13 @@ async fn a_client_flooding_inputs_without_reading_holds_bounded_state() {
         );
         tokio::time::sleep(std::time::Duration::from_millis(20)).await;
     }
+    // ...and the live scene animates for another second of scene time, which would be about
+    // 30 more frames if the window did not hold them back...
+    let until = server.state.scenes().live_time() + 1.0;
+    while server.state.scenes().live_time() < until {
+        assert!(start.elapsed() < WAIT * 2, "the live scene's time advances");
+        tokio::time::sleep(std::time::Duration::from_millis(20)).await;
+    }
     // ...but without acknowledgements, at most a window of frames for 22,000 inputs,
     // and at most one held: inputs replace the settings, nothing queues per input.
     let rendered = stats.frames_rendered.load(Ordering::SeqCst);
