@@ -123,7 +123,8 @@ impl From<BodyError> for IngestError {
             } => IngestError {
                 kind: IngestErrorKind::Timeout,
                 code: "timeout",
-                message: "the body did not arrive within the time limit".into(),
+                message: "the body did not arrive within the time limit (--push-timeout-secs)"
+                    .into(),
                 field: None,
                 offset: Some(offset),
             },

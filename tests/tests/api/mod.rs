@@ -20,6 +20,7 @@ mod python_client;
 mod python_example;
 mod restart;
 mod schemathesis;
+mod slow_body;
 mod slow_headers;
 mod surfel_files;
 mod surfels;

@@ -19,7 +19,7 @@ use std::time::Duration;
 use tokio_tungstenite::tungstenite::Message;
 
 const SCENES: usize = 12;
-const WAIT: Duration = Duration::from_secs(30);
+pub(super) const WAIT: Duration = Duration::from_secs(30);
 
 /// The shipped file: deploy/nginx/isoray.conf.
 pub(crate) fn shipped_conf() -> String {
@@ -49,7 +49,7 @@ pub(crate) fn shards_of(conf: &str) -> Vec<(String, String)> {
 }
 
 /// `text` with `from` replaced by `to`, which must occur exactly `times` times.
-fn replace_exactly(text: &str, from: &str, to: &str, times: usize) -> String {
+pub(super) fn replace_exactly(text: &str, from: &str, to: &str, times: usize) -> String {
     assert_eq!(
         text.matches(from).count(),
         times,
@@ -58,7 +58,7 @@ fn replace_exactly(text: &str, from: &str, to: &str, times: usize) -> String {
     text.replace(from, to)
 }
 
-fn request(base: &str, method: &str, path: &str, body: &[u8]) -> Response {
+pub(super) fn request(base: &str, method: &str, path: &str, body: &[u8]) -> Response {
     let headers: &[(&str, &str)] = if body.is_empty() {
         &[]
     } else {
@@ -71,7 +71,7 @@ fn request(base: &str, method: &str, path: &str, body: &[u8]) -> Response {
 }
 
 /// `n` balls of one step as JSON, placed by `seed`.
-fn json_step(n: usize, seed: usize) -> Vec<u8> {
+pub(super) fn json_step(n: usize, seed: usize) -> Vec<u8> {
     let positions: Vec<[f64; 3]> = (0..n)
         .map(|i| {
             let a = (i + seed) as f64 * 0.7;
@@ -84,7 +84,7 @@ fn json_step(n: usize, seed: usize) -> Vec<u8> {
 }
 
 /// Opens a viewer through `base`, checks `info`, and asks for small frames.
-async fn open_viewer(base: &str, id: &str) -> Ws {
+pub(super) async fn open_viewer(base: &str, id: &str) -> Ws {
     let url = format!(
         "{}/api/v1/scenes/{id}/stream",
         base.replace("http://", "ws://")
@@ -114,7 +114,7 @@ async fn open_viewer(base: &str, id: &str) -> Ws {
 }
 
 /// Reads frames (acknowledging each) until one shows scene time `time`.
-async fn frame_at_time(ws: &mut Ws, id: &str, time: f64) {
+pub(super) async fn frame_at_time(ws: &mut Ws, id: &str, time: f64) {
     let deadline = tokio::time::Instant::now() + WAIT;
     loop {
         let msg = tokio::time::timeout_at(deadline, ws.next())

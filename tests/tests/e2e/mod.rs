@@ -3,6 +3,7 @@
 mod adaptive;
 mod bad_input;
 mod codecs;
+mod faults;
 mod lifecycle;
 mod metrics;
 mod paper_scenes;
