@@ -74,18 +74,23 @@ pub fn intersect_leaf(
     let neighbours = p.model.neighbours.row(s);
     let mut x = ray.at(t0);
     let (iterations, epsilon) = (p.options.mls_iterations, p.options.mls_epsilon);
+    let inv_h2 = 1.0 / (h * h);
     for _ in 0..iterations {
         c.iterations += 1;
-        let (mut sw, mut sp, mut sn, mut sc) = (0.0f32, Vec3::ZERO, Vec3::ZERO, Vec3::ZERO);
+        let (mut sw, mut sp, mut sn) = (0.0f32, Vec3::ZERO, Vec3::ZERO);
         for &k in neighbours {
             let mut fresh = false;
             let d = p.surfel(k as usize, &mut fresh);
             c.surfel_updates += fresh as u64;
-            let w = weight((x - d.centre).length() / h);
+            // Outside the support the weight is 0: no square root for those.
+            let r2 = (x - d.centre).length_squared() * inv_h2;
+            if r2 >= 1.0 {
+                continue;
+            }
+            let w = weight(r2.sqrt());
             sw += w;
             sp += w * d.centre;
             sn += w * d.normal;
-            sc += w * p.model.surfels[k as usize].colour;
         }
         if !(sw > 0.0) {
             return None;
@@ -104,7 +109,7 @@ pub fn intersect_leaf(
                 t,
                 position: x,
                 normal: n,
-                colour: sc / sw,
+                colour: colour_at(p, neighbours, x, inv_h2),
                 surfel: s as u32,
             });
         }
@@ -119,6 +124,26 @@ pub fn intersect_leaf(
     }
     c.capped += 1;
     None
+}
+
+/// The weighted average colour of the neighbourhood at the converged point (eq. 12's
+/// weights), computed once per hit rather than on every iteration.
+fn colour_at(p: &PreparedSurfels, neighbours: &[u32], x: Vec3, inv_h2: f32) -> Vec3 {
+    let (mut sw, mut sc) = (0.0f32, Vec3::ZERO);
+    for &k in neighbours {
+        // Every neighbour is already deformed: the iteration that converged read it.
+        let Some(d) = p.surfels[k as usize].get() else {
+            continue;
+        };
+        let r2 = (x - d.centre).length_squared() * inv_h2;
+        if r2 >= 1.0 {
+            continue;
+        }
+        let w = weight(r2.sqrt());
+        sw += w;
+        sc += w * p.model.surfels[k as usize].colour;
+    }
+    sc / sw
 }
 
 /// Whether `x` on surfel `s`'s surface lies outside a surface that clips it (§4.3).

@@ -6,8 +6,9 @@
 use crate::geom::frame::LocalFrame;
 use crate::kinds::surfels::deform::{check_step, deform_surfel};
 use crate::kinds::surfels::model::{SurfelError, SurfelModel};
+use crate::ray::Ray;
 use glam::{Mat3, Vec3};
-use std::sync::atomic::{AtomicU32, Ordering};
+use std::sync::atomic::{AtomicU32, AtomicU64, Ordering};
 use std::sync::Arc;
 
 /// How a step's hierarchy follows the deformation.
@@ -77,11 +78,19 @@ pub const MLS_EPSILON: f32 = 1e-4;
 /// which costs work, never correctness: a cached node is only a first guess).
 const CACHE_ROW: u32 = 2048;
 const CACHE_SLOTS: usize = 1 << 21;
+/// Slots of the per-ray cache (rays without a pixel: the effects integrator's camera rays).
+const RAY_SLOTS: usize = 1 << 19;
 
 /// What a surfel scene keeps between steps; shared by all steps of one object.
 pub struct SurfelRuntime {
     /// Per pixel: 1 + the surfel whose leaf held the last nearest hit, or 0.
     cache: Vec<AtomicU32>,
+    /// Per ray (keyed by a hash of its origin and direction bits): the hash's upper 32 bits
+    /// as a tag, and 1 + the surfel of its last nearest hit, or 0. The effects integrator
+    /// asks for a camera ray's nearest hit without its pixel; the same camera sends the very
+    /// same ray through a pixel every frame, so its hash finds last frame's surfel (§4.2.2
+    /// "for each ray we store the sphere node..."). A moving camera finds no tags: no hint.
+    rays: Vec<AtomicU64>,
     /// Share of surfels the last lazy step touched, as `f32` bits.
     touched: AtomicU32,
 }
@@ -98,6 +107,7 @@ impl Default for SurfelRuntime {
     fn default() -> Self {
         SurfelRuntime {
             cache: (0..CACHE_SLOTS).map(|_| AtomicU32::new(0)).collect(),
+            rays: (0..RAY_SLOTS).map(|_| AtomicU64::new(0)).collect(),
             touched: AtomicU32::new(0f32.to_bits()),
         }
     }
@@ -125,6 +135,37 @@ impl SurfelRuntime {
         for c in &self.cache {
             c.store(0, Ordering::Relaxed);
         }
+        for c in &self.rays {
+            c.store(0, Ordering::Relaxed);
+        }
+    }
+
+    /// The key of a ray without a pixel: its slot and tag.
+    #[inline]
+    pub fn ray_key(ray: &Ray) -> (usize, u32) {
+        let mut h: u64 = 0;
+        for v in [ray.origin, ray.dir] {
+            for b in v.to_array() {
+                h = (h.rotate_left(5) ^ b.to_bits() as u64).wrapping_mul(0x51_7c_c1_b7_27_22_0a_95);
+            }
+        }
+        ((h as usize) % RAY_SLOTS, (h >> 32) as u32)
+    }
+
+    /// The surfel cached for the ray of `key`, if its tag matches.
+    #[inline]
+    pub fn cached_ray(&self, (slot, tag): (usize, u32)) -> Option<u32> {
+        let v = self.rays[slot].load(Ordering::Relaxed);
+        if (v >> 32) as u32 != tag {
+            return None;
+        }
+        (v as u32).checked_sub(1)
+    }
+
+    #[inline]
+    pub fn remember_ray(&self, (slot, tag): (usize, u32), surfel: Option<u32>) {
+        let v = ((tag as u64) << 32) | surfel.map_or(0, |s| s as u64 + 1);
+        self.rays[slot].store(v, Ordering::Relaxed);
     }
 
     pub fn touched_share(&self) -> f32 {
