@@ -170,12 +170,15 @@ async fn viewer(url: String, log: Arc<Mutex<ViewerLog>>, stop: Arc<AtomicBool>) 
             .await
             .is_ok();
         while open {
-            // The timeout only lets the loop notice `stop`.
+            // Checked before every read: an acknowledging viewer of a live scene gets frames
+            // back to back, so a read never times out and could not notice `stop` there
+            // (that hung this test on an idle machine).
+            if stop.load(Ordering::SeqCst) {
+                let _ = tokio::time::timeout(Duration::from_secs(5), ws.close(None)).await;
+                return;
+            }
+            // The timeout only bounds the wait, so that `stop` is noticed while idle too.
             match tokio::time::timeout(Duration::from_millis(200), ws.next()).await {
-                Err(_) if stop.load(Ordering::SeqCst) => {
-                    let _ = ws.close(None).await;
-                    return;
-                }
                 Err(_) => {}
                 Ok(Some(Ok(Message::Binary(bytes)))) => {
                     let sequence = decode_frame(&bytes).header.sequence;
