@@ -200,6 +200,21 @@ pub fn steps(base: &str, id: &str) -> Value {
     json(&get(base, &format!("/api/v1/scenes/{id}/steps")))["steps"].clone()
 }
 
+/// Index → checksum of each step in a `steps` list as the API returns it.
+pub fn step_checksums(steps: &Value) -> BTreeMap<u64, String> {
+    steps
+        .as_array()
+        .expect("steps")
+        .iter()
+        .map(|s| {
+            (
+                s["index"].as_u64().expect("index"),
+                s["checksum"].as_str().expect("checksum").to_string(),
+            )
+        })
+        .collect()
+}
+
 pub const NPY: &str = "application/x-npy";
 
 /// Every file under `root` (relative path → XXH3-128 of its bytes): what "nothing stored

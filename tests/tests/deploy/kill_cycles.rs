@@ -219,18 +219,7 @@ fn lost_steps(base: &str, id: &str, ledger: &Mutex<Ledger>) -> Vec<u64> {
         .iter()
         .map(|(i, (_, c))| (*i, c.clone()))
         .collect();
-    let listed = crate::api::steps(base, id);
-    let listed: BTreeMap<u64, String> = listed
-        .as_array()
-        .expect("steps")
-        .iter()
-        .map(|s| {
-            (
-                s["index"].as_u64().expect("index"),
-                s["checksum"].as_str().expect("checksum").to_string(),
-            )
-        })
-        .collect();
+    let listed = crate::api::step_checksums(&crate::api::steps(base, id));
     completed
         .into_iter()
         .filter(|(i, c)| listed.get(i) != Some(c))

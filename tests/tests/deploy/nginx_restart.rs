@@ -280,17 +280,7 @@ async fn a_process_killed_behind_nginx_comes_back_with_its_steps_and_viewers() {
         }
     })
     .await;
-    let listed: BTreeMap<u64, String> = listed["steps"]
-        .as_array()
-        .expect("steps")
-        .iter()
-        .map(|s| {
-            (
-                s["index"].as_u64().expect("index"),
-                s["checksum"].as_str().expect("checksum").to_string(),
-            )
-        })
-        .collect();
+    let listed = crate::api::step_checksums(&listed["steps"]);
     let lost: Vec<u64> = pushed
         .completed
         .iter()
