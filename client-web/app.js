@@ -332,6 +332,17 @@ async function selectScene(id) {
   connection.open(id);
 }
 
+// A deployment of several processes lists every process's scenes; a process that did not
+// answer is named in `unreachable_shards`, and the picker says its scenes are missing.
+const shardsDown = document.getElementById('shards-down');
+function showShards(list) {
+  const down = list.unreachable_shards || [];
+  shardsDown.hidden = down.length === 0;
+  shardsDown.textContent = down.length === 0 ? ''
+    : `${down.length} server${down.length === 1 ? '' : 's'} not answering: ${down.length === 1 ? 'its' : 'their'} scenes are missing from this list`;
+  shardsDown.title = down.join('\n');
+}
+
 // Scenes pushed since the page loaded appear when the picker is opened.
 let listing = null;
 async function refreshScenes() {
@@ -339,7 +350,9 @@ async function refreshScenes() {
   listing = apiFetch('/api/v1/scenes')
     .then(async (response) => {
       if (!response.ok) return;
-      scenes = (await response.json()).scenes;
+      const list = await response.json();
+      scenes = list.scenes;
+      showShards(list);
       fillSelect(sceneSelect, scenes.map((s) => [s.id, `${s.name} (${describe(s)})`]), settings.scene);
     })
     .catch(() => {})
@@ -371,7 +384,9 @@ async function start() {
       return;
     }
     if (!response.ok) throw new Error(describeFailure(response));
-    scenes = (await response.json()).scenes;
+    const list = await response.json();
+    scenes = list.scenes;
+    showShards(list);
   } catch (err) {
     setStatus(`Cannot list the scenes (${err.message}); retrying…`);
     setTimeout(start, startDelayMs);

@@ -1,11 +1,13 @@
-// Recording a time range to a WebM file with the browser's MediaRecorder: each frame is the
-// canvas once the server's still (lossless) image of its time is on screen. All frames are
-// fetched first, at the server's pace, then handed to the recorder at exactly the chosen rate
-// (the recorder stamps frames as they arrive) as one VideoFrame each through a
-// MediaStreamTrackGenerator, so there is exactly one recorded frame per time (browsers without
-// it draw each on a canvas captured with `captureStream(0)` and `requestFrame`). A progress
+// Recording a time range to a WebM file: each frame is the canvas once the server's still
+// (lossless) image of its time is on screen. All frames are fetched first, at the server's
+// pace, then encoded with WebCodecs, frame i stamped i/fps (webm.js), so the file has exactly
+// one frame per time at exact intervals. Browsers without a VP8 VideoEncoder hand the frames
+// to a MediaRecorder at the chosen rate instead (it stamps frames as they arrive, and may drop
+// one on a busy machine), as VideoFrames through a MediaStreamTrackGenerator or drawn on a
+// canvas captured with `captureStream(0)` and `requestFrame`. A progress
 // bar counts the frames fetched and encoded; the file is offered as a download at the end.
 import { $ } from './ui.js';
+import { canEncode, encodeWebm } from './webm.js';
 
 // Frames are kept as images until encoded: at most a minute at 10 fps, 20 s at 30 fps.
 const MAX_FRAMES = 600;
@@ -54,8 +56,10 @@ export class Recorder {
       return;
     }
     const count = Math.min(MAX_FRAMES, Math.round((to - from) * fps));
-    const type = ['video/webm;codecs=vp8', 'video/webm;codecs=vp9', 'video/webm'].find((t) => MediaRecorder.isTypeSupported(t));
-    if (!type) throw new Error('this browser cannot record WebM');
+    const type = typeof MediaRecorder === 'function'
+      ? ['video/webm;codecs=vp8', 'video/webm;codecs=vp9', 'video/webm'].find((t) => MediaRecorder.isTypeSupported(t))
+      : undefined;
+    if (!type && typeof VideoEncoder !== 'function') throw new Error('this browser cannot record WebM');
     this.busy = true;
     this.cancelled = false;
     this.button.textContent = 'Stop recording';
@@ -78,8 +82,32 @@ export class Recorder {
     } finally {
       this.restoreTime(before);
     }
-    // ...then to the recorder at exactly the chosen rate, so the file plays the range at it.
+    // ...then encoded: with WebCodecs, frame i stamped at i/fps exactly; else MediaRecorder.
     $('rec-status').textContent = `Encoding ${images.length} frames…`;
+    const frames = images.length;
+    if (!frames) {
+      this.#done('Nothing recorded.');
+      return;
+    }
+    if (await canEncode(images[0].width, images[0].height)) {
+      this.encoder = 'webcodecs';
+      this.blob = await encodeWebm(images, fps, (n) => { this.progress.value = count + n; });
+    } else {
+      this.encoder = 'mediarecorder';
+      this.blob = await this.#mediaRecorder(images, fps, type, count);
+    }
+    this.frames = frames;
+    const link = $('rec-download');
+    if (link.href) URL.revokeObjectURL(link.href);
+    link.href = URL.createObjectURL(this.blob);
+    link.download = `isoray-t${from}-${to}-${fps}fps.webm`;
+    link.hidden = false;
+    this.#done(`Recorded ${frames} frames (${(frames / fps).toFixed(2)} s).`);
+  }
+
+  /** The frames handed to a MediaRecorder at `fps` (it stamps them as they arrive). */
+  async #mediaRecorder(images, fps, type, count) {
+    if (!type) throw new Error('this browser cannot record WebM');
     const source = frameSource(images[0]);
     const recorder = new MediaRecorder(source.stream, { mimeType: type, videoBitsPerSecond: 8e6 });
     const chunks = [];
@@ -105,14 +133,7 @@ export class Recorder {
       await stopped;
       source.stop();
     }
-    this.frames = frames;
-    this.blob = new Blob(chunks, { type: 'video/webm' });
-    const link = $('rec-download');
-    if (link.href) URL.revokeObjectURL(link.href);
-    link.href = URL.createObjectURL(this.blob);
-    link.download = `isoray-t${from}-${to}-${fps}fps.webm`;
-    link.hidden = false;
-    this.#done(`Recorded ${frames} frames (${(frames / fps).toFixed(2)} s).`);
+    return new Blob(chunks, { type: 'video/webm' });
   }
 
   #done(text) {

@@ -1,76 +1,81 @@
-//! `isoray-bench accuracy`: what accuracy costs in time, for the metaball root finders.
+//! `isoray-bench accuracy`: what accuracy costs in time, for every kind, against references
+//! that share no code with the tracers (issue 13).
 //!
-//! Each root finder (bezier-clipping-metaballs.txt §3.2 Bézier clipping, fitted-bvh-metaballs.txt
-//! §3 projections + secant, the tutorial's marching + bisection, sphere tracing) under the
-//! Fitted BVH, at a ladder of hit-distance tolerances: the 640×480 render time (median of
-//! `--runs`), and the error of the hit distance against the `f64` reference
-//! (`metaballs::reference`: the exact piecewise polynomial, certified interval search) on a
-//! grid of the image's rays (every `--sample`-th pixel in x and y): the largest and mean
-//! absolute error over rays both hit, and how many rays hit in one and miss in the other.
-//! Distances are in world units; the scene's size is printed beside them.
+//! Per kind, every setting that trades accuracy for speed (`metaballs`: root finder and
+//! tolerance, marching's and the secant method's step, `f64` hit refinement; `tets`: single
+//! rays against packets, normals; `surfels`: MLS iterations and threshold; `codecs`: JPEG
+//! quality and H.264 bit rate against PSNR): time per frame, silhouette pixels lost and
+//! gained, hit-distance error (mean, p99, max, relative to the scene's extent), normal angle,
+//! and searches that hit their iteration cap. `--out` writes a CSV and a log–log SVG (Pareto
+//! front marked) per kind; `--doc` rewrites the generated block of docs/accuracy.md. The one
+//! command that regenerates it all is in docs/accuracy.md.
 
-use crate::common::{median, write_json, Machine};
+use crate::common::{write_json, Machine};
 use clap::Args;
-use isoray_render::kinds::metaballs::reference::ReferenceRay;
-use isoray_render::kinds::metaballs::{PrepareOptions, RayCounters, RootFinder};
-use isoray_render::scene::Geometry;
-use rayon::prelude::*;
+use isoray_render::{Backend, CpuBackend};
 use serde::Serialize;
-use std::path::PathBuf;
-use std::sync::Arc;
+use std::path::{Path, PathBuf};
 
-use crate::metaballs::{HEIGHT, T_MAX, WIDTH};
+mod codecs;
+mod metaballs;
+mod plot;
+mod stats;
+mod surfels;
+mod tets;
+
+use stats::Row;
+
+/// The block of docs/accuracy.md this command rewrites.
+const BEGIN: &str = "<!-- isoray-bench accuracy: begin (generated, do not edit) -->";
+const END: &str = "<!-- isoray-bench accuracy: end -->";
 
 #[derive(Args)]
 pub struct AccuracyArgs {
-    /// Scene ids (default: pool and molecule).
+    /// Kinds to study: metaballs, tets, surfels, codecs (default: all).
+    #[arg(long, value_delimiter = ',')]
+    kinds: Vec<String>,
+    /// Metaball scene ids (default: the six paper scenes).
     #[arg(long, value_delimiter = ',')]
     scenes: Vec<String>,
-    /// Hit-distance tolerances, world units.
+    /// Hit-distance tolerances of every root finder, world units.
     #[arg(long, value_delimiter = ',', default_values_t = [1e-1, 1e-2, 1e-3, 1e-4, 1e-5])]
     tolerances: Vec<f32>,
-    /// Timed renders per configuration; the median is reported.
+    /// Steps of marching and the secant method, fractions of the smallest radius.
+    #[arg(long, value_delimiter = ',', default_values_t = [1.0, 0.5, 0.25, 0.125, 0.0625, 0.03125, 0.015625, 0.0078125])]
+    steps: Vec<f32>,
+    /// Timed frames per setting; the median is reported.
     #[arg(long, default_value_t = 3)]
     runs: usize,
     /// Compare every n-th pixel in x and y with the reference.
-    #[arg(long, default_value_t = 8)]
+    #[arg(long, default_value_t = 4)]
     sample: u32,
-    /// Also write the rows as JSON to this file.
+    /// Surfel demos at this fraction of their full size.
+    #[arg(long, default_value_t = 0.1)]
+    surfel_detail: f32,
+    /// Frames encoded per codec setting.
+    #[arg(long, default_value_t = 8)]
+    frames: usize,
+    /// Folder for `<kind>.csv` and `<kind>.svg` (created).
+    #[arg(long)]
+    out: Option<PathBuf>,
+    /// Markdown file whose generated block (between its markers) is rewritten with the tables.
+    #[arg(long)]
+    doc: Option<PathBuf>,
+    /// Also write every row as JSON to this file.
     #[arg(long)]
     json: Option<PathBuf>,
-    /// Also write the rows as CSV to this file.
+    /// Also write every row as CSV to this file.
     #[arg(long)]
     csv: Option<PathBuf>,
 }
 
 #[derive(Serialize)]
-struct Row {
-    scene: String,
-    finder: String,
-    tolerance: f32,
-    render_ms: f64,
-    iterations_per_hit: f64,
-    max_error: f64,
-    mean_error: f64,
-    /// 99th percentile of the error over rays both hit.
-    p99_error: f64,
-    /// The scene's extent (largest side of its bounds), world units.
-    extent: f64,
-    /// Largest angle between the finder's normal and the reference's, degrees.
-    max_normal_deg: f64,
-    compared: usize,
-    disagreements: usize,
-    /// Rays the reference hits and the finder misses (silhouette pixels lost).
-    lost: usize,
-    /// Rays the finder hits and the reference misses (gained).
-    gained: usize,
+struct Report<'a> {
+    machine: Machine,
+    rows: &'a [Row],
 }
 
-#[derive(Serialize)]
-struct Report {
-    machine: Machine,
-    rows: Vec<Row>,
-}
+const KINDS: [&str; 4] = ["metaballs", "tets", "surfels", "codecs"];
 
 pub fn run(args: AccuracyArgs) -> Result<(), String> {
     if args.runs == 0 || args.sample == 0 {
@@ -79,194 +84,198 @@ pub fn run(args: AccuracyArgs) -> Result<(), String> {
     if let Some(t) = args
         .tolerances
         .iter()
+        .chain(&args.steps)
         .find(|t| !(t.is_finite() && **t > 0.0))
     {
-        return Err(format!("tolerance {t} must be a positive number"));
+        return Err(format!("tolerance or step {t} must be a positive number"));
     }
-    let ids: Vec<String> = if args.scenes.is_empty() {
-        vec!["pool".into(), "molecule".into()]
+    if !(args.surfel_detail > 0.0 && args.surfel_detail <= 1.0) {
+        return Err(format!(
+            "--surfel-detail {} must be in (0, 1]",
+            args.surfel_detail
+        ));
+    }
+    let kinds: Vec<&str> = if args.kinds.is_empty() {
+        KINDS.to_vec()
     } else {
-        args.scenes.clone()
+        let mut v = Vec::new();
+        for k in &args.kinds {
+            v.push(
+                *KINDS
+                    .iter()
+                    .find(|n| **n == k.as_str())
+                    .ok_or_else(|| format!("unknown kind {k:?}: use {}", KINDS.join(", ")))?,
+            );
+        }
+        v
     };
+    let demos = crate::metaballs::pick(&args.scenes)?;
+    let backend = Backend::Cpu(CpuBackend::new(0).map_err(|e| e.to_string())?);
     let machine = Machine::here();
-    println!("# isoray-bench accuracy\n");
-    println!(
-        "{}; {WIDTH}×{HEIGHT} primary rays under the Fitted BVH, render ms the median of {} \
-         run(s); errors against the f64 reference on every {}th pixel in x and y.\n",
+    let started = std::time::Instant::now();
+    let mut all: Vec<(&str, Vec<Row>)> = Vec::new();
+    let mut notes: Vec<String> = Vec::new();
+    for kind in kinds {
+        let rows = match kind {
+            "metaballs" => {
+                let settings = metaballs::Settings {
+                    tolerances: args.tolerances.clone(),
+                    steps: {
+                        let mut s = args.steps.clone();
+                        s.push(f32::INFINITY); // the secant method's centre projections only
+                        s
+                    },
+                };
+                let rows = metaballs::rows(&demos, &settings, args.runs, args.sample);
+                notes.extend(metaballs::step_bounds(&rows));
+                rows
+            }
+            // The tet reference tests every tet per ray (100k): a coarser grid.
+            "tets" => tets::rows(&backend, args.runs, args.sample.max(12))?,
+            "surfels" => surfels::rows(&backend, args.surfel_detail, args.runs, args.sample)?,
+            _ => codecs::rows(&backend, args.frames)?,
+        };
+        all.push((kind, rows));
+    }
+    let doc = document(
+        &machine,
+        &args,
+        &all,
+        &notes,
+        started.elapsed().as_secs_f64(),
+    )?;
+    println!("{doc}");
+    if let Some(path) = &args.doc {
+        let text = std::fs::read_to_string(path).map_err(|e| format!("{}: {e}", path.display()))?;
+        let (Some(b), Some(e)) = (text.find(BEGIN), text.find(END)) else {
+            return Err(format!(
+                "{} has no generated block ({BEGIN} … {END})",
+                path.display()
+            ));
+        };
+        let updated = format!("{}{BEGIN}\n{doc}\n{}", &text[..b], &text[e..]);
+        std::fs::write(path, updated).map_err(|e| format!("{}: {e}", path.display()))?;
+    }
+    let rows: Vec<Row> = all.iter().flat_map(|(_, r)| r.iter().cloned()).collect();
+    if let Some(path) = &args.csv {
+        std::fs::write(path, stats::csv(&rows)).map_err(|e| format!("{}: {e}", path.display()))?;
+    }
+    if let Some(path) = &args.json {
+        write_json(
+            path,
+            &Report {
+                machine,
+                rows: &rows,
+            },
+        )?;
+    }
+    Ok(())
+}
+
+/// The markdown of the study (tables, plot links, the step bounds), writing each kind's CSV
+/// and SVG under `--out`.
+fn document(
+    machine: &Machine,
+    args: &AccuracyArgs,
+    all: &[(&str, Vec<Row>)],
+    notes: &[String],
+    seconds: f64,
+) -> Result<String, String> {
+    let mut doc = format!(
+        "Measured on {} by `isoray-bench accuracy` in {seconds:.0} s; times are medians of {} \
+         frame(s), errors on every {}th pixel in x and y.\n",
         machine.line(),
         args.runs,
         args.sample
     );
-    let mut rows = Vec::new();
-    for demo in crate::metaballs::pick(&ids)? {
-        let id = demo.id();
-        let state = Arc::new(demo.state_at(1.0));
-        let Geometry::Metaballs(balls) = &state.geometry else {
-            return Err(format!("{id} is not a metaball scene"));
-        };
-        let floor = demo.isovalue_slider().0;
-        let isovalue = demo.default_isovalue();
-        let rays = demo.default_camera().rays(WIDTH, HEIGHT);
-        let pixels: Vec<(u32, u32)> = (0..HEIGHT)
-            .step_by(args.sample as usize)
-            .flat_map(|y| {
-                (0..WIDTH)
-                    .step_by(args.sample as usize)
-                    .map(move |x| (x, y))
-            })
-            .collect();
-        // The reference once per scene: the first hit in the ray's own parameter.
-        let reference: Vec<Option<(f64, glam::DVec3)>> = pixels
-            .par_iter()
-            .map(|&(x, y)| {
-                let ray = rays.through_pixel(x, y);
-                let r = ReferenceRay::new(
-                    balls,
-                    ray.origin.as_dvec3(),
-                    ray.dir.as_dvec3(),
-                    0.0,
-                    T_MAX as f64,
-                );
-                let t = r.first_at_least(isovalue as f64, 0.0)?;
-                Some((t, r.normal(t).unwrap_or_default()))
-            })
-            .collect();
-        let extent = balls
-            .bounds()
-            .map_or(0.0, |(lo, hi)| (hi - lo).max_element());
-        eprintln!("{id}: scene extent {extent:.1} world units");
-        for finder in RootFinder::ALL {
-            for &tolerance in &args.tolerances {
-                let options = PrepareOptions {
-                    tolerance,
-                    ..PrepareOptions::fitted(floor).with_finder(finder)
-                };
-                let prepared = state.clone().prepare_with(options);
-                let mut times = Vec::new();
-                let mut counters = RayCounters::default();
-                for _ in 0..args.runs {
-                    let (ms, c) = crate::metaballs::render(&prepared, demo, 1);
-                    times.push(ms);
-                    counters = c;
-                }
-                let answers: Vec<Option<(f64, glam::DVec3)>> = pixels
-                    .par_iter()
-                    .map(|&(x, y)| {
-                        let ray = rays.through_pixel(x, y);
-                        prepared
-                            .first_hit_counted(
-                                &ray,
-                                0.0,
-                                T_MAX,
-                                isovalue,
-                                &mut RayCounters::default(),
-                            )
-                            .map(|h| (h.t as f64, h.normal.as_dvec3()))
-                    })
-                    .collect();
-                let (mut errors, mut lost, mut gained, mut max_normal_deg) =
-                    (Vec::new(), 0, 0, 0.0f64);
-                for (a, r) in answers.iter().zip(&reference) {
-                    match (a, r) {
-                        (Some((a, na)), Some((r, nr))) => {
-                            errors.push((a - r).abs());
-                            let cos = na.dot(*nr).clamp(-1.0, 1.0);
-                            max_normal_deg = max_normal_deg.max(cos.acos().to_degrees());
-                        }
-                        (None, None) => {}
-                        (None, Some(_)) => lost += 1,
-                        (Some(_), None) => gained += 1,
-                    }
-                }
-                errors.sort_by(f64::total_cmp);
-                let compared = errors.len();
-                let max_error = errors.last().copied().unwrap_or(0.0);
-                let sum: f64 = errors.iter().sum();
-                let p99_error = errors
-                    .get((compared * 99 / 100).min(compared.saturating_sub(1)))
-                    .copied()
-                    .unwrap_or(0.0);
-                let disagreements = lost + gained;
-                let row = Row {
-                    scene: id.to_string(),
-                    finder: finder.name().into(),
-                    tolerance,
-                    render_ms: median(times),
-                    iterations_per_hit: crate::common::per(counters.hit_iterations, counters.hits),
-                    max_error,
-                    mean_error: sum / compared.max(1) as f64,
-                    p99_error,
-                    extent: extent as f64,
-                    max_normal_deg,
-                    compared,
-                    disagreements,
-                    lost,
-                    gained,
-                };
-                eprintln!(
-                    "{id} {:<20} tol {tolerance:e}: {:.1} ms, max error {:.2e}",
-                    row.finder, row.render_ms, row.max_error
-                );
-                rows.push(row);
-            }
+    for (kind, rows) in all {
+        if rows.is_empty() {
+            continue;
         }
-    }
-    println!(
-        "| scene | finder | tolerance | render ms | iterations/hit | max error | p99 error | \
-         mean error | max/extent | normal ° | rays compared | lost | gained |"
-    );
-    println!("|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|");
-    for r in &rows {
-        println!(
-            "| {} | {} | {:.0e} | {:.1} | {:.2} | {:.1e} | {:.1e} | {:.1e} | {:.1e} | {:.2} | {} | {} | {} |",
-            r.scene,
-            r.finder,
-            r.tolerance,
-            r.render_ms,
-            r.iterations_per_hit,
-            r.max_error,
-            r.p99_error,
-            r.mean_error,
-            r.max_error / r.extent.max(1e-30),
-            r.max_normal_deg,
-            r.compared,
-            r.lost,
-            r.gained
-        );
-    }
-    println!(
-        "\nHit/miss disagreements are rays that only graze the surface (within the f32 field's \
-         rounding) or, for marching, cross a stretch thinner than its step."
-    );
-    if let Some(path) = &args.csv {
-        let mut text = String::from(
-            "kind,scene,setting,tolerance,render_ms,iterations_per_hit,max_error,mean_error,\
-             p99_error,relative_max_error,max_normal_deg,compared,lost,gained\n",
-        );
-        for r in &rows {
-            text.push_str(&format!(
-                "metaballs,{},{},{:e},{:.3},{:.3},{:e},{:e},{:e},{:e},{:.4},{},{},{}\n",
-                r.scene,
-                r.finder,
-                r.tolerance,
-                r.render_ms,
-                r.iterations_per_hit,
-                r.max_error,
-                r.mean_error,
-                r.p99_error,
-                r.max_error / r.extent.max(1e-30),
-                r.max_normal_deg,
-                r.compared,
-                r.lost,
-                r.gained
+        let points = plot::points(rows);
+        let front = plot::pareto(&points);
+        let (x_label, y_label) = if *kind == "codecs" {
+            (
+                "encode ms per frame (one core)",
+                "RMS error / full scale = 10^(-PSNR/20)",
+            )
+        } else {
+            (
+                "ms per frame (summed over the scenes)",
+                "p99 |Δt| / scene extent (worst scene)",
+            )
+        };
+        doc.push_str(&format!("\n### {kind}\n\n"));
+        if let Some(out) = &args.out {
+            std::fs::create_dir_all(out).map_err(|e| format!("{}: {e}", out.display()))?;
+            let csv = out.join(format!("{kind}.csv"));
+            std::fs::write(&csv, stats::csv(rows))
+                .map_err(|e| format!("{}: {e}", csv.display()))?;
+            let svg = out.join(format!("{kind}.svg"));
+            let title = format!("{kind}: error against time (filled: no silhouette pixel lost)");
+            std::fs::write(&svg, plot::svg(&title, x_label, y_label, &points)?)
+                .map_err(|e| format!("{}: {e}", svg.display()))?;
+            let link = |p: &Path| relative(p, args.doc.as_deref());
+            doc.push_str(&format!(
+                "![{kind}: error against time]({}) (rows per scene: [{kind}.csv]({}))\n\n",
+                link(&svg),
+                link(&csv)
             ));
         }
-        std::fs::write(path, text).map_err(|e| format!("{}: {e}", path.display()))?;
+        if *kind == "codecs" {
+            doc.push_str(&codec_table(rows));
+        } else {
+            doc.push_str(&stats::summary_table(rows));
+        }
+        doc.push_str("\nPareto front (fastest first): ");
+        doc.push_str(
+            &front
+                .iter()
+                .map(|p| {
+                    format!(
+                        "{} {} ({:.1} ms, {:.1e})",
+                        p.family, p.setting, p.ms, p.error
+                    )
+                })
+                .collect::<Vec<_>>()
+                .join("; "),
+        );
+        doc.push('\n');
+        if *kind == "metaballs" {
+            for n in notes {
+                doc.push_str(&format!("\n- Step bound: {n}"));
+            }
+            doc.push('\n');
+        }
     }
-    if let Some(path) = &args.json {
-        write_json(path, &Report { machine, rows })?;
+    Ok(doc)
+}
+
+/// `path` relative to the folder of `doc` when it lies below it.
+fn relative(path: &Path, doc: Option<&Path>) -> String {
+    doc.and_then(|d| d.parent())
+        .and_then(|base| path.strip_prefix(base).ok())
+        .unwrap_or(path)
+        .display()
+        .to_string()
+}
+
+fn codec_table(rows: &[Row]) -> String {
+    let mut out = String::from(
+        "| codec | setting | encode ms/frame | KB/frame | Mbit/s at 30 fps | PSNR dB |\n|---|---|---:|---:|---:|---:|\n",
+    );
+    for r in rows {
+        out.push_str(&format!(
+            "| {} | {} | {:.2} | {:.1} | {:.2} | {:.1} |\n",
+            r.family,
+            r.setting,
+            r.ms,
+            r.bytes / 1e3,
+            r.bytes * 8.0 * 30.0 / 1e6,
+            r.psnr_db
+        ));
     }
-    Ok(())
+    out
 }
 
 #[cfg(test)]
@@ -274,10 +283,16 @@ mod tests {
     #[test]
     fn bad_arguments_are_named() {
         let args = |runs, sample, tolerances: Vec<f32>| super::AccuracyArgs {
+            kinds: vec![],
             scenes: vec![],
             tolerances,
+            steps: vec![0.25],
             runs,
             sample,
+            surfel_detail: 0.1,
+            frames: 1,
+            out: None,
+            doc: None,
             json: None,
             csv: None,
         };

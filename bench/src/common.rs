@@ -39,6 +39,15 @@ impl Machine {
 }
 
 /// The median of `v` (the upper one of an even count); 0 when empty.
+/// The `q` quantile (0..=1) of sorted `v`, nearest rank; 0 when empty.
+pub fn quantile(sorted: &[f64], q: f64) -> f64 {
+    if sorted.is_empty() {
+        return 0.0;
+    }
+    let rank = (q * sorted.len() as f64).ceil() as usize;
+    sorted[rank.clamp(1, sorted.len()) - 1]
+}
+
 pub fn median(mut v: Vec<f64>) -> f64 {
     if v.is_empty() {
         return 0.0;

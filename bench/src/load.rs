@@ -13,7 +13,7 @@
 //! errors) and a line over all sessions, with the machine it ran on. Everything it sends
 //! goes to `--url` only; the run stops by itself after `--seconds`.
 
-use crate::common::Machine;
+use crate::common::{quantile, Machine};
 use futures_util::{SinkExt, StreamExt};
 use isoray_protocol::{FrameHeader, ServerMessage, SessionInfo, FRAME_HEADER_LEN};
 use serde::Serialize;
@@ -52,6 +52,26 @@ pub struct LoadArgs {
     /// Also write the report as JSON to this file.
     #[arg(long)]
     json: Option<PathBuf>,
+    /// Create this many metaball scenes through `--url` (pushing step 0 to each) and spread
+    /// the viewers over them instead of `--scene`.
+    #[arg(long, default_value_t = 0)]
+    create: usize,
+    /// Balls per step of the created scenes.
+    #[arg(long, default_value_t = 1000)]
+    balls: usize,
+    /// Push a new step to the first N created scenes every 1/`--push-hz` s while the
+    /// viewers watch.
+    #[arg(long, default_value_t = 0)]
+    push_to: usize,
+    #[arg(long, default_value_t = 1.0)]
+    push_hz: f64,
+    /// A process behind the balancer, `NAME=http://HOST:PORT` (NAME: its `--shard`); repeat.
+    /// Its `/metrics` is read at mid-run to show which process served each scene.
+    #[arg(long)]
+    backend: Vec<String>,
+    /// Token for the backends' `/metrics` (their `--metrics-token`).
+    #[arg(long)]
+    metrics_token: Option<String>,
 }
 
 /// One viewer's outcome.
@@ -75,6 +95,8 @@ struct SessionReport {
     /// The frame size the server's adaptive controller settled on: the most frequent size
     /// among the frames of the second half of the run (`WIDTHxHEIGHT`).
     settled_size: String,
+    /// Connections opened again after the server closed one (a process restarted, say).
+    reconnects: u64,
     #[serde(skip)]
     latencies_ms: Vec<f64>,
     /// (arrival, width, height) of every frame.
@@ -101,16 +123,13 @@ struct Report {
     latency_p95_ms: f64,
     latency_p99_ms: f64,
     errors: u64,
+    reconnects: u64,
     per_session: Vec<SessionReport>,
-}
-
-/// The `q` quantile (0..=1) of sorted `v`, nearest rank; 0 when empty.
-fn quantile(sorted: &[f64], q: f64) -> f64 {
-    if sorted.is_empty() {
-        return 0.0;
-    }
-    let rank = (q * sorted.len() as f64).ceil() as usize;
-    sorted[rank.clamp(1, sorted.len()) - 1]
+    pushers: Vec<crate::load_cluster::PushReport>,
+    processes: Vec<crate::load_cluster::ProcessReport>,
+    /// Processes whose session count at mid-run differs from the viewers of the scenes
+    /// their shard created (a scene served by a process that does not hold it).
+    misplaced_processes: usize,
 }
 
 fn parse_size(s: &str) -> Result<(u32, u32), String> {
@@ -164,9 +183,26 @@ pub fn run(args: LoadArgs) -> Result<(), String> {
     {
         return Err("--fps must be in [1, 1000]".into());
     }
+    if !(args.push_hz.is_finite() && args.push_hz > 0.0 && args.push_hz <= 100.0) {
+        return Err("--push-hz must be in (0, 100]".into());
+    }
+    if args.push_to > args.create {
+        return Err("--push-to must be at most --create".into());
+    }
+    if args.create > 1000 || args.balls == 0 || args.balls > 1_000_000 {
+        return Err("--create must be at most 1000 and --balls in 1..=1000000".into());
+    }
+    let backends = args
+        .backend
+        .iter()
+        .map(|b| crate::load_cluster::parse_backend(b))
+        .collect::<Result<Vec<_>, _>>()?;
     let (width, height) = parse_size(&args.size)?;
     let base = ws_base(&args.url)?;
-    let scenes = if args.scene.is_empty() {
+    let created = crate::load_cluster::create_scenes(&args.url, args.create, args.balls)?;
+    let scenes: Vec<String> = if !created.is_empty() {
+        created.iter().map(|c| c.id.clone()).collect()
+    } else if args.scene.is_empty() {
         vec!["blobs".to_string()]
     } else {
         args.scene.clone()
@@ -177,7 +213,29 @@ pub fn run(args: LoadArgs) -> Result<(), String> {
         .map_err(|e| format!("cannot start the async runtime: {e}"))?;
     let duration = Duration::from_secs_f64(args.seconds);
     let input_interval = Duration::from_secs_f64(1.0 / args.input_hz);
-    let mut per_session: Vec<SessionReport> = runtime.block_on(async {
+    let (mut per_session, pushers, processes) = runtime.block_on(async {
+        let pushers: Vec<_> = created
+            .iter()
+            .take(args.push_to)
+            .map(|scene| {
+                let (url, scene, balls, hz) =
+                    (args.url.clone(), scene.clone(), args.balls, args.push_hz);
+                tokio::task::spawn_blocking(move || {
+                    crate::load_cluster::pusher(url, scene, balls, hz, duration)
+                })
+            })
+            .collect();
+        let scrape = {
+            let (backends, token) = (backends.clone(), args.metrics_token.clone());
+            tokio::spawn(async move {
+                tokio::time::sleep(duration / 2).await;
+                tokio::task::spawn_blocking(move || {
+                    crate::load_cluster::scrape(&backends, token.as_deref())
+                })
+                .await
+                .unwrap_or_default()
+            })
+        };
         let tasks: Vec<_> = (0..args.sessions)
             .map(|i| {
                 let scene = scenes[i % scenes.len()].clone();
@@ -186,7 +244,7 @@ pub fn run(args: LoadArgs) -> Result<(), String> {
                     url.push_str(&format!("?token={t}"));
                 }
                 let phase = i as f64 / args.sessions as f64 * std::f64::consts::TAU;
-                tokio::spawn(viewer(
+                tokio::spawn(reconnecting_viewer(
                     i,
                     scene,
                     url,
@@ -207,8 +265,24 @@ pub fn run(args: LoadArgs) -> Result<(), String> {
                 ..SessionReport::default()
             }));
         }
-        out
+        let mut pushed = Vec::new();
+        for p in pushers {
+            pushed.push(p.await.unwrap_or_default());
+        }
+        (out, pushed, scrape.await.unwrap_or_default())
     });
+    let mut processes = processes;
+    for p in &mut processes {
+        let prefix = format!("{}_", p.name);
+        p.expected_sessions = per_session
+            .iter()
+            .filter(|s| s.scene.starts_with(&prefix))
+            .count();
+    }
+    let misplaced_processes = processes
+        .iter()
+        .filter(|p| p.error.is_some() || p.sessions != p.expected_sessions as f64)
+        .count();
 
     for s in &mut per_session {
         s.latencies_ms.sort_by(f64::total_cmp);
@@ -249,8 +323,13 @@ pub fn run(args: LoadArgs) -> Result<(), String> {
         latency_p50_ms: quantile(&all, 0.50),
         latency_p95_ms: quantile(&all, 0.95),
         latency_p99_ms: quantile(&all, 0.99),
-        errors: per_session.iter().map(|s| s.errors).sum(),
+        errors: per_session.iter().map(|s| s.errors).sum::<u64>()
+            + pushers.iter().map(|p| p.failed).sum::<u64>(),
+        reconnects: per_session.iter().map(|s| s.reconnects).sum(),
         per_session,
+        pushers,
+        processes,
+        misplaced_processes,
     };
     print_report(&report);
     if let Some(path) = &args.json {
@@ -300,7 +379,7 @@ fn print_report(r: &Report) {
     }
     println!(
         "all: {:.1} frames/s in total; per viewer {:.1} fps median ({:.1}..{:.1}), {} below half \
-         the mean; input-to-frame p50 {:.1} ms, p95 {:.1} ms, p99 {:.1} ms; {} errors",
+         the mean; input-to-frame p50 {:.1} ms, p95 {:.1} ms, p99 {:.1} ms; {} errors, {} reconnects",
         r.total_frames_per_sec,
         r.fps_median,
         r.fps_min,
@@ -309,8 +388,45 @@ fn print_report(r: &Report) {
         r.latency_p50_ms,
         r.latency_p95_ms,
         r.latency_p99_ms,
-        r.errors
+        r.errors,
+        r.reconnects
     );
+    for p in &r.pushers {
+        println!(
+            "pusher {}: {} steps pushed, {} failed; push p50 {:.1} ms, p95 {:.1} ms, max {:.1} ms{}",
+            p.scene,
+            p.pushed,
+            p.failed,
+            p.latency_p50_ms,
+            p.latency_p95_ms,
+            p.latency_max_ms,
+            if p.error_messages.is_empty() {
+                String::new()
+            } else {
+                format!(" ({})", p.error_messages.join("; "))
+            }
+        );
+    }
+    for p in &r.processes {
+        println!(
+            "process {} ({}): {} sessions at mid-run, {} viewers of its shard's scenes{}",
+            p.name,
+            p.url,
+            p.sessions,
+            p.expected_sessions,
+            p.error
+                .as_deref()
+                .map(|e| format!(" ({e})"))
+                .unwrap_or_default()
+        );
+    }
+    if !r.processes.is_empty() {
+        println!(
+            "placement: {} of {} processes serve exactly the viewers of their own scenes",
+            r.processes.len() - r.misplaced_processes,
+            r.processes.len()
+        );
+    }
     for s in r
         .per_session
         .iter()
@@ -325,6 +441,57 @@ fn fail(report: &mut SessionReport, why: String) {
     report.errors += 1;
     if report.error_messages.len() < 5 {
         report.error_messages.push(why);
+    }
+}
+
+/// A viewer that opens its stream again whenever it ends before `duration` (a process
+/// restarted), counting the reconnects; the reports of its connections are summed.
+#[allow(clippy::too_many_arguments)]
+async fn reconnecting_viewer(
+    session: usize,
+    scene: String,
+    url: String,
+    size: (u32, u32),
+    phase: f64,
+    input_interval: Duration,
+    duration: Duration,
+    fps: Option<f64>,
+) -> SessionReport {
+    let end = Instant::now() + duration;
+    let mut total = SessionReport {
+        session,
+        scene: scene.clone(),
+        ..SessionReport::default()
+    };
+    loop {
+        let left = end.saturating_duration_since(Instant::now());
+        let r = viewer(
+            session,
+            scene.clone(),
+            url.clone(),
+            size,
+            phase,
+            input_interval,
+            left,
+            fps,
+        )
+        .await;
+        total.frames += r.frames;
+        total.bytes += r.bytes;
+        total.seconds += r.seconds;
+        total.errors += r.errors;
+        for m in r.error_messages {
+            if total.error_messages.len() < 5 {
+                total.error_messages.push(m);
+            }
+        }
+        total.latencies_ms.extend(r.latencies_ms);
+        total.sizes.extend(r.sizes);
+        if r.errors == 0 || Instant::now() + Duration::from_millis(500) >= end {
+            return total;
+        }
+        total.reconnects += 1;
+        tokio::time::sleep(Duration::from_millis(250)).await;
     }
 }
 

@@ -7,6 +7,8 @@ mod common;
 mod effects;
 mod ingest;
 mod load;
+mod load_cluster;
+mod metaball_packets;
 mod metaballs;
 mod stream;
 mod surfels;

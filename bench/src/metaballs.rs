@@ -58,6 +58,12 @@ pub struct MetaballsArgs {
     /// Seconds of animation time at which the scenes are taken.
     #[arg(long, default_value_t = 1.0)]
     time: f64,
+    /// Skip the packet table (single rays against 16×16 packets, 640×480 and 1920×1080).
+    #[arg(long)]
+    no_packets: bool,
+    /// Only the packet table (no acceleration-mode or root-finder table).
+    #[arg(long)]
+    packets_only: bool,
 }
 
 #[derive(Args)]
@@ -115,6 +121,7 @@ struct Report {
     finder: String,
     accel: Vec<AccelResult>,
     finders: Vec<FinderResult>,
+    packets: Vec<crate::metaball_packets::PacketResult>,
 }
 
 #[derive(Serialize)]
@@ -220,7 +227,8 @@ pub(crate) fn pick(scenes: &[String]) -> Result<Vec<DemoScene>, String> {
 
 /// Traces every `stride`-th row of the 640×480 image: (ms, counters).
 pub(crate) fn render(prepared: &PreparedScene, demo: DemoScene, stride: u32) -> (f64, RayCounters) {
-    let rays = demo.default_camera().rays(WIDTH, HEIGHT);
+    // In the prepared scene's frame (the world's for every demo scene, which lie near it).
+    let rays = prepared.primary_rays(&demo.default_camera(), WIDTH, HEIGHT);
     let isovalue = demo.default_isovalue();
     let rows: Vec<u32> = (0..HEIGHT).step_by(stride as usize).collect();
     let started = Instant::now();
@@ -263,7 +271,12 @@ pub fn run(args: MetaballsArgs) -> Result<(), String> {
     );
     let mut accel_rows = Vec::new();
     let mut finder_rows = Vec::new();
-    for &demo in &demos {
+    let packet_rows = if args.no_packets {
+        Vec::new()
+    } else {
+        crate::metaball_packets::measure(&demos, runs, args.time)
+    };
+    for &demo in demos.iter().filter(|_| !args.packets_only) {
         let state = Arc::new(demo.state_at(args.time));
         let floor = demo.isovalue_slider().0;
         let n = state.primitive_count();
@@ -302,7 +315,12 @@ pub fn run(args: MetaballsArgs) -> Result<(), String> {
             }
         }
     }
-    print_tables(&accel_rows, &finder_rows);
+    if !args.packets_only {
+        print_tables(&accel_rows, &finder_rows);
+    }
+    if !packet_rows.is_empty() {
+        crate::metaball_packets::print(&packet_rows);
+    }
     if let Some(path) = &args.json {
         write_json(
             path,
@@ -311,6 +329,7 @@ pub fn run(args: MetaballsArgs) -> Result<(), String> {
                 finder: finder.name().into(),
                 accel: accel_rows,
                 finders: finder_rows,
+                packets: packet_rows,
             },
         )?;
     }

@@ -113,16 +113,24 @@ export async function waitForFrames(page, n = 1, { from = null, timeout = 20000 
  */
 export async function settledPixels(page, { from = 0, quietMs = 400, timeout = 30000 } = {}) {
   const deadline = Date.now() + timeout;
-  await page.waitForFunction((n) => {
+  // A still frame of the size the viewer asks for now: on a busy machine the page's layout
+  // (and so the size it asks for) can settle after the first still frame arrived.
+  const stillAtSize = (n) => {
     const v = window.isoray && window.isoray.view;
-    return v && v.framesShown > n && v.lastHeader && (v.lastHeader.flags & 1) === 1;
-  }, from, { timeout });
+    if (!(v && v.framesShown > n && v.lastHeader && (v.lastHeader.flags & 1) === 1)) return false;
+    const [w, h] = window.isoray.quality.size();
+    return v.lastHeader.width === w && v.lastHeader.height === h;
+  };
+  await page.waitForFunction(stillAtSize, from, { timeout });
   let last = await frameCount(page);
   let since = Date.now();
   while (Date.now() < deadline) {
     await page.waitForTimeout(100);
     const now = await frameCount(page);
-    if (now !== last) { last = now; since = Date.now(); } else if (Date.now() - since >= quietMs) break;
+    if (now !== last) { last = now; since = Date.now(); } else if (Date.now() - since >= quietMs) {
+      if (await page.evaluate(stillAtSize, from)) break;
+      since = Date.now();
+    }
   }
   return canvasPixels(page);
 }

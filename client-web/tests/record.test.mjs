@@ -1,6 +1,6 @@
 // Recording: a 2-second time range recorded at 10 frames per second gives a WebM file whose
-// frames all decode (WebCodecs in the same browser) and number exactly 20, at timestamps at
-// least 100 ms apart.
+// frames all decode (WebCodecs in the same browser) and number exactly 20, at timestamps
+// exactly 100 ms apart.
 import { test } from 'node:test';
 import assert from 'node:assert/strict';
 import { withPage, settledPixels } from './harness.mjs';
@@ -31,10 +31,12 @@ test('a recorded clip of 2 seconds decodes and has the expected frame count', as
     assert.match(webm.codec, /^V_VP[89]$/);
     assert.equal(webm.frames.length, 20, 'one frame per 1/10 s of the 2-second range');
     assert.ok(webm.frames[0].key, 'it starts with a keyframe');
-    // Handed to the recorder at 10 per second: the recorder's timestamps (its arrival times)
-    // are 100 ms apart or more (90: room for rounding and the encoder thread).
-    const gaps = webm.frames.slice(1).map((f, i) => f.ms - webm.frames[i].ms);
-    assert.ok(gaps.every((g) => g >= 90), `frames about 100 ms apart or more (${gaps})`);
+    // Encoded with WebCodecs (Chromium has a VP8 VideoEncoder), frame i stamped at i/10 s:
+    // exactly 100 ms apart however busy the machine (MediaRecorder, the fallback, stamps
+    // arrival times: one gap of 85 ms after one of 107, and one frame of 20 dropped, were seen
+    // on a loaded 2-core machine).
+    assert.equal(await page.evaluate(() => window.isoray.recorder.encoder), 'webcodecs');
+    assert.deepEqual(webm.frames.map((f) => f.ms), webm.frames.map((_, i) => 100 * i), 'frames 100 ms apart');
 
     // Every frame decodes, at the canvas's size.
     const canvas = await page.evaluate(() => [document.getElementById('view').width, document.getElementById('view').height]);

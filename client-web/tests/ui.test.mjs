@@ -171,3 +171,23 @@ test('with --view-token the page says it needs the token, and with ?token= it st
     await page.waitForURL(/token=peek-0123456789abcdef/);
   }, { serverArgs: ['--view-token', 'peek-0123456789abcdef'] });
 });
+
+test('the scene picker says when a server of the deployment does not answer', async () => {
+  // The server lists its peers' scenes with its own (--peers); nothing listens on the peer's
+  // port, so its scenes are missing, and the picker says so while still offering the rest.
+  await withPage('shards-down', async ({ server, page }) => {
+    await page.goto(`${server.url}?scene=blobs`);
+    await page.waitForFunction(() => document.getElementById('scene').options.length > 0);
+    await page.waitForSelector('#shards-down', { state: 'visible' });
+    assert.match(await page.textContent('#shards-down'), /^1 server not answering: its scenes are missing/);
+    assert.equal(await page.getAttribute('#shards-down', 'title'), 'http://127.0.0.1:9');
+    const ids = await page.$$eval('#scene option', (os) => os.map((o) => o.value));
+    assert.ok(ids.includes('blobs'), `this server's scenes are listed: ${ids}`);
+  }, { serverArgs: ['--peers', 'http://127.0.0.1:9', '--peer-timeout-ms', '500'] });
+  // Without peers (or with every peer answering) there is no note.
+  await withPage('shards-up', async ({ server, page }) => {
+    await page.goto(`${server.url}?scene=blobs`);
+    await page.waitForFunction(() => document.getElementById('scene').options.length > 0);
+    assert.equal(await page.isHidden('#shards-down'), true);
+  });
+});

@@ -8,6 +8,7 @@
 //! Binary step payloads are described in the README's API section and on [`RAW_STEP_MAGIC`]:
 //! a NumPy `.npy` array or a raw little-endian array with a 16-byte header.
 
+pub use crate::api_surfels::{JsonSurfelStep, SurfelData, SurfelMesh, SurfelPoints, SurfelSpec};
 pub use crate::api_tets::{JsonTetStep, MeshInfo, TetMeshData, TetSpec};
 pub use crate::effects::{
     ClipBoxSpec, EffectChanges, FloorSpec, GroupSpec, IsosurfaceSpec, LightKind, MaterialSpec,
@@ -35,9 +36,8 @@ pub const RAW_STEP_MAGIC: [u8; 4] = *b"ISRA";
 /// Length of the raw step header.
 pub const RAW_STEP_HEADER_LEN: usize = 16;
 
-/// The primitive kinds a scene can hold. Only `metaballs` is served so far; the others are
-/// part of the schema so clients can be written against it, and are refused with
-/// `422 unsupported_kind` until the engine has them.
+/// The primitive kinds a scene can hold: metaballs, tetrahedral meshes with a scalar field,
+/// and deforming surfels.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[serde(rename_all = "snake_case")]
@@ -74,6 +74,9 @@ pub struct CreateScene {
     /// Static data of a tet scene: its mesh (or send it later) and colour range.
     #[serde(default)]
     pub tets: Option<TetSpec>,
+    /// Static data of a surfel scene: its surfels and simulation nodes (required).
+    #[serde(default)]
+    pub surfels: Option<SurfelSpec>,
     #[serde(default)]
     pub lighting: Option<LightingSpec>,
     /// The camera viewers start with; one looking at the origin when absent.
@@ -274,6 +277,10 @@ pub struct SceneBounds {
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 pub struct SceneInfoList {
     pub scenes: Vec<SceneInfo>,
+    /// Peers (`--peers`) that did not answer in time, by base URL (or `dns://` name, when it
+    /// did not resolve): their scenes are missing from `scenes`. Empty when all answered.
+    #[serde(default)]
+    pub unreachable_shards: Vec<String>,
 }
 
 /// One stored step.

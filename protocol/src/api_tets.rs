@@ -8,7 +8,8 @@
 //! `(V, 3)`, then int32/int64/uint32/uint64 `(T, 4)`), or as two raw arrays with the 16-byte
 //! `ISRA` header (dtype codes 1 = f32, 2 = f64 for the vertices; 3 = u32, 4 = u64, 5 = i32,
 //! 6 = i64 for the cells). Each step then holds one scalar per vertex: a `(V, 1)` array, or
-//! [`JsonTetStep`].
+//! [`JsonTetStep`]. A deforming mesh's step holds each vertex's scalar and position: a
+//! `(V, 4)` array of columns `scalar x y z`, or `positions` in [`JsonTetStep`].
 
 use serde::{Deserialize, Serialize};
 
@@ -36,12 +37,18 @@ pub struct TetMeshData {
     pub cells: Vec<[u64; 4]>,
 }
 
-/// JSON body of a tet scene's step: one scalar per mesh vertex.
+/// JSON body of a tet scene's step: one scalar per mesh vertex and, for a deforming mesh
+/// (Lagrangian and ALE codes move their vertices every step), each vertex's position this
+/// step. Moved positions are checked like the mesh: no tet may become inverted or
+/// degenerate.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[serde(deny_unknown_fields)]
 pub struct JsonTetStep {
     pub scalars: Vec<f64>,
+    /// This step's vertex positions, one per mesh vertex (default: the mesh's own).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub positions: Option<Vec<[f64; 3]>>,
 }
 
 /// Answer of `PUT /api/v1/scenes/{id}/mesh`.

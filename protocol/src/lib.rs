@@ -7,6 +7,7 @@
 //! the human-readable description; the tests below pin the JSON shapes it documents.
 
 pub mod api;
+pub mod api_surfels;
 pub mod api_tets;
 pub mod effects;
 pub mod frame;

@@ -1,5 +1,6 @@
 //! A pinhole camera and the rays it shoots through pixel centres.
 
+use crate::geom::frame::LocalFrame;
 use crate::ray::Ray;
 use glam::Vec3;
 
@@ -14,6 +15,15 @@ pub struct Camera {
 }
 
 impl Camera {
+    /// The same camera in `frame` (eye and target moved in `f64`; see [`LocalFrame`]).
+    pub fn in_frame(&self, frame: &LocalFrame) -> Camera {
+        Camera {
+            eye: frame.local_from_world(self.eye),
+            target: frame.local_from_world(self.target),
+            ..*self
+        }
+    }
+
     /// Precomputes what every primary ray needs for an image of `width` × `height`.
     pub fn rays(&self, width: u32, height: u32) -> PrimaryRays {
         let forward = (self.target - self.eye).normalize();

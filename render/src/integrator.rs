@@ -58,7 +58,7 @@ pub fn shade_primary(
     hit: Option<&Hit>,
     isovalue: f32,
 ) -> (Vec3, f32) {
-    let lighting = scene.lighting();
+    let lighting = scene.lighting_in_frame();
     match hit {
         Some(hit) => match &lighting.color_map {
             None => (lighting.shade(hit, ray.dir), hit.t),
@@ -111,7 +111,7 @@ impl<'a> Tracer<'a> {
     pub fn new(scene: &'a PreparedScene, plan: &'a EffectsPlan, isovalue: f32) -> Tracer<'a> {
         Tracer {
             scene,
-            lighting: scene.lighting(),
+            lighting: scene.lighting_in_frame(),
             plan,
             isovalue,
             counts: RayCounts::default(),
@@ -270,7 +270,7 @@ impl<'a> Tracer<'a> {
                     t,
                     position,
                     normal: Vec3::Y,
-                    albedo: floor.color_at(position),
+                    albedo: floor.color_at(position, self.scene.frame()),
                     material: floor.material,
                 });
             }

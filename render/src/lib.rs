@@ -24,6 +24,7 @@ pub mod backend;
 pub mod camera;
 pub mod colormap;
 mod demo_effects;
+mod demo_surfels;
 pub mod effects;
 pub mod framebuffer;
 pub mod geom;

@@ -1,5 +1,6 @@
 //! Rays and hit records shared by every primitive kind.
 
+use crate::geom::frame::LocalFrame;
 use glam::Vec3;
 
 /// A ray `origin + t * dir`; `dir` has unit length so `t` is a distance.
@@ -19,6 +20,15 @@ impl Ray {
 
     pub fn at(&self, t: f32) -> Vec3 {
         self.origin + t * self.dir
+    }
+
+    /// The same ray in `frame` (the origin moved in `f64`; the direction, and so every
+    /// distance along the ray, unchanged).
+    pub fn in_frame(&self, frame: &LocalFrame) -> Ray {
+        Ray {
+            origin: frame.local_from_world(self.origin),
+            dir: self.dir,
+        }
     }
 }
 

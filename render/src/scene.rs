@@ -6,8 +6,15 @@
 //! the implicit min–max BVH of tetrahedral-isosurface-ray-tracing.txt, see
 //! [`crate::kinds::tets`], built once per mesh and refitted per step); the prepared state is
 //! then shared, read-only, by every view of it.
+//!
+//! A state far from the world's origin is prepared and traced in a [`LocalFrame`] near its
+//! own (issue 13): the geometry, the camera and the lighting are moved there in `f64` before
+//! anything becomes an `f32` of the hot path. Every query of a [`PreparedScene`] takes rays
+//! in that frame ([`PreparedScene::frame`]; [`Ray::in_frame`] moves a world ray) and returns
+//! hit distances and normals, which a translation leaves unchanged, and local hit positions.
 
-use crate::camera::PrimaryRays;
+use crate::camera::{Camera, PrimaryRays};
+use crate::geom::frame::LocalFrame;
 use crate::kinds::dispatch::Tally;
 use crate::kinds::metaballs::engine::PrepareOptions;
 use crate::kinds::tets::prepared::TetOptions;
@@ -67,11 +74,16 @@ impl Scene {
         options: PrepareOptions,
         tet_options: TetOptions,
     ) -> PreparedScene {
-        let prepared = self.geometry.prepare(options, tet_options);
+        let frame = self.geometry.frame();
+        let prepared = self.geometry.prepare(options, tet_options, &frame);
+        let lighting_in_frame =
+            (!frame.is_world()).then(|| Arc::new(self.lighting.in_frame(&frame)));
         PreparedScene {
             scene: self,
             prepared,
             lighting: None,
+            frame,
+            lighting_in_frame,
         }
     }
 }
@@ -83,6 +95,10 @@ pub struct PreparedScene {
     prepared: PreparedGeometry,
     /// A session's own lighting in place of the scene's (see [`PreparedScene::with_lighting`]).
     lighting: Option<Arc<Lighting>>,
+    /// The frame the geometry was prepared in (the world's, unless the state is far away).
+    frame: LocalFrame,
+    /// [`PreparedScene::lighting`] moved into `frame`; `None` in the world frame.
+    lighting_in_frame: Option<Arc<Lighting>>,
 }
 
 impl PreparedScene {
@@ -90,20 +106,44 @@ impl PreparedScene {
         &self.scene
     }
 
-    /// How this state is lit and shaded: the scene's [`Lighting`], or the one given to
-    /// [`PreparedScene::with_lighting`]. Tracing reads lighting only from here.
+    /// How this state is lit and shaded, in world coordinates: the scene's [`Lighting`], or
+    /// the one given to [`PreparedScene::with_lighting`].
     pub fn lighting(&self) -> &Lighting {
         self.lighting.as_deref().unwrap_or(&self.scene.lighting)
+    }
+
+    /// [`PreparedScene::lighting`] in the scene's [`LocalFrame`]: tracing reads lighting only
+    /// from here.
+    pub fn lighting_in_frame(&self) -> &Lighting {
+        self.lighting_in_frame
+            .as_deref()
+            .unwrap_or_else(|| self.lighting())
+    }
+
+    /// The frame the geometry is traced in: every query takes rays in it.
+    pub fn frame(&self) -> &LocalFrame {
+        &self.frame
+    }
+
+    /// The primary rays of `camera` (in world coordinates) for an image of `width` ×
+    /// `height`, in the scene's frame: the camera is moved in `f64` before its rays are set
+    /// up in `f32`.
+    pub fn primary_rays(&self, camera: &Camera, width: u32, height: u32) -> PrimaryRays {
+        camera.in_frame(&self.frame).rays(width, height)
     }
 
     /// The same prepared state (sharing its acceleration structure) lit by `lighting`
     /// instead: a session's own clip box, isosurfaces or colour map, without preparing the
     /// state again. Cheap: two reference counts and the lighting.
     pub fn with_lighting(&self, lighting: Lighting) -> PreparedScene {
+        let lighting_in_frame =
+            (!self.frame.is_world()).then(|| Arc::new(lighting.in_frame(&self.frame)));
         PreparedScene {
             scene: self.scene.clone(),
             prepared: self.prepared.clone(),
             lighting: Some(Arc::new(lighting)),
+            frame: self.frame,
+            lighting_in_frame,
         }
     }
 
@@ -116,7 +156,10 @@ impl PreparedScene {
         self.prepared.build_ms()
     }
 
-    /// The first crossing of the isosurface along `ray` within `[t_min, t_max]`.
+    /// The first crossing of the isosurface along `ray` (in the scene's [`frame`]) within
+    /// `[t_min, t_max]`.
+    ///
+    /// [`frame`]: PreparedScene::frame
     #[inline]
     pub fn first_hit(&self, ray: &Ray, t_min: f32, t_max: f32, isovalue: f32) -> Option<Hit> {
         self.prepared

@@ -1,22 +1,29 @@
-//! Built-in, deterministic, animated scenes: a pure function of time, no files, no randomness
-//! beyond a fixed-seed generator, so every run and every thread count sees the same states.
+//! Built-in, deterministic, animated scenes: a pure function of time, no randomness beyond a
+//! fixed-seed generator, so every run and every thread count sees the same states. The one
+//! file read is the Molecule demo's real structure, 1TII from Debian's `pymol-data`
+//! ([`PYMOL_MOLECULE`]), read once when installed; without it that demo is synthetic.
 //!
 //! Besides the small `Blobs` demo, these are the test scenes of fitted-bvh-metaballs.txt §6
 //! (Table 1, Fig. 8) with the paper's ball counts, rebuilt as generators: Scattered (30,000
 //! and 100,000 balls in a cube, each bobbing), Tornado (4,000 and 128,000 balls swirling up a
-//! widening funnel), Molecule (5,440 atoms of a synthetic folded chain, element radii and CPK
-//! colours, slowly turning and vibrating) and Pool (10,000 balls of a dense fluid slab under
+//! widening funnel), Molecule (1TII, 5,469 atoms without waters, from `pymol-data`; else 5,440
+//! atoms of a synthetic folded chain; element radii and CPK colours, slowly turning and
+//! vibrating) and Pool (10,000 balls of a dense fluid slab under
 //! travelling waves). All use Wyvill's kernel at `T = 0.5`.
 
 use crate::camera::Camera;
 use crate::demo_effects;
+use crate::demo_surfels;
 pub use crate::geom::rng::SplitMix64;
 use crate::kinds::metaballs::kernel::Kernel;
-use crate::kinds::metaballs::pdb::Element;
+use crate::kinds::metaballs::pdb::{read_models, Element, MoleculeOptions, Row};
 use crate::kinds::metaballs::scene::{Metaball, MetaballScene};
+use crate::kinds::surfels::demo::SurfelDemoKind;
 use crate::scene::{Geometry, Scene};
 use crate::shade::Lighting;
 use glam::{Quat, Vec3};
+use std::path::Path;
+use std::sync::OnceLock;
 
 /// The demo scenes the server offers without any pushed data.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -39,6 +46,8 @@ pub enum DemoScene {
     Pool,
     /// A tet mesh with a time-varying gyroid field (tetrahedral-isosurface-ray-tracing.txt).
     TetGyroid,
+    /// The deforming bucky ball of tetrahedral-isosurface-ray-tracing.txt Fig. 4, shadows on.
+    TetBucky,
     // The effects demos (see `demo_effects`).
     /// Diffuse, glass and mirror blobs over a floor under a sphere area light.
     Glass,
@@ -46,10 +55,17 @@ pub enum DemoScene {
     Clouds,
     /// Nested isosurfaces cut by a clip box (tetrahedral-isosurface-ray-tracing.txt §7).
     Shells,
+    // The surfel demos (deforming-point-sampled-surfaces.txt §5; see `demo_surfels`).
+    /// 40 elastic balls thrown into a hollow cube.
+    SurfelBalls,
+    /// A 150,000-surfel bumpy object hit by a ball (the paper's Armadillo scale).
+    SurfelImpact,
+    /// Three bouncing cubes whose faces meet at sharp, clipped edges.
+    SurfelHeads,
 }
 
 impl DemoScene {
-    pub const ALL: [DemoScene; 12] = [
+    pub const ALL: [DemoScene; 16] = [
         DemoScene::Blobs,
         DemoScene::Scattered1k,
         DemoScene::Scattered30k,
@@ -59,9 +75,20 @@ impl DemoScene {
         DemoScene::Molecule,
         DemoScene::Pool,
         DemoScene::TetGyroid,
+        DemoScene::TetBucky,
         DemoScene::Glass,
         DemoScene::Clouds,
         DemoScene::Shells,
+        DemoScene::SurfelBalls,
+        DemoScene::SurfelImpact,
+        DemoScene::SurfelHeads,
+    ];
+
+    /// The surfel demos.
+    pub const SURFELS: [DemoScene; 3] = [
+        DemoScene::SurfelBalls,
+        DemoScene::SurfelImpact,
+        DemoScene::SurfelHeads,
     ];
 
     /// The scenes made to show the effects.
@@ -89,9 +116,13 @@ impl DemoScene {
             DemoScene::Molecule => "molecule",
             DemoScene::Pool => "pool",
             DemoScene::TetGyroid => "tets-gyroid",
+            DemoScene::TetBucky => "tets-bucky",
             DemoScene::Glass => "glass",
             DemoScene::Clouds => "clouds",
             DemoScene::Shells => "shells",
+            DemoScene::SurfelBalls => "surfel-balls",
+            DemoScene::SurfelImpact => "surfel-impact",
+            DemoScene::SurfelHeads => "surfel-heads",
         }
     }
 
@@ -106,9 +137,13 @@ impl DemoScene {
             DemoScene::Molecule => "Molecule",
             DemoScene::Pool => "Pool",
             DemoScene::TetGyroid => "Gyroid (tets)",
+            DemoScene::TetBucky => "Deforming bucky ball (tets)",
             DemoScene::Glass => "Glass and mirrors",
             DemoScene::Clouds => "Clouds",
             DemoScene::Shells => "Shells",
+            DemoScene::SurfelBalls => "Ball pit (surfels)",
+            DemoScene::SurfelImpact => "Impact (surfels)",
+            DemoScene::SurfelHeads => "Clipped cubes (surfels)",
         }
     }
 
@@ -122,16 +157,31 @@ impl DemoScene {
             }
             DemoScene::Tornado4k => "4,000 metaballs in a tornado (Fitted BVH paper, Table 1)",
             DemoScene::Tornado128k => "128,000 metaballs in a tornado (Fitted BVH paper, Table 1)",
-            DemoScene::Molecule => {
-                "5,440-atom synthetic molecule, CPK colours (Fitted BVH paper, Table 1)"
-            }
+            DemoScene::Molecule => match real_molecule() {
+                Some(_) => {
+                    "the 1TII molecule from the PDB (pymol-data), CPK colours (Fitted BVH paper, Table 1)"
+                }
+                None => "5,440-atom synthetic molecule, CPK colours (Fitted BVH paper, Table 1)",
+            },
             DemoScene::Pool => "10,000 metaballs of a fluid pool (Fitted BVH paper, Table 1)",
             DemoScene::TetGyroid => "time-varying gyroid field on a ball of 103,000 tets",
+            DemoScene::TetBucky => {
+                "a C60 cage on 146,000 tets whose vertices move every step, with shadows"
+            }
             DemoScene::Glass => {
                 "diffuse, glass and mirror blobs over a floor, lit by a sphere area light"
             }
             DemoScene::Clouds => "metaballs rendered as an absorbing volume over a floor",
             DemoScene::Shells => "three nested isosurfaces of one field, cut open by a clip box",
+            DemoScene::SurfelBalls => {
+                "40 elastic surfel balls thrown into a hollow cube (shape matching)"
+            }
+            DemoScene::SurfelImpact => {
+                "a 153,000-surfel bumpy object on ~450 simulation nodes, hit by a ball"
+            }
+            DemoScene::SurfelHeads => {
+                "three bouncing cubes of clipped surfel faces with sharp edges"
+            }
         }
     }
 
@@ -144,12 +194,16 @@ impl DemoScene {
             DemoScene::Scattered1k => 1_000,
             DemoScene::Tornado4k => 4_000,
             DemoScene::Tornado128k => 128_000,
-            DemoScene::Molecule => 5_440,
+            DemoScene::Molecule => real_molecule().map_or(SYNTHETIC_MOLECULE_ATOMS, <[Row]>::len),
             DemoScene::Pool => 10_000,
             DemoScene::TetGyroid => crate::kinds::tets::generate::demo_mesh().tets().len(),
+            DemoScene::TetBucky => crate::kinds::tets::bucky::bucky_tet_count(),
             DemoScene::Glass => demo_effects::GLASS_BALLS,
             DemoScene::Clouds => demo_effects::CLOUD_BALLS,
             DemoScene::Shells => demo_effects::SHELL_BALLS,
+            DemoScene::SurfelBalls => demo_surfels::count(SurfelDemoKind::Balls),
+            DemoScene::SurfelImpact => demo_surfels::count(SurfelDemoKind::Impact),
+            DemoScene::SurfelHeads => demo_surfels::count(SurfelDemoKind::Heads),
         }
     }
 
@@ -170,12 +224,20 @@ impl DemoScene {
             DemoScene::Tornado4k | DemoScene::Tornado128k => {
                 look(Vec3::new(0.0, 12.0, 42.0), Vec3::new(0.0, 10.0, 0.0), 45.0)
             }
-            DemoScene::Molecule => look(Vec3::new(0.0, 10.0, 95.0), Vec3::ZERO, 45.0),
+            DemoScene::Molecule => {
+                // 95 for the synthetic globule (reach 38), the same framing for 1TII.
+                let d = 2.5 * molecule_reach();
+                look(Vec3::new(0.0, 0.105 * d, d), Vec3::ZERO, 45.0)
+            }
             DemoScene::Pool => look(Vec3::new(0.0, 14.0, 26.0), Vec3::new(0.0, 1.0, 0.0), 50.0),
             DemoScene::TetGyroid => look(Vec3::new(3.0, 2.2, 5.2), Vec3::ZERO, 40.0),
+            DemoScene::TetBucky => look(Vec3::new(3.2, 2.4, 6.4), Vec3::new(0.0, -0.4, 0.0), 40.0),
             DemoScene::Glass => demo_effects::glass_camera(),
             DemoScene::Clouds => demo_effects::clouds_camera(),
             DemoScene::Shells => demo_effects::shells_camera(),
+            DemoScene::SurfelBalls => demo_surfels::camera(SurfelDemoKind::Balls),
+            DemoScene::SurfelImpact => demo_surfels::camera(SurfelDemoKind::Impact),
+            DemoScene::SurfelHeads => demo_surfels::camera(SurfelDemoKind::Heads),
         }
     }
 
@@ -193,6 +255,7 @@ impl DemoScene {
                 (0.05, 1.5)
             }
             DemoScene::TetGyroid => (-1.5, 1.0),
+            DemoScene::TetBucky => (0.1, 1.0),
             _ => (MIN_ISOVALUE, 1.5),
         }
     }
@@ -205,7 +268,7 @@ impl DemoScene {
                 scattered(self.ball_count(), time)
             }
             DemoScene::Tornado4k | DemoScene::Tornado128k => tornado(self.ball_count(), time),
-            DemoScene::Molecule => molecule(self.ball_count(), time),
+            DemoScene::Molecule => molecule(time),
             DemoScene::Pool => pool(time),
             DemoScene::TetGyroid => {
                 return Scene {
@@ -213,6 +276,15 @@ impl DemoScene {
                     lighting: self.lighting(),
                 }
             }
+            DemoScene::TetBucky => {
+                return Scene {
+                    geometry: Geometry::Tets(crate::kinds::tets::bucky::bucky_state(time)),
+                    lighting: self.lighting(),
+                }
+            }
+            DemoScene::SurfelBalls => return self.surfels(SurfelDemoKind::Balls, time),
+            DemoScene::SurfelImpact => return self.surfels(SurfelDemoKind::Impact, time),
+            DemoScene::SurfelHeads => return self.surfels(SurfelDemoKind::Heads, time),
             DemoScene::Glass => demo_effects::glass(time),
             DemoScene::Clouds => demo_effects::clouds(time),
             DemoScene::Shells => demo_effects::shells(time),
@@ -223,6 +295,35 @@ impl DemoScene {
         }
     }
 
+    fn surfels(self, kind: SurfelDemoKind, time: f64) -> Scene {
+        Scene {
+            geometry: Geometry::Surfels(demo_surfels::state_at(kind, time)),
+            lighting: self.lighting(),
+        }
+    }
+
+    /// The surfel demo behind this scene, if it is one.
+    pub fn surfel_kind(self) -> Option<SurfelDemoKind> {
+        match self {
+            DemoScene::SurfelBalls => Some(SurfelDemoKind::Balls),
+            DemoScene::SurfelImpact => Some(SurfelDemoKind::Impact),
+            DemoScene::SurfelHeads => Some(SurfelDemoKind::Heads),
+            DemoScene::Blobs
+            | DemoScene::Scattered30k
+            | DemoScene::Scattered100k
+            | DemoScene::Scattered1k
+            | DemoScene::Tornado4k
+            | DemoScene::Tornado128k
+            | DemoScene::Molecule
+            | DemoScene::Pool
+            | DemoScene::TetGyroid
+            | DemoScene::TetBucky
+            | DemoScene::Glass
+            | DemoScene::Clouds
+            | DemoScene::Shells => None,
+        }
+    }
+
     /// How the scene is lit and shaded: the default look, or an effects demo's.
     pub fn lighting(self) -> Lighting {
         match self {
@@ -230,6 +331,7 @@ impl DemoScene {
             DemoScene::Clouds => demo_effects::clouds_lighting(),
             DemoScene::Shells => demo_effects::shells_lighting(),
             DemoScene::TetGyroid => crate::kinds::tets::generate::demo_lighting(),
+            DemoScene::TetBucky => crate::kinds::tets::bucky::bucky_lighting(),
             _ => Lighting::default(),
         }
     }
@@ -344,9 +446,28 @@ fn tornado(count: usize, time: f64) -> MetaballScene {
     with_floor(Kernel::Wyvill, balls, MIN_ISOVALUE)
 }
 
-/// A folded chain: a persistent random walk with 1.5 Å bonds confined to a globule, its
-/// atoms cycling through a protein-like element mix, turning about `y` and vibrating.
-fn molecule(count: usize, time: f64) -> MetaballScene {
+/// Where Debian's `pymol-data` keeps 1TII (an AB5 enterotoxin, 5,684 atom records), the
+/// real structure the Molecule demo shows when the package is installed.
+pub const PYMOL_MOLECULE: &str = "/usr/share/pymol/data/demo/1tii.pdb";
+
+/// The atoms of the synthetic chain the Molecule demo falls back to (the paper's count).
+const SYNTHETIC_MOLECULE_ATOMS: usize = 5_440;
+
+/// 1TII's first model (no hydrogens, no waters, centred) as ball rows, read once with
+/// pdbtbx; `None` when `pymol-data` is not installed or the file does not read.
+pub fn real_molecule() -> Option<&'static [Row]> {
+    static REAL: OnceLock<Option<Vec<Row>>> = OnceLock::new();
+    REAL.get_or_init(|| {
+        read_models(Path::new(PYMOL_MOLECULE), MoleculeOptions::default())
+            .ok()
+            .and_then(|models| models.into_iter().next())
+    })
+    .as_deref()
+}
+
+/// A synthetic folded chain of `count` atoms in a globule, as ball rows (the fallback
+/// when no real structure is installed).
+fn synthetic_molecule(count: usize) -> Vec<Row> {
     let mut rng = SplitMix64(0x0000_0A70_3540);
     let globule = 1.05 * (count as f32 * 28.0 * 3.0 / (4.0 * std::f32::consts::PI)).cbrt();
     let pattern = [
@@ -365,8 +486,7 @@ fn molecule(count: usize, time: f64) -> MetaballScene {
     ];
     let mut pos = Vec3::ZERO;
     let mut heading = Vec3::X;
-    let spin = Quat::from_rotation_y((0.15 * time) as f32);
-    let balls = (0..count)
+    (0..count)
         .map(|i| {
             heading = (heading + 0.9 * rng.in_unit_ball()).normalize_or(Vec3::Y);
             let next = pos + 1.5 * heading;
@@ -376,23 +496,53 @@ fn molecule(count: usize, time: f64) -> MetaballScene {
             }
             pos += 1.5 * heading;
             let element = pattern[i % pattern.len()];
+            let c = element.cpk_color();
+            // The support is twice the van der Waals radius, so at T = 0.5 a lone atom's
+            // surface is its van der Waals sphere (f(R/2) = 1/2).
+            let radius = 2.0 * element.van_der_waals_radius();
+            [pos.x, pos.y, pos.z, radius, 1.0, c.x, c.y, c.z]
+        })
+        .collect()
+}
+
+/// The Molecule demo's atoms at rest: 1TII when installed, else the synthetic chain.
+fn molecule_atoms() -> std::borrow::Cow<'static, [Row]> {
+    match real_molecule() {
+        Some(rows) => std::borrow::Cow::Borrowed(rows),
+        None => std::borrow::Cow::Owned(synthetic_molecule(SYNTHETIC_MOLECULE_ATOMS)),
+    }
+}
+
+/// The Molecule demo at `time`: its atoms vibrating (0.15 Å) while the whole slowly turns.
+fn molecule(time: f64) -> MetaballScene {
+    let spin = Quat::from_rotation_y((0.15 * time) as f32);
+    let balls = molecule_atoms()
+        .iter()
+        .enumerate()
+        .map(|(i, r)| {
             let jiggle = 0.15
                 * Vec3::new(
                     wave(2.1, time, i as f32 * 0.7),
                     wave(2.3, time, i as f32 * 1.3),
                     wave(1.9, time, i as f32 * 0.4),
                 );
-            // The support is twice the van der Waals radius, so at T = 0.5 a lone atom's
-            // surface is its van der Waals sphere (f(R/2) = 1/2).
             Metaball::sphere(
-                spin * (pos + jiggle),
-                2.0 * element.van_der_waals_radius(),
-                1.0,
-                element.cpk_color(),
+                spin * (Vec3::new(r[0], r[1], r[2]) + jiggle),
+                r[3],
+                r[4],
+                Vec3::new(r[5], r[6], r[7]),
             )
         })
         .collect();
     with_floor(Kernel::Wyvill, balls, MIN_ISOVALUE)
+}
+
+/// How far the Molecule demo's atoms reach from the origin (centre plus support).
+fn molecule_reach() -> f32 {
+    molecule_atoms()
+        .iter()
+        .map(|r| Vec3::new(r[0], r[1], r[2]).length() + r[3])
+        .fold(1.0, f32::max)
 }
 
 /// 10,000 balls: a 50 × 40 × 5 jittered lattice of spacing 0.45 under two travelling waves.
@@ -431,6 +581,11 @@ mod tests {
     #[test]
     fn paper_scenes_have_the_paper_counts_and_are_valid_and_deterministic() {
         for demo in DemoScene::ALL {
+            // The surfel demos simulate on first use; the small one stands for all three here
+            // (the engine's own tests cover every surfel demo at small sizes).
+            if demo.surfel_kind().is_some() && demo != DemoScene::SurfelHeads {
+                continue;
+            }
             let a = demo.state_at(1.5);
             assert_eq!(a.primitive_count(), demo.ball_count(), "{demo:?}");
             a.validate(1_000_000).expect("valid");

@@ -12,6 +12,7 @@
 use crate::colormap::{srgb_code_to_linear, ColorMap};
 use crate::effects::toggles::Effects;
 pub use crate::geom::clip::ClipBox;
+use crate::geom::frame::LocalFrame;
 use crate::ray::Hit;
 use glam::Vec3;
 
@@ -155,16 +156,25 @@ pub struct Floor {
 }
 
 impl Floor {
-    /// The floor's colour at `p`.
+    /// The floor's colour at `p_in_local`, a point of `frame` (the squares stay where they are
+    /// in the world: a far frame's point is moved back in `f64`).
     #[inline]
-    pub fn color_at(&self, p: Vec3) -> Vec3 {
-        if self.checker > 0.0 {
-            let ix = (p.x / self.checker).floor() as i64;
-            let iz = (p.z / self.checker).floor() as i64;
-            self.colors[((ix + iz) & 1) as usize]
-        } else {
-            self.colors[0]
+    pub fn color_at(&self, p_in_local: Vec3, frame: &LocalFrame) -> Vec3 {
+        if !(self.checker > 0.0) {
+            return self.colors[0];
         }
+        let (ix, iz) = if frame.is_world() {
+            let p = p_in_local;
+            (
+                (p.x / self.checker).floor() as i64,
+                (p.z / self.checker).floor() as i64,
+            )
+        } else {
+            let p = frame.world_from_local(p_in_local);
+            let c = self.checker as f64;
+            ((p.x / c).floor() as i64, (p.z / c).floor() as i64)
+        };
+        self.colors[((ix + iz) & 1) as usize]
     }
 }
 
@@ -248,6 +258,30 @@ const DEFAULT_MATERIAL: Material = Material {
 };
 
 impl Lighting {
+    /// The same lighting in `frame`: point and sphere lights, the floor's height and the clip
+    /// box moved in `f64` (see [`LocalFrame`]); everything else is unchanged.
+    pub fn in_frame(&self, frame: &LocalFrame) -> Lighting {
+        let mut l = self.clone();
+        if frame.is_world() {
+            return l;
+        }
+        for light in &mut l.lights {
+            match light {
+                Light::Directional { .. } => {}
+                Light::Point { position, .. } => *position = frame.local_from_world(*position),
+                Light::Sphere { center, .. } => *center = frame.local_from_world(*center),
+            }
+        }
+        if let Some(floor) = &mut l.floor {
+            floor.height = (floor.height as f64 - frame.origin.y) as f32;
+        }
+        if let Some(clip) = &mut l.clip_box {
+            clip.min = frame.local_from_world(clip.min);
+            clip.max = frame.local_from_world(clip.max);
+        }
+        l
+    }
+
     /// The material of `materials[index]`.
     #[inline]
     pub fn material(&self, index: u16) -> &Material {

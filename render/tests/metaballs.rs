@@ -493,12 +493,97 @@ fn extreme_but_finite_balls_render_without_panicking() {
     }
 }
 
+/// A search that stops at its iteration cap is counted (issue 13: a capped search is a
+/// possible wrong pixel, reported rather than silent); an ordinary one is not.
+#[test]
+fn searches_that_hit_the_iteration_cap_are_counted() {
+    let scene = MetaballScene::new(
+        Kernel::Wyvill,
+        vec![Metaball::sphere(Vec3::ZERO, 1.0, 1.0, Vec3::ONE)],
+    );
+    let ray = Ray::new(Vec3::new(0.0, 0.0, 3.0), Vec3::new(0.0, 0.0, -1.0));
+    let run = |step: f32| {
+        let options = PrepareOptions {
+            step,
+            ..PrepareOptions::fitted(0.5)
+                .with_accel(AccelKind::BruteForce)
+                .with_finder(RootFinder::March)
+        };
+        let engine = PreparedMetaballs::new(scene.clone(), options);
+        let mut counters = isoray_render::kinds::metaballs::RayCounters::default();
+        let hit = engine.first_hit_counted(&ray, 0.0, T_MAX, 0.5, &mut counters);
+        (hit.map(|h| h.t), counters.capped)
+    };
+    // Steps of 1e-6 radii: 1.3 million steps to the surface, past the cap of 20,000.
+    let (hit, capped) = run(1e-6);
+    assert_eq!((hit, capped), (None, 1), "a capped march is a counted miss");
+    // The default step reaches the surface uncapped, where the reference does.
+    let (hit, capped) = run(RootFinder::March.default_step());
+    assert_eq!(capped, 0);
+    let t = hit.expect("the default step hits");
+    let exact = ReferenceRay::new(
+        &scene,
+        glam::DVec3::new(0.0, 0.0, 3.0),
+        glam::DVec3::new(0.0, 0.0, -1.0),
+        0.0,
+        10.0,
+    )
+    .first_at_least(0.5, 0.0)
+    .expect("the reference hits");
+    assert!((t as f64 - exact).abs() < 1e-3, "t {t} against {exact}");
+}
+
+/// `refine_f64` turns a coarse `f32` hit (tolerance 1e-2) into one within `f32` rounding of
+/// the reference, for every finder.
+#[test]
+fn f64_refinement_narrows_a_coarse_hit_to_rounding() {
+    let (scene, isovalue) = random_scene(Kernel::Wyvill, 11);
+    let mut worst = [0.0f64; 2];
+    for finder in RootFinder::ALL {
+        for (slot, refine_f64) in [false, true].into_iter().enumerate() {
+            let options = PrepareOptions {
+                tolerance: 1e-2,
+                refine_f64,
+                ..PrepareOptions::fitted(isovalue)
+                    .with_accel(AccelKind::BruteForce)
+                    .with_finder(finder)
+            };
+            let engine = PreparedMetaballs::new(scene.clone(), options);
+            for ray in random_rays(5, 200) {
+                let (o, d) = (ray.origin.as_dvec3(), ray.dir.as_dvec3());
+                let reference = ReferenceRay::new(&scene, o, d, 0.0, T_MAX as f64);
+                let (Some(hit), Some(t)) = (
+                    engine.first_hit(&ray, 0.0, T_MAX, isovalue),
+                    reference.first_at_least(isovalue as f64, 0.0),
+                ) else {
+                    continue;
+                };
+                // Only rays whose first root is simple and the same one both find.
+                if (hit.t as f64 - t).abs() < 0.05 {
+                    worst[slot] = worst[slot].max((hit.t as f64 - t).abs());
+                }
+            }
+        }
+    }
+    eprintln!(
+        "worst |Δt| at tolerance 1e-2: f32 {:.1e}, refined in f64 {:.1e}",
+        worst[0], worst[1]
+    );
+    assert!(worst[0] > 1e-3, "the coarse tolerance shows: {worst:?}");
+    assert!(
+        worst[1] < 1e-4,
+        "refined hits are within rounding: {worst:?}"
+    );
+}
+
 /// Where Debian's `pymol-data` keeps its PDB files (`bash .ci/run` installs the package).
 const PYMOL_DATA: &str = "/usr/share/pymol/data";
 
 #[test]
 fn real_molecules_from_pymol_data_load_and_render_like_brute_force() {
-    use isoray_render::kinds::metaballs::pdb::{molecule_scene, parse_pdb, Element};
+    use isoray_render::kinds::metaballs::pdb::{
+        molecule_scene, read_models, Element, MoleculeOptions,
+    };
     use isoray_render::Camera;
     // HIV-1 protease with an inhibitor (old format: serial numbers where newer files keep the
     // element), and a larger complex with element columns.
@@ -510,20 +595,37 @@ fn real_molecules_from_pymol_data_load_and_render_like_brute_force() {
                 path.display()
             )
         });
+        // The atom records that are not water (these files carry no hydrogens), counted
+        // from the text's columns.
         let records = text
             .lines()
             .take_while(|l| !l.starts_with("ENDMDL"))
             .filter(|l| l.starts_with("ATOM") || l.starts_with("HETATM"))
+            .filter(|l| l.get(17..20) != Some("HOH"))
             .count();
-        let atoms = parse_pdb(&text).expect("a real PDB file parses");
+        let models = read_models(&path, MoleculeOptions::default()).expect("a real PDB file reads");
+        let atoms = &models[0];
         assert_eq!(atoms.len(), records, "{file}: one ball per atom record");
+        if file == "demo/1tii.pdb" {
+            // The Molecule demo shows this structure when pymol-data is installed.
+            let demo = isoray_render::scenes::DemoScene::Molecule;
+            assert_eq!(demo.ball_count(), records, "the Molecule demo is 1TII");
+        }
         assert!(atoms.len() > 1000, "{file}: {} atoms", atoms.len());
-        // Proteins are carbon, nitrogen, oxygen and sulphur (these files carry no hydrogens).
+        // Proteins are carbon, nitrogen, oxygen and sulphur, told apart by their colours.
+        let is = |r: &[f32; 8], e: Element| {
+            let c = e.cpk_color();
+            r[5..8] == [c.x, c.y, c.z] && (r[3] - 2.0 * e.van_der_waals_radius()).abs() < 1e-6
+        };
         let organic = atoms
             .iter()
-            .filter(|a| matches!(a.element, Element::C | Element::N | Element::O | Element::S))
+            .filter(|r| {
+                [Element::C, Element::N, Element::O, Element::S]
+                    .iter()
+                    .any(|&e| is(r, e))
+            })
             .count();
-        let carbon = atoms.iter().filter(|a| a.element == Element::C).count();
+        let carbon = atoms.iter().filter(|r| is(r, Element::C)).count();
         assert!(
             organic * 100 >= atoms.len() * 98,
             "{file}: {organic} of {}",
@@ -533,7 +635,7 @@ fn real_molecules_from_pymol_data_load_and_render_like_brute_force() {
             carbon * 2 > atoms.len(),
             "{file}: carbon is the majority ({carbon})"
         );
-        let scene = molecule_scene(&atoms);
+        let scene = molecule_scene(atoms);
         scene.validate(usize::MAX).expect("valid balls");
         let (lo, hi) = scene.bounds().expect("atoms");
         let center = 0.5 * (lo + hi);

@@ -167,6 +167,34 @@ pub struct Config {
     #[arg(long, env = "ISORAY_METRICS_TOKEN", hide_env_values = true)]
     pub metrics_token: Option<String>,
 
+    // --- issue 15: rate limits behind a balancer ---------------------------------------------
+    /// Renders (`POST .../render`) per second each client may make on average.
+    #[arg(long, env = "ISORAY_RENDER_RATE", default_value_t = 10.0)]
+    pub render_rate: f64,
+
+    /// Renders a client may make in a burst above that rate.
+    #[arg(long, env = "ISORAY_RENDER_BURST", default_value_t = 40)]
+    pub render_burst: u32,
+
+    /// Addresses (`IP` or `IP/PREFIX`, comma-separated) of proxies whose `X-Forwarded-For` is
+    /// believed: a request from one of them is rate limited as the client that header names
+    /// (the nearest address that is not itself a trusted proxy). Requests from any other peer
+    /// are limited by the peer's address, whatever they send. Unset: no proxy is trusted.
+    #[arg(long, env = "ISORAY_TRUSTED_PROXY", value_delimiter = ',')]
+    pub trusted_proxy: Vec<String>,
+
+    // --- issue 15: every process lists every scene -------------------------------------------
+    /// The other processes of this deployment, whose scenes `GET /api/v1/scenes` lists beside
+    /// this one's (comma-separated): base URLs (`http://host:port`), or `dns://NAME:PORT` for
+    /// every address NAME resolves to (a Kubernetes headless service). A peer that does not
+    /// answer in time is named in the list's `unreachable_shards`. Unset: this process only.
+    #[arg(long, env = "ISORAY_PEERS", value_delimiter = ',')]
+    pub peers: Vec<String>,
+
+    /// Milliseconds to wait for a peer's scene list (and for a `dns://` name to resolve).
+    #[arg(long, env = "ISORAY_PEER_TIMEOUT_MS", default_value_t = 800)]
+    pub peer_timeout_ms: u64,
+
     /// Where frames are traced: `cpu`; `gpu` (a wgpu device, software ones such as lavapipe
     /// included; the server needs the `gpu` feature); `auto`: a hardware GPU when there is
     /// one, else the CPU. A GPU that cannot start or fails later leaves the CPU tracing, with
@@ -291,6 +319,29 @@ impl Config {
         }
         for origin in &self.allowed_origins {
             validate_origin(origin)?;
+        }
+        if !(self.render_rate.is_finite() && self.render_rate > 0.0) || self.render_burst == 0 {
+            return Err("--render-rate must be positive and --render-burst at least 1".into());
+        }
+        for proxy in &self.trusted_proxy {
+            crate::clients::Network::parse(proxy)?;
+        }
+        for peer in &self.peers {
+            let ok = match (peer.strip_prefix("http://"), peer.strip_prefix("dns://")) {
+                (Some(host), _) => !host.is_empty() && !host.contains('/'),
+                (None, Some(name)) => name
+                    .rsplit_once(':')
+                    .is_some_and(|(n, p)| !n.is_empty() && p.parse::<u16>().is_ok()),
+                (None, None) => false,
+            };
+            if !ok {
+                return Err(format!(
+                    "--peers `{peer}`: expected http://HOST:PORT or dns://NAME:PORT"
+                ));
+            }
+        }
+        if self.peer_timeout_ms == 0 {
+            return Err("--peer-timeout-ms must be at least 1".into());
         }
         for (name, token) in [
             ("--admin-token", &self.admin_token),

@@ -36,6 +36,9 @@ impl EffectLimits {
 pub struct EffectError {
     pub field: &'static str,
     pub message: String,
+    /// The value fits the OpenAPI document's schema but breaks a rule between values (min
+    /// below max, an isovalue inside the scene's range): a 422 rather than a 400.
+    pub relational: bool,
 }
 
 /// `effects` with `changes` applied, if every value is within `limits`; nothing is applied
@@ -90,6 +93,7 @@ pub fn apply(
             if !(lo..=hi).contains(&v) {
                 return Err(EffectError {
                     field,
+                    relational: false,
                     message: format!(
                         "{field} {v} is outside {lo}..={hi} (the server's configured maximum)"
                     ),

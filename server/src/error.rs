@@ -21,6 +21,8 @@ pub struct AppError {
     pub message: String,
     pub field: Option<String>,
     pub offset: Option<u64>,
+    /// Seconds after which a refused request may succeed: sent as `Retry-After` (429).
+    pub retry_after: Option<u64>,
 }
 
 impl AppError {
@@ -31,11 +33,18 @@ impl AppError {
             message: message.into(),
             field: None,
             offset: None,
+            retry_after: None,
         }
     }
 
     pub fn bad_request(code: &'static str, message: impl Into<String>) -> AppError {
         AppError::new(StatusCode::BAD_REQUEST, code, message)
+    }
+
+    /// Values that fit the OpenAPI document's schema but break a rule between them (or with
+    /// the scene) that the document states in prose: 422 (see `KindErrorKind::Relational`).
+    pub fn relational(code: &'static str, message: impl Into<String>) -> AppError {
+        AppError::new(StatusCode::UNPROCESSABLE_ENTITY, code, message)
     }
 
     pub fn field(mut self, field: impl Into<String>) -> AppError {
@@ -90,6 +99,7 @@ impl From<IngestError> for AppError {
             IngestErrorKind::Timeout => StatusCode::REQUEST_TIMEOUT,
             IngestErrorKind::Io => StatusCode::INTERNAL_SERVER_ERROR,
             IngestErrorKind::StorageFull => StatusCode::INSUFFICIENT_STORAGE,
+            IngestErrorKind::Relational => StatusCode::UNPROCESSABLE_ENTITY,
         };
         AppError {
             status,
@@ -97,6 +107,7 @@ impl From<IngestError> for AppError {
             message: e.message,
             field: e.field,
             offset: e.offset,
+            retry_after: None,
         }
     }
 }
@@ -107,6 +118,7 @@ impl From<KindError> for AppError {
             KindErrorKind::Invalid => StatusCode::BAD_REQUEST,
             KindErrorKind::Unsupported => StatusCode::UNPROCESSABLE_ENTITY,
             KindErrorKind::NotReady => StatusCode::CONFLICT,
+            KindErrorKind::Relational => StatusCode::UNPROCESSABLE_ENTITY,
         };
         AppError {
             status,
@@ -114,6 +126,7 @@ impl From<KindError> for AppError {
             message: e.message,
             field: e.field,
             offset: e.offset,
+            retry_after: None,
         }
     }
 }
@@ -132,6 +145,12 @@ impl IntoResponse for AppError {
             field: self.field,
             offset: self.offset,
         };
-        (self.status, Json(body)).into_response()
+        let mut response = (self.status, Json(body)).into_response();
+        if let Some(secs) = self.retry_after {
+            response
+                .headers_mut()
+                .insert(axum::http::header::RETRY_AFTER, secs.into());
+        }
+        response
     }
 }

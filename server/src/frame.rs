@@ -116,9 +116,9 @@ pub fn render(
     // refinement pass.
     let fb = match request.pass {
         Pass::Single => {
-            backend
-                .render_effects(prepared, &request.view, request.effects)
-                .0
+            let (fb, rays) = backend.render_effects(prepared, &request.view, request.effects);
+            m::capped_searches(rays.kinds.metaballs.capped, rays.kinds.surfels.capped);
+            fb
         }
         Pass::Refine(refinement, key) => {
             refinement.next_pass(backend, prepared, &request.view, request.effects, key)

@@ -10,6 +10,7 @@
 
 pub mod api;
 pub mod body;
+pub mod clients;
 pub mod config;
 pub mod effects;
 pub mod encode;

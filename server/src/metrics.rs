@@ -1,6 +1,7 @@
 //! Prometheus metrics at `/metrics`: sessions, frames and bytes by codec, dropped frames,
 //! per-stage times, input-to-frame latency, render queue depth and wait, jobs running, depth
-//! channel bytes, scene states built, refusals and rejected inputs.
+//! channel bytes, scene states built, refusals and rejected inputs, root-finder searches that
+//! hit their iteration cap.
 //!
 //! One process-wide recorder (the `metrics` facade is global); servers started in one process,
 //! as the tests do, share it.
@@ -29,6 +30,9 @@ pub const DEPTH_BYTES: &str = "isoray_depth_bytes_total";
 /// stored scene counts under `scene="stored"` (a series per pushed scene would be unbounded).
 pub const STATES_BUILT: &str = "isoray_scene_states_built_total";
 pub const INPUTS_REJECTED: &str = "isoray_inputs_rejected_total";
+/// Ray searches that stopped at their root finder's iteration cap, by kind (issue 13: a capped
+/// search is a possible wrong pixel, counted rather than silent). Single-pass frames only.
+pub const CAPPED_SEARCHES: &str = "isoray_root_finder_capped_total";
 /// Always 1, labelled with the version and the cargo features the binary was built with
 /// (Prometheus' `*_build_info` convention): which encoders a process has, and for the tests,
 /// that the binary they spawn is the one they were built with.
@@ -88,6 +92,9 @@ fn register_zeroes() {
     metrics::gauge!(RENDER_QUEUE).set(0.0);
     metrics::gauge!(RENDER_RUNNING).set(0.0);
     metrics::counter!(DEPTH_BYTES).absolute(0);
+    for kind in ["metaballs", "surfels"] {
+        metrics::counter!(CAPPED_SEARCHES, "kind" => kind).absolute(0);
+    }
     metrics::gauge!(
         BUILD_INFO,
         "version" => env!("CARGO_PKG_VERSION"),
@@ -117,4 +124,14 @@ pub fn queue_wait(wait: Duration) {
 
 pub fn input_to_frame(latency: Duration) {
     metrics::histogram!(INPUT_TO_FRAME_SECONDS).record(latency.as_secs_f64());
+}
+
+/// Adds a frame's capped root-finder searches (metaballs, surfels).
+pub fn capped_searches(metaballs: u64, surfels: u64) {
+    if metaballs > 0 {
+        metrics::counter!(CAPPED_SEARCHES, "kind" => "metaballs").increment(metaballs);
+    }
+    if surfels > 0 {
+        metrics::counter!(CAPPED_SEARCHES, "kind" => "surfels").increment(surfels);
+    }
 }

@@ -97,7 +97,20 @@ pub fn apply(
 }
 
 fn error(field: &'static str, message: String) -> EffectError {
-    EffectError { field, message }
+    EffectError {
+        field,
+        message,
+        relational: false,
+    }
+}
+
+/// A rule between values, stated in the document's prose (422).
+fn relational(field: &'static str, message: String) -> EffectError {
+    EffectError {
+        field,
+        message,
+        relational: true,
+    }
 }
 
 fn clip_box(spec: &ClipBoxSpec) -> Result<ClipBox, EffectError> {
@@ -113,7 +126,7 @@ fn clip_box(spec: &ClipBoxSpec) -> Result<ClipBox, EffectError> {
     }
     // Finite (checked above), so `>=` also refuses equal corners.
     if (0..3).any(|i| spec.min[i] >= spec.max[i]) {
-        return Err(error(
+        return Err(relational(
             "clip",
             "clip: min must be below max on every axis".into(),
         ));
@@ -144,7 +157,7 @@ fn surface_looks(
         .map(|(i, s)| {
             let iso = s.isovalue as f32;
             if !(iso > lo && iso < hi) {
-                return Err(error(
+                return Err(relational(
                     "surfaces",
                     format!(
                         "surfaces[{i}].isovalue {} must be inside the scene's isovalue range ({lo}, {hi})",
@@ -191,13 +204,14 @@ fn color_map(spec: &ColorMapSpec, slider: (f32, f32)) -> Result<Option<ColorMap>
     let (lo, hi) = match spec.range {
         None => slider,
         Some([lo, hi]) => {
-            if !(lo.is_finite()
-                && hi.is_finite()
-                && lo < hi
-                && lo.abs() <= 1e30
-                && hi.abs() <= 1e30)
-            {
+            if !(lo.is_finite() && hi.is_finite() && lo.abs() <= 1e30 && hi.abs() <= 1e30) {
                 return Err(error(
+                    "color_map",
+                    "color_map.range must be two finite numbers, low below high".into(),
+                ));
+            }
+            if lo >= hi {
+                return Err(relational(
                     "color_map",
                     "color_map.range must be two finite numbers, low below high".into(),
                 ));

@@ -50,7 +50,7 @@ pub trait TracePasses {
 /// The plan of `effects` on `scene`.
 pub fn plan_for(scene: &PreparedScene, effects: &Effects) -> EffectsPlan {
     let s = scene.scene();
-    EffectsPlan::new(scene.lighting(), s.primitive_count(), effects)
+    EffectsPlan::new(scene.lighting_in_frame(), s.primitive_count(), effects)
 }
 
 /// Renders one frame with `effects` (its first refinement pass), blocking. A plan with

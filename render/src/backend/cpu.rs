@@ -152,7 +152,7 @@ fn trace_tiles<P: Copy + Send, S: Send>(
 /// and shaded, straight to sRGB.
 fn render_tiles(scene: &PreparedScene, view: &View) -> Framebuffer {
     let (width, height) = (view.width, view.height);
-    let rays = view.camera.rays(width, height);
+    let rays = scene.primary_rays(&view.camera, width, height);
     let forward = rays.forward();
     let mut fb = Framebuffer::new(width, height);
     let trace = |rect: Rect| {
@@ -176,7 +176,7 @@ fn render_tiles(scene: &PreparedScene, view: &View) -> Framebuffer {
 /// Each tile's primary hits, as distance and normal.
 fn surface_tiles(scene: &PreparedScene, view: &View) -> SurfaceBuffer {
     let (width, height) = (view.width, view.height);
-    let rays = view.camera.rays(width, height);
+    let rays = scene.primary_rays(&view.camera, width, height);
     let n = width as usize * height as usize;
     let mut values = vec![0.0f32; n * SurfaceBuffer::CHANNELS];
     let mut distances = vec![f32::INFINITY; n];
@@ -216,7 +216,7 @@ fn surface_tiles(scene: &PreparedScene, view: &View) -> SurfaceBuffer {
 /// linear colour, with its rays counted.
 fn trace_pass(scene: &PreparedScene, view: &View, plan: &EffectsPlan, pass: u32) -> Pass {
     let (width, height) = (view.width, view.height);
-    let rays = view.camera.rays(width, height);
+    let rays = scene.primary_rays(&view.camera, width, height);
     let forward = rays.forward();
     let n = width as usize * height as usize;
     let mut out = Pass {

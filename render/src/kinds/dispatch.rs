@@ -7,6 +7,7 @@
 //! [`SceneCounters`].
 
 use crate::camera::PrimaryRays;
+use crate::geom::frame::LocalFrame;
 use crate::kinds::contract::PreparedKind;
 use crate::kinds::counters::SceneCounters;
 use crate::kinds::metaballs::counters::MetaballCounters;
@@ -97,17 +98,36 @@ impl Geometry {
         }
     }
 
-    /// Builds what tracing needs; each kind takes its own options and ignores the others.
-    pub fn prepare(&self, options: PrepareOptions, tet_options: TetOptions) -> PreparedGeometry {
+    /// The frame this state is traced in ([`LocalFrame::for_bounds`] of its bounds; for
+    /// surfels the deformed simulation nodes' bounds, which cost O(nodes), not O(surfels)).
+    pub fn frame(&self) -> LocalFrame {
+        let bounds = match self {
+            Geometry::Metaballs(m) => m.bounds(),
+            Geometry::Tets(t) => t.bounds(),
+            Geometry::Surfels(s) => s.node_bounds(),
+        };
+        LocalFrame::for_bounds(bounds)
+    }
+
+    /// Builds what tracing needs in `frame` (the geometry moved there in `f64` before it
+    /// becomes the kind's `f32` data); each kind takes its own options and ignores the others.
+    pub fn prepare(
+        &self,
+        options: PrepareOptions,
+        tet_options: TetOptions,
+        frame: &LocalFrame,
+    ) -> PreparedGeometry {
         match self {
-            Geometry::Metaballs(m) => {
-                PreparedGeometry::Metaballs(Arc::new(PreparedMetaballs::new(m.clone(), options)))
-            }
-            Geometry::Tets(t) => {
-                PreparedGeometry::Tets(Arc::new(PreparedTets::new(t.clone(), tet_options)))
-            }
+            Geometry::Metaballs(m) => PreparedGeometry::Metaballs(Arc::new(
+                PreparedMetaballs::new(m.in_frame(frame), options),
+            )),
+            Geometry::Tets(t) => PreparedGeometry::Tets(Arc::new(PreparedTets::new_in_frame(
+                t.clone(),
+                tet_options,
+                frame,
+            ))),
             Geometry::Surfels(s) => {
-                PreparedGeometry::Surfels(Arc::new(PreparedSurfels::new(s.clone())))
+                PreparedGeometry::Surfels(Arc::new(PreparedSurfels::new(s.in_frame(frame))))
             }
         }
     }

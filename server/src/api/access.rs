@@ -2,6 +2,7 @@
 //! and create checks, the client's address, and what the handlers share.
 
 use crate::api::auth::{bearer, require, token_hash, RateLimiter};
+use crate::clients::{client_address, Network};
 use crate::error::AppError;
 use crate::scenes::entry::SceneEntry;
 use crate::state::AppState;
@@ -17,6 +18,10 @@ use std::sync::Arc;
 /// What the API handlers share besides the app state.
 pub struct ApiShared {
     pub writes: RateLimiter,
+    /// `POST .../render`, per client.
+    pub renders: RateLimiter,
+    /// `--trusted-proxy`: peers whose `X-Forwarded-For` names the client.
+    pub trusted_proxies: Vec<Network>,
     pub openapi_json: String,
     /// Scene creations in progress, counted against `--max-scenes` with the stored ones.
     pub creating: std::sync::Mutex<usize>,
@@ -48,18 +53,25 @@ pub fn reserve_scene<'a>(app: &AppState, shared: &'a ApiShared) -> Result<SceneS
     Ok(SceneSlot(&shared.creating))
 }
 
-/// The client's address, when the server was started with connection info.
+/// The client's address, when the server was started with connection info: the peer's, or
+/// the one a trusted proxy forwarded (`crate::clients`).
 pub struct ClientAddr(pub Option<IpAddr>);
 
 impl<S: Send + Sync> FromRequestParts<S> for ClientAddr {
     type Rejection = std::convert::Infallible;
 
     async fn from_request_parts(parts: &mut Parts, _: &S) -> Result<ClientAddr, Self::Rejection> {
+        let peer = parts
+            .extensions
+            .get::<ConnectInfo<SocketAddr>>()
+            .map(|c| c.0.ip());
+        let trusted = parts
+            .extensions
+            .get::<Arc<ApiShared>>()
+            .map(|s| s.trusted_proxies.as_slice())
+            .unwrap_or_default();
         Ok(ClientAddr(
-            parts
-                .extensions
-                .get::<ConnectInfo<SocketAddr>>()
-                .map(|c| c.0.ip()),
+            peer.map(|p| client_address(p, &parts.headers, trusted)),
         ))
     }
 }
@@ -134,6 +146,57 @@ fn check_view_token(
     }
     let refs: Vec<&str> = accepted.iter().map(String::as_str).collect();
     require(presented, &refs, "viewing")
+}
+
+/// The scene a view names, after the view token: with `--view-token`, a request without a
+/// token is refused (401) before the scene is looked up.
+pub fn viewable_scene(
+    app: &AppState,
+    headers: &HeaderMap,
+    id: &str,
+) -> Result<Arc<SceneEntry>, AppError> {
+    if app.config().view_token.is_some() && bearer(headers).is_none() {
+        require(None, &[], "viewing")?;
+    }
+    let entry = scene_of(app, id)?;
+    check_view(app, headers, Some(&entry))?;
+    Ok(entry)
+}
+
+/// The stored scene a write names, authorization first: a request without a token is refused
+/// (401) before anything else is looked at; then the scene (404, 421), the token (403: the
+/// scene's write token or the admin token; a built-in demo, or a scene not here, has only the
+/// admin token), and last whether the scene takes writes at all (409 for a built-in demo).
+pub fn writable_scene(
+    app: &AppState,
+    headers: &HeaderMap,
+    id: &str,
+) -> Result<Arc<StoredScene>, AppError> {
+    const WHAT: &str = "writing to this scene";
+    if bearer(headers).is_none() {
+        require(None, &[], WHAT)?;
+    }
+    let admin = app.config().admin_token.as_deref().map(token_hash);
+    let admin: Vec<&str> = admin.as_deref().into_iter().collect();
+    let entry = match scene_of(app, id) {
+        Ok(entry) => entry,
+        // Only the admin token may learn that a scene is not here (or on another shard): any
+        // other token could only be some scene's write token, which this one is not (403).
+        Err(e) => {
+            require(bearer(headers), &admin, WHAT)?;
+            return Err(e);
+        }
+    };
+    match entry.stored_scene() {
+        Some(scene) => {
+            check_write(app, headers, scene)?;
+            Ok(Arc::clone(scene))
+        }
+        None => {
+            require(bearer(headers), &admin, WHAT)?;
+            stored_of(&entry)
+        }
+    }
 }
 
 pub fn check_write(

@@ -1,5 +1,5 @@
 //! Who may write and view: random scene ids and tokens, token checks, and the per-client
-//! write rate limit.
+//! rate limits (writes, renders).
 //!
 //! Tokens are 256-bit random hex strings from the OS generator, returned once at scene
 //! creation; the store keeps only their SHA-256, compared in constant time. Scene ids are
@@ -8,8 +8,8 @@
 use crate::error::AppError;
 use axum::http::{HeaderMap, StatusCode};
 use sha2::{Digest, Sha256};
-use std::collections::HashMap;
 use std::net::IpAddr;
+use std::num::NonZeroU32;
 use std::sync::Mutex;
 use std::time::Instant;
 
@@ -65,54 +65,77 @@ pub fn require(
     }
 }
 
-/// A token bucket per client address for write requests.
+/// A rate limit per client address (GCRA, from `governor`): `rate` requests per second on
+/// average, `burst` at once. Clients are told how long to wait (429 with `Retry-After`).
+///
+/// The key map is bounded in practice: once it holds [`MAX_CLIENTS`] addresses, those whose
+/// allowance is whole again (the state a new client starts in, so dropping them changes no
+/// answer) are dropped, at most once a second.
 pub struct RateLimiter {
+    limiter: governor::DefaultKeyedRateLimiter<Option<IpAddr>>,
     rate_per_sec: f64,
-    burst: f64,
-    buckets: Mutex<HashMap<Option<IpAddr>, (f64, Instant)>>,
+    what: &'static str,
+    last_sweep: Mutex<Instant>,
 }
 
-/// Buckets kept before idle ones are dropped.
-const MAX_BUCKETS: usize = 10_000;
+/// Client addresses kept before idle ones are dropped.
+pub const MAX_CLIENTS: usize = 10_000;
 
 impl RateLimiter {
-    pub fn new(rate_per_sec: f64, burst: u32) -> RateLimiter {
+    /// `what` names the requests in the refusal ("writes", "renders").
+    pub fn new(rate_per_sec: f64, burst: u32, what: &'static str) -> RateLimiter {
+        // The config checks both are positive; a period below a nanosecond is one nanosecond.
+        let period = std::time::Duration::from_secs_f64(1.0 / rate_per_sec)
+            .max(std::time::Duration::from_nanos(1));
+        let quota = governor::Quota::with_period(period)
+            .unwrap_or(governor::Quota::per_second(NonZeroU32::MIN))
+            .allow_burst(NonZeroU32::new(burst).unwrap_or(NonZeroU32::MIN));
         RateLimiter {
+            limiter: governor::RateLimiter::keyed(quota),
             rate_per_sec,
-            burst: f64::from(burst),
-            buckets: Mutex::new(HashMap::new()),
+            what,
+            last_sweep: Mutex::new(Instant::now()),
         }
     }
 
-    /// Takes one write from `client`'s bucket, or says how long to wait.
+    /// Takes one request from `client`'s allowance, or says how long to wait.
     pub fn check(&self, client: Option<IpAddr>) -> Result<(), AppError> {
-        let now = Instant::now();
-        let mut buckets = self.buckets.lock().unwrap_or_else(|e| e.into_inner());
-        if buckets.len() >= MAX_BUCKETS {
-            let full = self.burst;
-            let rate = self.rate_per_sec;
-            buckets.retain(|_, (tokens, at)| {
-                *tokens + now.duration_since(*at).as_secs_f64() * rate < full
-            });
+        self.sweep();
+        match self.limiter.check_key(&client) {
+            Ok(()) => Ok(()),
+            Err(not_until) => {
+                let wait = not_until.wait_time_from(governor::clock::Clock::now(
+                    &governor::clock::DefaultClock::default(),
+                ));
+                let ms = wait.as_millis().max(1);
+                let mut e = AppError::new(
+                    StatusCode::TOO_MANY_REQUESTS,
+                    "rate_limited",
+                    format!(
+                        "too many {} from this client; retry in {ms} ms (limit {} per second)",
+                        self.what, self.rate_per_sec
+                    ),
+                );
+                e.retry_after = Some(wait.as_secs() + u64::from(wait.subsec_nanos() > 0));
+                Err(e)
+            }
         }
-        let (tokens, at) = buckets.entry(client).or_insert((self.burst, now));
-        *tokens =
-            (*tokens + now.duration_since(*at).as_secs_f64() * self.rate_per_sec).min(self.burst);
-        *at = now;
-        if *tokens >= 1.0 {
-            *tokens -= 1.0;
-            Ok(())
-        } else {
-            let wait = (1.0 - *tokens) / self.rate_per_sec;
-            Err(AppError::new(
-                StatusCode::TOO_MANY_REQUESTS,
-                "rate_limited",
-                format!(
-                    "too many writes from this client; retry in {:.0} ms (limit {} per second)",
-                    (wait * 1000.0).ceil(),
-                    self.rate_per_sec
-                ),
-            ))
+    }
+
+    /// Addresses held now.
+    pub fn clients(&self) -> usize {
+        self.limiter.len()
+    }
+
+    fn sweep(&self) {
+        if self.limiter.len() < MAX_CLIENTS {
+            return;
+        }
+        let mut last = self.last_sweep.lock().unwrap_or_else(|e| e.into_inner());
+        if last.elapsed() >= std::time::Duration::from_secs(1) {
+            *last = Instant::now();
+            self.limiter.retain_recent();
+            self.limiter.shrink_to_fit();
         }
     }
 }
@@ -136,11 +159,16 @@ mod tests {
 
     #[test]
     fn bucket_refuses_past_the_burst() {
-        let limiter = RateLimiter::new(0.001, 2);
+        let limiter = RateLimiter::new(0.001, 2, "writes");
         limiter.check(None).expect("first");
         limiter.check(None).expect("second");
         let e = limiter.check(None).expect_err("third is over the burst");
         assert_eq!(e.status, StatusCode::TOO_MANY_REQUESTS);
+        // 1000 s per request at 0.001 per second.
+        assert!(
+            e.retry_after.is_some_and(|s| (990..=1000).contains(&s)),
+            "{e:?}"
+        );
         limiter
             .check(Some(IpAddr::from([10, 0, 0, 1])))
             .expect("another client has its own bucket");

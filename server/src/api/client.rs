@@ -74,6 +74,21 @@ impl Client {
         })
     }
 
+    /// A connection to the first of the host's addresses that accepts within the timeout.
+    fn connect(&self) -> std::io::Result<TcpStream> {
+        use std::net::ToSocketAddrs;
+        let mut last = None;
+        for addr in self.host.to_socket_addrs()? {
+            match TcpStream::connect_timeout(&addr, self.timeout) {
+                Ok(s) => return Ok(s),
+                Err(e) => last = Some(e),
+            }
+        }
+        Err(last.unwrap_or_else(|| {
+            std::io::Error::new(std::io::ErrorKind::NotFound, "the host has no address")
+        }))
+    }
+
     /// Sends one request on a fresh connection and reads the whole answer.
     pub fn request(
         &self,
@@ -82,7 +97,7 @@ impl Client {
         headers: &[(&str, &str)],
         body: Body<'_>,
     ) -> Result<Response, ClientError> {
-        let stream = TcpStream::connect(&self.host)?;
+        let stream = self.connect()?;
         stream.set_read_timeout(Some(self.timeout))?;
         stream.set_write_timeout(Some(self.timeout))?;
         stream.set_nodelay(true)?;

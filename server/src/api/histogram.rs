@@ -6,7 +6,7 @@
 //! the vertex values of a tet mesh); this handler parses the query, picks the state and runs
 //! the job on the job pool (`crate::jobs`), off the async runtime.
 
-use crate::api::access::{check_view, scene_of};
+use crate::api::access::viewable_scene;
 use crate::error::AppError;
 use crate::state::AppState;
 use axum::extract::{Path, RawQuery, State};
@@ -32,8 +32,9 @@ fn parse_query(query: &str) -> Result<Query, AppError> {
         range: None,
     };
     let (mut lo, mut hi) = (None, None);
-    for pair in query.split('&').filter(|p| !p.is_empty()) {
-        let (k, v) = pair.split_once('=').unwrap_or((pair, ""));
+    // Percent-decoded (`1e%2B36`), as a client's URL encoder writes it.
+    for (k, v) in form_urlencoded::parse(query.as_bytes()) {
+        let (k, v): (&str, &str) = (&k, &v);
         let number = |name: &'static str| {
             v.parse::<f64>()
                 .ok()
@@ -86,13 +87,13 @@ fn parse_query(query: &str) -> Result<Query, AppError> {
         (None, None) => {}
         (Some(lo), Some(hi)) if lo < hi => q.range = Some((lo, hi)),
         (Some(_), Some(_)) => {
-            return Err(AppError::bad_request("invalid_value", "lo must be below hi").field("lo"))
+            return Err(AppError::relational("invalid_value", "lo must be below hi").field("lo"))
         }
         (None, Some(_)) => {
-            return Err(AppError::bad_request("invalid_query", "hi needs lo").field("lo"))
+            return Err(AppError::relational("invalid_query", "hi needs lo").field("lo"))
         }
         (Some(_), None) => {
-            return Err(AppError::bad_request("invalid_query", "lo needs hi").field("hi"))
+            return Err(AppError::relational("invalid_query", "lo needs hi").field("hi"))
         }
     }
     Ok(q)
@@ -123,8 +124,7 @@ pub async fn histogram(
     Path(id): Path<String>,
     RawQuery(query): RawQuery,
 ) -> Result<Json<FieldHistogram>, AppError> {
-    let entry = scene_of(&app, &id)?;
-    check_view(&app, &headers, Some(&entry))?;
+    let entry = viewable_scene(&app, &headers, &id)?;
     let q = parse_query(query.as_deref().unwrap_or(""))?;
     let (lo, hi) = q.range.unwrap_or_else(|| {
         let (lo, hi) = entry.demo().isovalue_slider();

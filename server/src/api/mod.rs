@@ -11,14 +11,17 @@
 pub mod access;
 pub mod auth;
 pub mod client;
+mod contract;
 mod histogram;
 pub mod origin;
+mod peers;
 mod push;
 mod render;
 pub mod request;
 pub mod routes;
 mod scenes;
 mod steps;
+pub mod strict_json;
 mod tets;
 
 pub use routes::{openapi, router};

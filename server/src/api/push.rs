@@ -1,19 +1,18 @@
 //! Pushing a step: `PUT /api/v1/scenes/{id}/steps/{index}` with a JSON, `.npy` or raw body,
 //! read as a stream, checked value by value and written crash-safely.
 
-use crate::api::access::{
-    check_write, parse_index, path_error, scene_of, stored_of, ApiShared, ClientAddr,
-};
+use crate::api::access::{parse_index, path_error, writable_scene, ApiShared, ClientAddr};
 use crate::api::request::{
     blocking, declared_length, forward_body, push_format, read_json, too_large, PushFormat,
     BODY_QUEUE,
 };
 use crate::body::BodyReader;
 use crate::error::AppError;
-use crate::kinds::{check_ready, StepLayout};
+use crate::kinds::{check_ready, SceneSetup, StepLayout};
 use crate::state::AppState;
+use crate::store::format::HEADER_LEN;
 use crate::store::ingest::{
-    ingest_json, ingest_json_tets, ingest_npy, ingest_raw, IngestLimits, Target,
+    ingest_json, ingest_json_tets, ingest_npy, ingest_raw, IngestLimits, Target, WrittenStep,
 };
 use crate::store::{CommitError, CommitOutcome};
 use axum::body::Body;
@@ -80,11 +79,9 @@ pub async fn push_step(
     RawQuery(query): RawQuery,
     body: Body,
 ) -> Result<Response, AppError> {
-    shared.writes.check(client)?;
     let Path((id, index)) = path.map_err(path_error)?;
-    let entry = scene_of(&app, &id)?;
-    let scene = stored_of(&entry)?;
-    check_write(&app, &headers, &scene)?;
+    let scene = writable_scene(&app, &headers, &id)?;
+    shared.writes.check(client)?;
     check_ready(&scene.setup)?;
     let index = parse_index(&app, &index)?;
     let query: PushQuery = serde_urlencoded_lite(query.as_deref().unwrap_or(""))?;
@@ -123,16 +120,41 @@ pub async fn push_step(
     };
     let written = match format {
         // The JSON shape is per kind (rows of balls for metaballs).
-        PushFormat::Json => match limits.layout {
-            StepLayout::Metaballs => {
-                let step: JsonStep = read_json(&app, &headers, body).await?;
-                blocking(move || ingest_json(&step, &limits, target)).await??
+        PushFormat::Json => {
+            let step: AnyJsonStep = read_json(&app, &headers, body).await?;
+            match (limits.layout, step.by_kind()?) {
+                (StepLayout::Metaballs, Ok(step)) => {
+                    blocking(move || ingest_json(&step, &limits, target)).await??
+                }
+                (StepLayout::Tets { .. }, Err(step)) => {
+                    blocking(move || ingest_json_tets(&step, &limits, target)).await??
+                }
+                // Node positions: a metaball step's shape without its optional columns.
+                (StepLayout::Surfels { .. }, Ok(step)) => {
+                    let step = surfel_step(step)?;
+                    blocking(move || ingest_json(&step, &limits, target)).await??
+                }
+                (StepLayout::Metaballs, Err(_))
+                | (StepLayout::Tets { .. }, Ok(_))
+                | (StepLayout::Surfels { .. }, Err(_)) => {
+                    return Err(AppError::relational(
+                        "wrong_kind",
+                        format!(
+                            "scene `{id}` is of kind `{}`: {}",
+                            scene.meta.kind.as_str(),
+                            match limits.layout {
+                                StepLayout::Metaballs => "its JSON steps are {\"positions\": ...}",
+                                StepLayout::Tets { .. } =>
+                                    "its JSON steps are {\"scalars\": [...]} (and, for a \
+                                     deforming mesh, \"positions\")",
+                                StepLayout::Surfels { .. } =>
+                                    "its JSON steps are {\"positions\": ...} (node positions only)",
+                            }
+                        ),
+                    ))
+                }
             }
-            StepLayout::Tets { .. } => {
-                let step: JsonTetStep = read_json(&app, &headers, body).await?;
-                blocking(move || ingest_json_tets(&step, &limits, target)).await??
-            }
-        },
+        }
         PushFormat::Npy | PushFormat::Raw => {
             let (tx, rx) = tokio::sync::mpsc::channel(BODY_QUEUE);
             let worker = tokio::task::spawn_blocking(move || {
@@ -149,6 +171,14 @@ pub async fn push_step(
                 .map_err(|e| AppError::internal(format!("step writer failed: {e}")))?;
             result?
         }
+    };
+    // A step that moves a tet mesh is checked as a whole, like the mesh was: the rows passed
+    // one by one, but a tet is inverted only by its four corners together.
+    let written = if limits.layout.checks_whole_step(written.header.columns) {
+        let check_scene = Arc::clone(&scene);
+        blocking(move || check_whole_step(&check_scene.setup, written)).await??
+    } else {
+        written
     };
     let replace = query.replace.unwrap_or(false);
     let commit_scene = Arc::clone(&scene);
@@ -179,14 +209,107 @@ pub async fn push_step(
         .into_response())
 }
 
+/// A JSON step of any kind, as the document says (`oneOf` JsonStep, JsonTetStep; a surfel
+/// scene's step is a JsonStep with positions only, JsonSurfelStep): which one is decided by
+/// its fields, then checked against the scene's kind (422 if it is another's).
+#[derive(serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+struct AnyJsonStep {
+    #[serde(default)]
+    positions: Option<Vec<[f64; 3]>>,
+    #[serde(default)]
+    radii: Option<Vec<f64>>,
+    #[serde(default)]
+    strengths: Option<Vec<f64>>,
+    #[serde(default)]
+    colors: Option<Vec<[f64; 3]>>,
+    /// Absent, or an array: the document's JsonTetStep requires the array and JsonStep has
+    /// no such field, so `"scalars": null` matches neither and is refused (400).
+    #[serde(default, deserialize_with = "present_array")]
+    scalars: Option<Vec<f64>>,
+}
+
+/// A field that may be left out but, when given, must be an array (not `null`).
+fn present_array<'de, D: serde::Deserializer<'de>>(d: D) -> Result<Option<Vec<f64>>, D::Error> {
+    <Vec<f64> as serde::Deserialize>::deserialize(d).map(Some)
+}
+
+impl AnyJsonStep {
+    /// A metaball step (`Ok`) or a tet step (`Err`): `scalars` makes a tet step (with the
+    /// moved vertex `positions` of a deforming mesh beside them), `positions` alone a
+    /// metaball step; a mixture, or neither, is a 400.
+    #[allow(clippy::type_complexity)]
+    fn by_kind(self) -> Result<Result<JsonStep, JsonTetStep>, AppError> {
+        let ball_fields = self.radii.is_some() || self.strengths.is_some() || self.colors.is_some();
+        match (self.positions, self.scalars) {
+            (Some(positions), None) => Ok(Ok(JsonStep {
+                positions,
+                radii: self.radii,
+                strengths: self.strengths,
+                colors: self.colors,
+            })),
+            (positions, Some(scalars)) if !ball_fields => {
+                Ok(Err(JsonTetStep { scalars, positions }))
+            }
+            (_, Some(_)) => Err(AppError::bad_request(
+                "invalid_json",
+                "a tet step is {\"scalars\": [...]} with optional moved vertex \"positions\"; \
+                 `radii`, `strengths` and `colors` belong to metaball steps",
+            )
+            .field("scalars")),
+            (None, None) => Err(AppError::bad_request(
+                "invalid_json",
+                "a step needs `positions` (metaballs) or `scalars` (tets)",
+            )
+            .field("positions")),
+        }
+    }
+}
+
+/// Reads a written (not yet committed) step back and runs its kind's whole-step checks; on
+/// an error the temporary file goes with `written`, so nothing stored changes.
+fn check_whole_step(setup: &SceneSetup, written: WrittenStep) -> Result<WrittenStep, AppError> {
+    let bytes = std::fs::read(written.temp.path())
+        .map_err(|e| AppError::internal(format!("cannot read the written step back: {e}")))?;
+    let payload = bytes.get(HEADER_LEN..).unwrap_or_default();
+    setup.check_step(written.header.columns, payload)?;
+    Ok(written)
+}
+
+/// A surfel step is the nodes' positions only: a metaball step's radii, strengths or colours
+/// fit the document's `JsonStep` but not a surfel scene (422 naming the column).
+fn surfel_step(step: JsonStep) -> Result<JsonStep, AppError> {
+    let extra = [
+        ("radii", step.radii.is_some()),
+        ("strengths", step.strengths.is_some()),
+        ("colors", step.colors.is_some()),
+    ]
+    .into_iter()
+    .find(|(_, present)| *present);
+    match extra {
+        Some((name, _)) => Err(AppError::relational(
+            "wrong_kind",
+            format!("a surfel scene's step is the node positions only, without `{name}`"),
+        )
+        .field(name)),
+        None => Ok(JsonStep {
+            positions: step.positions,
+            radii: None,
+            strengths: None,
+            colors: None,
+        }),
+    }
+}
+
 /// Parses `replace=true&time=1.5` without another dependency: both values are plain tokens.
 fn serde_urlencoded_lite(query: &str) -> Result<PushQuery, AppError> {
     let mut q = PushQuery {
         replace: None,
         time: None,
     };
-    for pair in query.split('&').filter(|p| !p.is_empty()) {
-        let (k, v) = pair.split_once('=').unwrap_or((pair, ""));
+    // Percent-decoded (`time=1e%2B3`), as a client's URL encoder writes it.
+    for (k, v) in form_urlencoded::parse(query.as_bytes()) {
+        let (k, v): (&str, &str) = (&k, &v);
         match k {
             "replace" => {
                 q.replace = Some(match v {

@@ -1,7 +1,7 @@
 //! `POST /api/v1/scenes/{id}/render`: one image of a scene, PNG or JPEG, or its hit
 //! distances and normals as a `.npy` array.
 
-use crate::api::access::{check_view, scene_of};
+use crate::api::access::{viewable_scene, ApiShared, ClientAddr};
 use crate::api::request::read_json;
 use crate::error::AppError;
 use crate::frame::{self, FrameRequest};
@@ -11,9 +11,11 @@ use axum::body::Body;
 use axum::extract::{Path, State};
 use axum::http::{header, HeaderMap};
 use axum::response::{IntoResponse, Response};
+use axum::Extension;
 use isoray_protocol::api::{ApiErrorBody, ImageFormat, RenderRequest};
 use isoray_protocol::Codec;
 use isoray_render::View;
+use std::sync::Arc;
 
 /// Default image size of a one-shot render.
 const DEFAULT_RENDER_SIZE: (u32, u32) = (640, 480);
@@ -36,16 +38,21 @@ const DEFAULT_RENDER_SIZE: (u32, u32) = (640, 480);
 )]
 pub async fn render(
     State(app): State<AppState>,
+    Extension(shared): Extension<Arc<ApiShared>>,
+    ClientAddr(client): ClientAddr,
     headers: HeaderMap,
     Path(id): Path<String>,
     body: Body,
 ) -> Result<Response, AppError> {
-    let entry = scene_of(&app, &id)?;
-    check_view(&app, &headers, Some(&entry))?;
+    let entry = viewable_scene(&app, &headers, &id)?;
+    // The most expensive request: limited per client (behind --trusted-proxy, per forwarded
+    // client), after the view check.
+    shared.renders.check(client)?;
     let req: RenderRequest = read_json(&app, &headers, body).await?;
     let max = app.config().max_size;
-    let width = req.width.unwrap_or(DEFAULT_RENDER_SIZE.0);
-    let height = req.height.unwrap_or(DEFAULT_RENDER_SIZE.1);
+    // The default size, within this server's --max-size.
+    let width = req.width.unwrap_or(DEFAULT_RENDER_SIZE.0.min(max));
+    let height = req.height.unwrap_or(DEFAULT_RENDER_SIZE.1.min(max));
     for (field, v) in [("width", width), ("height", height)] {
         if v == 0 || v > max {
             return Err(AppError::bad_request(
@@ -63,10 +70,17 @@ pub async fn render(
     let isovalue = match req.isovalue {
         Some(v) => {
             let (lo, hi) = entry.isovalue_range();
-            if !(v.is_finite() && v > f64::from(lo) && v < f64::from(hi)) {
+            if !v.is_finite() {
                 return Err(AppError::bad_request(
                     "invalid_value",
-                    format!("isovalue {v} is outside ({lo}, {hi})"),
+                    format!("isovalue {v} is not a finite number"),
+                )
+                .field("isovalue"));
+            }
+            if !(v > f64::from(lo) && v < f64::from(hi)) {
+                return Err(AppError::relational(
+                    "invalid_value",
+                    format!("isovalue {v} is outside the scene's isovalue range ({lo}, {hi})"),
                 )
                 .field("isovalue"));
             }
@@ -81,12 +95,15 @@ pub async fn render(
         );
     }
     let step = match (entry.stored_scene(), req.step) {
+        // The scene (the URL's resource) exists; a body naming a step it does not hold is a
+        // request whose fields disagree with the store: 422, like `step` on a built-in scene.
         (Some(scene), Some(i)) => Some(scene.step(i).ok_or_else(|| {
-            AppError::not_found(format!("scene `{id}` has no step {i}")).field("step")
+            AppError::relational("invalid_value", format!("scene `{id}` has no step {i}"))
+                .field("step")
         })?),
         (Some(scene), None) => scene.latest(),
         (None, Some(_)) => {
-            return Err(AppError::bad_request(
+            return Err(AppError::relational(
                 "invalid_value",
                 "built-in scenes have no steps; use time",
             )
@@ -105,7 +122,11 @@ pub async fn render(
     let mut style = crate::style::Style::default();
     if let Some(changes) = &req.effects {
         let bad = |e: crate::effects::EffectError| {
-            AppError::bad_request("invalid_value", e.message).field(format!("effects.{}", e.field))
+            let field = format!("effects.{}", e.field);
+            match e.relational {
+                true => AppError::relational("invalid_value", e.message).field(field),
+                false => AppError::bad_request("invalid_value", e.message).field(field),
+            }
         };
         fx = crate::effects::apply(&fx, changes, &limits).map_err(bad)?;
         let slider = entry.demo().isovalue_slider();

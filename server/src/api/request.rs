@@ -1,6 +1,7 @@
 //! Reading request bodies: JSON within the size and time limits, and binary bodies forwarded
 //! chunk by chunk to a blocking reader (`crate::body::BodyReader`), plus the push formats.
 
+use crate::api::strict_json::StrictDe;
 use crate::body::BodyAbort;
 use crate::error::AppError;
 use crate::state::AppState;
@@ -21,9 +22,11 @@ pub enum PushFormat {
     Raw,
 }
 
+/// A JSON body as the OpenAPI document describes it: objects where it says object, whole
+/// numbers however written where it says integer (`api::strict_json`), nothing after the value.
 pub fn parse_json<T: serde::de::DeserializeOwned>(bytes: &[u8]) -> Result<T, AppError> {
-    let de = &mut serde_json::Deserializer::from_slice(bytes);
-    serde_path_to_error::deserialize(de).map_err(|e| {
+    let mut de = serde_json::Deserializer::from_slice(bytes);
+    let value: T = serde_path_to_error::deserialize(StrictDe(&mut de)).map_err(|e| {
         let path = e.path().to_string();
         let inner = e.into_inner();
         // serde_json reports line and column; for a one-line body the column is the offset.
@@ -36,7 +39,12 @@ pub fn parse_json<T: serde::de::DeserializeOwned>(bytes: &[u8]) -> Result<T, App
             Some(o) if inner.column() > 0 => err.offset(o),
             _ => err,
         }
-    })
+    })?;
+    de.end().map_err(|e| {
+        AppError::bad_request("invalid_json", format!("after the JSON value: {e}"))
+            .offset(e.column().saturating_sub(1) as u64)
+    })?;
+    Ok(value)
 }
 
 /// A JSON body must say so: `Content-Type: application/json` (parameters such as

@@ -7,6 +7,7 @@
 
 use crate::api::access::ApiShared;
 use crate::api::auth::RateLimiter;
+use crate::api::contract;
 use crate::api::histogram;
 use crate::api::push;
 use crate::api::render;
@@ -23,6 +24,9 @@ use isoray_protocol::api::{
     LightSpec, LightingSpec, MeshInfo, MetaballDefaults, PushResult, RenderRequest, SceneBounds,
     SceneInfo, SceneInfoList, SceneKind, StepInfo, StepList, TetMeshData, TetSpec,
 };
+use isoray_protocol::api_surfels::{
+    JsonSurfelStep, SurfelData, SurfelMesh, SurfelPoints, SurfelSpec,
+};
 use isoray_protocol::effects::{ClipBoxSpec, ColorMapSpec, SurfaceStyleSpec};
 use std::sync::Arc;
 use utoipa::OpenApi;
@@ -38,8 +42,11 @@ use utoipa_axum::routes;
             images. Binary steps are NumPy .npy arrays or raw little-endian arrays with a \
             16-byte header (magic `ISRA`, version 1, dtype 1=f32/2=f64, u16 columns, u64 rows); \
             rows are `x y z [radius [strength [r g b]]]` for metaballs, one scalar per mesh \
-            vertex for tets (whose mesh is sent once, inline or with PUT .../mesh). Errors are \
-            JSON `{code, message, field?, offset?}`."
+            vertex for tets (whose mesh is sent once, inline or with PUT .../mesh), each \
+            simulation node's position x y z for surfels (whose surfels and rest nodes come \
+            inline at creation; the server embeds them and builds the sphere hierarchy once; a \
+            step deformed so far that the hierarchy stops pruning falls back to a rebuild for \
+            that step). Errors are JSON `{code, message, field?, offset?}`."
     ),
     paths(stream_doc, index_doc, asset_doc, healthz_doc, metrics_doc),
     components(schemas(
@@ -47,7 +54,9 @@ use utoipa_axum::routes;
         PushResult, JsonStep, RenderRequest, ApiCamera, LightingSpec, LightSpec,
         MetaballDefaults, SceneKind, ImageFormat, TetSpec, TetMeshData, JsonTetStep, MeshInfo,
         // A viewer's look (in `effects` of a render request) and a scene's bounds.
-        SceneBounds, ClipBoxSpec, SurfaceStyleSpec, ColorMapSpec
+        SceneBounds, ClipBoxSpec, SurfaceStyleSpec, ColorMapSpec,
+        // Surfel scenes: the object at creation, node positions per step.
+        SurfelSpec, SurfelData, SurfelPoints, SurfelMesh, JsonSurfelStep
     )),
     modifiers(&BearerSecurity),
     tags(
@@ -97,13 +106,21 @@ pub fn openapi() -> utoipa::openapi::OpenApi {
 pub fn router(config: &Config) -> Router<AppState> {
     let (router, doc) = openapi_router().split_for_parts();
     let shared = Arc::new(ApiShared {
-        writes: RateLimiter::new(config.write_rate, config.write_burst),
+        writes: RateLimiter::new(config.write_rate, config.write_burst, "writes"),
+        renders: RateLimiter::new(config.render_rate, config.render_burst, "renders"),
+        trusted_proxies: crate::clients::trusted(&config.trusted_proxy),
         creating: std::sync::Mutex::new(0),
-        openapi_json: doc
-            .to_pretty_json()
-            .expect("the generated OpenAPI document serializes"),
+        openapi_json: served_document(&doc, config),
     });
     router.layer(Extension(shared))
+}
+
+/// The document as served: the generated one completed with this server's constraints
+/// (`api::contract`).
+fn served_document(doc: &utoipa::openapi::OpenApi, config: &Config) -> String {
+    let mut value = serde_json::to_value(doc).expect("the generated OpenAPI document serializes");
+    contract::apply(&mut value, config);
+    serde_json::to_string_pretty(&value).expect("a JSON value serializes")
 }
 
 /// The websocket that streams frames of a scene (protocol v1, see PROTOCOL.md). Served by

@@ -1,17 +1,17 @@
 //! Scenes: list, create, get, delete.
 
 use crate::api::access::{
-    check_create, check_view, check_write, reserve_scene, scene_of, stored_of, ApiShared,
-    ClientAddr,
+    check_create, check_view, reserve_scene, viewable_scene, writable_scene, ApiShared, ClientAddr,
 };
 use crate::api::auth::token_hash;
+use crate::api::peers::{merge, peer_scenes};
 use crate::api::request::{blocking, read_json};
 use crate::error::AppError;
 use crate::kinds::SceneSetup;
 use crate::state::AppState;
 use crate::store::SceneMeta;
 use axum::body::Body;
-use axum::extract::{Path, State};
+use axum::extract::{Path, RawQuery, State};
 use axum::http::{HeaderMap, StatusCode};
 use axum::{Extension, Json};
 use isoray_protocol::api::{
@@ -19,23 +19,63 @@ use isoray_protocol::api::{
 };
 use std::sync::Arc;
 
-/// Every scene: the built-in demos and the pushed ones.
+/// Every scene: the built-in demos and the pushed ones, of this process and of its peers
+/// (`--peers`), merged; peers that did not answer in time are named in `unreachable_shards`.
 #[utoipa::path(
     get,
     path = "/api/v1/scenes",
     tag = "scenes",
+    params(
+        ("scope" = Option<String>, Query, description = "`all` (default): this process's scenes and its peers'; `local`: this process's only (what peers ask each other)")
+    ),
     responses(
         (status = 200, description = "OK", body = SceneInfoList),
+        (status = 400, description = "Unknown query parameter or scope", body = ApiErrorBody),
         (status = 401, description = "Token missing", body = ApiErrorBody), (status = 403, description = "Token wrong", body = ApiErrorBody)
     )
 )]
 pub async fn list_scenes(
     State(app): State<AppState>,
     headers: HeaderMap,
+    RawQuery(query): RawQuery,
 ) -> Result<Json<SceneInfoList>, AppError> {
     check_view(&app, &headers, None)?;
+    let mut local_only = false;
+    for (k, v) in form_urlencoded::parse(query.as_deref().unwrap_or("").as_bytes()) {
+        match (k.as_ref(), v.as_ref()) {
+            ("scope", "local") => local_only = true,
+            ("scope", "all") => local_only = false,
+            ("scope", other) => {
+                return Err(AppError::bad_request(
+                    "invalid_query",
+                    format!("scope=`{other}`: all or local"),
+                )
+                .field("scope"))
+            }
+            (other, _) => {
+                return Err(AppError::bad_request(
+                    "invalid_query",
+                    format!("unknown query parameter `{other}` (scope)"),
+                )
+                .field(other.to_string()))
+            }
+        }
+    }
+    let local: Vec<_> = app.scenes().entries().iter().map(|e| e.info()).collect();
+    if local_only || app.config().peers.is_empty() {
+        return Ok(Json(SceneInfoList {
+            scenes: local,
+            unreachable_shards: Vec::new(),
+        }));
+    }
+    let authorization = headers
+        .get(axum::http::header::AUTHORIZATION)
+        .and_then(|v| v.to_str().ok())
+        .map(str::to_string);
+    let peers = peer_scenes(app.config(), authorization).await;
     Ok(Json(SceneInfoList {
-        scenes: app.scenes().entries().iter().map(|e| e.info()).collect(),
+        scenes: merge(local, peers.scenes),
+        unreachable_shards: peers.unreachable,
     }))
 }
 
@@ -49,7 +89,7 @@ pub async fn list_scenes(
     security((), ("bearer" = [])),
     responses(
         (status = 201, description = "Created", body = CreatedScene),
-        (status = 400, description = "Invalid field", body = ApiErrorBody),
+        (status = 400, description = "Invalid field (a surfel scene: NaN, zero-length tangent axes, no nodes ...)", body = ApiErrorBody),
         (status = 401, description = "Admin token missing (server started with --admin-token)", body = ApiErrorBody),
         (status = 403, description = "Not the admin token", body = ApiErrorBody),
         (status = 409, description = "The server holds --max-scenes scenes already", body = ApiErrorBody),
@@ -68,8 +108,8 @@ pub async fn create_scene(
     headers: HeaderMap,
     body: Body,
 ) -> Result<(StatusCode, Json<CreatedScene>), AppError> {
-    shared.writes.check(client)?;
     check_create(&app, &headers)?;
+    shared.writes.check(client)?;
     let spec: CreateScene = read_json(&app, &headers, body).await?;
     let _slot = reserve_scene(&app, &shared)?;
     for (field, text, max) in [
@@ -84,10 +124,15 @@ pub async fn create_scene(
             .field(field));
         }
     }
-    let setup = SceneSetup::from_spec(
-        &spec,
-        &crate::effects::EffectLimits::from_config(app.config()),
-    )?;
+    // A surfel scene's object is embedded and its hierarchy built here: seconds for a large
+    // one, so off the async runtime.
+    let limits = crate::effects::EffectLimits::from_config(app.config());
+    let (spec, setup) = blocking(move || {
+        let setup = SceneSetup::from_spec(&spec, &limits);
+        (spec, setup)
+    })
+    .await?;
+    let setup = setup?;
     let store = app.scenes().store().cloned().ok_or_else(|| {
         AppError::new(
             StatusCode::SERVICE_UNAVAILABLE,
@@ -136,8 +181,7 @@ pub async fn get_scene(
     headers: HeaderMap,
     Path(id): Path<String>,
 ) -> Result<Json<SceneInfo>, AppError> {
-    let entry = scene_of(&app, &id)?;
-    check_view(&app, &headers, Some(&entry))?;
+    let entry = viewable_scene(&app, &headers, &id)?;
     let mut info = entry.info();
     // The bounds need the state (prepared, or from the cache): on the job pool.
     let bounds = app.jobs().run(move || {
@@ -178,10 +222,8 @@ pub async fn delete_scene(
     headers: HeaderMap,
     Path(id): Path<String>,
 ) -> Result<StatusCode, AppError> {
+    writable_scene(&app, &headers, &id)?;
     shared.writes.check(client)?;
-    let entry = scene_of(&app, &id)?;
-    let scene = stored_of(&entry)?;
-    check_write(&app, &headers, &scene)?;
     let store = app
         .scenes()
         .store()

@@ -1,7 +1,7 @@
 //! A scene's steps: list, get (description and data), delete.
 
 use crate::api::access::{
-    check_view, check_write, parse_index, path_error, scene_of, stored_of, ApiShared, ClientAddr,
+    parse_index, path_error, stored_of, viewable_scene, writable_scene, ApiShared, ClientAddr,
 };
 use crate::api::client::npy_header_f32;
 use crate::api::request::blocking;
@@ -30,8 +30,7 @@ pub async fn list_steps(
     headers: HeaderMap,
     Path(id): Path<String>,
 ) -> Result<Json<StepList>, AppError> {
-    let entry = scene_of(&app, &id)?;
-    check_view(&app, &headers, Some(&entry))?;
+    let entry = viewable_scene(&app, &headers, &id)?;
     let steps = entry
         .stored_scene()
         .map(|s| s.steps().iter().map(|st| st.info()).collect())
@@ -45,8 +44,7 @@ fn step_of(
     id: &str,
     index: &str,
 ) -> Result<Arc<StoredStep>, AppError> {
-    let entry = scene_of(app, id)?;
-    check_view(app, headers, Some(&entry))?;
+    let entry = viewable_scene(app, headers, id)?;
     let scene = stored_of(&entry)?;
     let index = parse_index(app, index)?;
     scene.step(index).ok_or_else(|| {
@@ -134,11 +132,9 @@ pub async fn delete_step(
     headers: HeaderMap,
     path: Result<Path<(String, String)>, PathRejection>,
 ) -> Result<StatusCode, AppError> {
-    shared.writes.check(client)?;
     let Path((id, index)) = path.map_err(path_error)?;
-    let entry = scene_of(&app, &id)?;
-    let scene = stored_of(&entry)?;
-    check_write(&app, &headers, &scene)?;
+    let scene = writable_scene(&app, &headers, &id)?;
+    shared.writes.check(client)?;
     let index = parse_index(&app, &index)?;
     let store = app
         .scenes()

@@ -3,7 +3,7 @@
 //! mesh crash-safely beside `scene.json` (see `store::mesh`) and answers. Sending the same
 //! mesh again is a no-op, a different one a 409.
 
-use crate::api::access::{check_write, path_error, scene_of, stored_of, ApiShared, ClientAddr};
+use crate::api::access::{path_error, writable_scene, ApiShared, ClientAddr};
 use crate::api::request::{
     blocking, declared_length, forward_body, push_format, read_json, too_large, PushFormat,
     BODY_QUEUE,
@@ -60,11 +60,9 @@ pub async fn put_mesh(
     path: Result<Path<String>, PathRejection>,
     body: Body,
 ) -> Result<(StatusCode, Json<MeshInfo>), AppError> {
-    shared.writes.check(client)?;
     let Path(id) = path.map_err(path_error)?;
-    let entry = scene_of(&app, &id)?;
-    let scene = stored_of(&entry)?;
-    check_write(&app, &headers, &scene)?;
+    let scene = writable_scene(&app, &headers, &id)?;
+    shared.writes.check(client)?;
     let Some(slot) = scene.setup.mesh_slot() else {
         return Err(AppError::new(
             StatusCode::CONFLICT,

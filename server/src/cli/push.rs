@@ -1,7 +1,10 @@
 //! `isoray push`: pushes `.npy` files (or raw `ISRA` arrays) to a server as consecutive time
 //! steps of a scene, creating the scene first unless one is named. Each file is streamed from
 //! disk, never read whole into memory; the server validates it and answers per step. A VTK
-//! series (`.vtu` files, or a `.pvd` collection) is a tet scene: see `push_vtu`.
+//! series (`.vtu` files, or a `.pvd` collection) is a tet scene: see `push_vtu`; molecules
+//! (`.pdb`, `.cif`) and particle files (`.csv`, `.xyz` frames, `.npz`) are metaball scenes:
+//! see `push_molecule` and `push_points`; point clouds and meshes (`.xyz` points, `.ply`,
+//! `.obj`, `.off`) are surfel scenes: see `push_surfels`.
 
 use super::push_args::{create_scene, put_step, step_path, PushArgs};
 use isoray_server::api::client::{Body, Client};
@@ -22,9 +25,29 @@ pub fn run(args: PushArgs) -> Result<(), String> {
     if args
         .files
         .iter()
-        .any(|f| super::push_molecule::is_molecule(f))
+        .any(|f| isoray_render::kinds::metaballs::pdb::is_molecule(f))
     {
         return super::push_molecule::run(&args);
+    }
+    let points = args
+        .files
+        .iter()
+        .filter(|f| super::push_points::is_points(f))
+        .count();
+    if points == args.files.len() {
+        return super::push_points::run(&args);
+    }
+    if points > 0 {
+        return Err(
+            "give either particle files (.csv, .xyz, .npz) or other step files, not both".into(),
+        );
+    }
+    if args
+        .files
+        .iter()
+        .any(|f| super::surfel_files::is_surfel_input(f))
+    {
+        return super::push_surfels::run(&args);
     }
     let series = args
         .files

@@ -12,7 +12,7 @@ use std::path::PathBuf;
 /// `POST /api/v1/scenes`, or `{"kind": "metaballs"}`), and its id and write token are printed.
 /// A VTK series (`.vtu` files of tetrahedra, or a `.pvd` collection of them) makes a tet
 /// scene: the first file's mesh, then one step per file from a point scalar array.
-#[derive(Debug, Parser)]
+#[derive(Clone, Debug, Parser)]
 #[command(name = "isoray push")]
 pub struct PushArgs {
     /// The server's base URL.
@@ -48,9 +48,17 @@ pub struct PushArgs {
     /// Molecules: a ball's support radius over its element's van der Waals radius.
     #[arg(long, default_value_t = 2.0)]
     pub radius_scale: f32,
+    /// Point clouds and meshes (.xyz, .ply, .obj, .off): surfels to sample from a mesh
+    /// (default 20,000).
+    #[arg(long)]
+    pub surfels: Option<u64>,
     /// The step files: `.npy` (float32 or float64, shape (rows, columns)), raw arrays with
     /// the 16-byte `ISRA` header (any other extension), a VTK series (`.vtu`, `.pvd`,
-    /// `.vtk`), or one molecule (`.pdb`, `.cif`: its models are the steps).
+    /// `.vtk`), one molecule (`.pdb`, `.cif`: its models are the steps), particle files
+    /// (`.csv` with a header naming x, y, z [radius, strength, red, green, blue]; `.xyz`
+    /// frames, whose first line is the particle count; `.npz` with the array `positions` and
+    /// optional `radius`, `strength`, `color`), or one point cloud or triangle mesh (`.xyz`
+    /// of `x y z [nx ny nz]` lines, `.ply`, `.obj`, `.off`: a surfel scene).
     #[arg(required = true)]
     pub files: Vec<PathBuf>,
 }

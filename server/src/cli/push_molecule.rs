@@ -1,5 +1,6 @@
 //! `isoray push` of molecules: Protein Data Bank (`.pdb`, `.ent`) and mmCIF (`.cif`) files,
-//! read with pdbtbx, as a metaball scene.
+//! read with pdbtbx (`isoray_render::kinds::metaballs::pdb::read_models`), as a metaball
+//! scene.
 //!
 //! Each atom becomes a ball like the Molecule scenes of fitted-bvh-metaballs.txt §6: at the
 //! atom's position, with support radius `--radius-scale` (default 2) times the element's
@@ -11,144 +12,12 @@
 //! origin (the same shift for every model), and a new scene's camera frames the molecule.
 
 use super::push_args::{create_scene, put_step, step_path, PushArgs};
-use isoray_render::kinds::metaballs::pdb::Element;
+use isoray_render::kinds::metaballs::pdb::{read_models, MoleculeOptions, Row};
 use isoray_server::api::client::{npy_header_f32, Body, Client};
-use pdbtbx::{
-    ContainsAtomConformer, ContainsAtomConformerResidue, Context, Format, PDBError, ReadOptions,
-    StrictnessLevel,
-};
-use std::path::Path;
-
-/// Whether `path` names a molecule file.
-pub fn is_molecule(path: &Path) -> bool {
-    matches!(
-        path.extension()
-            .map(|e| e.to_string_lossy().to_ascii_lowercase())
-            .as_deref(),
-        Some("pdb" | "ent" | "cif" | "mmcif")
-    )
-}
-
-/// What to keep of a molecule, and how large its balls are.
-#[derive(Clone, Copy, Debug)]
-pub struct MoleculeOptions {
-    pub hydrogens: bool,
-    pub waters: bool,
-    pub radius_scale: f32,
-}
-
-/// A ball's row of a metaball step: x y z radius strength r g b.
-pub type Row = [f32; 8];
-
-fn line_of(context: &Context) -> Option<usize> {
-    match context {
-        Context::FullLine { linenumber, .. } | Context::Line { linenumber, .. } => {
-            Some(*linenumber)
-        }
-        Context::Range {
-            start_linenumber, ..
-        }
-        | Context::RangeHighlights {
-            start_linenumber, ..
-        } => Some(*start_linenumber),
-        _ => None,
-    }
-}
-
-/// The first error that refuses the file (not a warning), naming its line (pdbtbx counts
-/// lines from 1).
-fn describe(errors: &[PDBError]) -> String {
-    let refusing = errors.iter().find(|e| e.fails(StrictnessLevel::Loose));
-    let Some(e) = refusing.or(errors.first()) else {
-        return "unreadable".into();
-    };
-    let detail = e.long_description().trim();
-    match line_of(e.context()) {
-        Some(line) => format!("line {line}: {}: {detail}", e.short_description()),
-        None => format!("{}: {detail}", e.short_description()),
-    }
-}
-
-/// The models of a molecule file as rows of balls; errors name the file and line.
-pub fn read_models(path: &Path, opts: MoleculeOptions) -> Result<Vec<Vec<Row>>, String> {
-    let at = |e: String| format!("{}: {e}", path.display());
-    let name = path
-        .to_str()
-        .ok_or_else(|| at("the path is not UTF-8".into()))?;
-    let cif = path
-        .extension()
-        .is_some_and(|e| e.eq_ignore_ascii_case("cif") || e.eq_ignore_ascii_case("mmcif"));
-    // pdbtbx 0.12 panics on some inputs (a chain id it does not accept, in `add_atom`);
-    // a bad file must give an error, so such a panic becomes one.
-    let read = std::panic::catch_unwind(|| {
-        ReadOptions::default()
-            .set_level(StrictnessLevel::Loose)
-            .set_only_atomic_coords(true)
-            .set_format(if cif { Format::Mmcif } else { Format::Pdb })
-            .read(name)
-    })
-    .map_err(|_| at("pdbtbx could not read the file (it panicked; see above)".into()))?;
-    let (pdb, _warnings) = read.map_err(|errors| at(describe(&errors)))?;
-    let mut models = Vec::new();
-    for model in pdb.models() {
-        let mut rows = Vec::new();
-        for h in model.atoms_with_hierarchy() {
-            let water = h
-                .residue()
-                .name()
-                .is_some_and(|n| matches!(n.trim(), "HOH" | "WAT" | "DOD" | "H2O"));
-            if water && !opts.waters {
-                continue;
-            }
-            let atom = h.atom();
-            let symbol = atom
-                .element()
-                .map(|e| e.symbol().to_string())
-                .unwrap_or_else(|| atom.name().trim().chars().take(1).collect());
-            let element = Element::from_symbol(&symbol);
-            if element == Element::H && !opts.hydrogens {
-                continue;
-            }
-            let (x, y, z) = atom.pos();
-            let c = element.cpk_color();
-            rows.push([
-                x as f32,
-                y as f32,
-                z as f32,
-                opts.radius_scale * element.van_der_waals_radius(),
-                1.0,
-                c.x,
-                c.y,
-                c.z,
-            ]);
-        }
-        if rows.is_empty() {
-            return Err(at(format!(
-                "model {} has no atoms to show (hydrogens and waters are left out without \
-                 --hydrogens and --waters)",
-                models.len() + 1
-            )));
-        }
-        models.push(rows);
-    }
-    if models.is_empty() {
-        return Err(at("no atoms".into()));
-    }
-    // The first model's centre at the origin, every model moved alike.
-    let first = &models[0];
-    let n = first.len() as f64;
-    let centre = [0, 1, 2].map(|k| (first.iter().map(|r| f64::from(r[k])).sum::<f64>() / n) as f32);
-    for row in models.iter_mut().flatten() {
-        for k in 0..3 {
-            row[k] -= centre[k];
-        }
-    }
-    Ok(models)
-}
 
 /// A new scene's description: Wyvill balls at isovalue 0.5, the camera framing the first
 /// model.
-fn spec(models: &[Vec<Row>], name: &str) -> String {
+pub fn spec(models: &[Vec<Row>], name: &str) -> String {
     let reach = models[0]
         .iter()
         .map(|r| (r[0] * r[0] + r[1] * r[1] + r[2] * r[2]).sqrt() + r[3])

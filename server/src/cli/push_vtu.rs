@@ -4,8 +4,10 @@
 //! The first file's points and cells become the scene's mesh (sent once with `PUT .../mesh`
 //! as two `.npy` arrays; hexahedra, wedges and pyramids split into tets, see `vtk_grid`);
 //! every file's scalar array becomes a step of one value per vertex (a cell array is moved
-//! to the points). A series keeps its connectivity: a file whose points or cells differ
-//! from the first's is refused, naming it. `.vtu` files are read by `vtk_xml` (every
+//! to the points). A series keeps its connectivity: a file whose cells differ from the
+//! first's is refused, naming it. A file whose points moved (a deforming mesh) sends them
+//! with its scalars, as a `(V, 4)` step of `scalar x y z`; the server checks that the move
+//! inverts no tet. `.vtu` files are read by `vtk_xml` (every
 //! encoding and compressor VTK writes), legacy files by vtkio (`vtk_legacy`). Tets whose
 //! corners turn the wrong way for VTK's convention are reordered (corners 1 and 2 swapped)
 //! and counted, since the server refuses inverted tets.
@@ -117,6 +119,24 @@ pub fn mesh_body(points: &[[f64; 3]], cells: &[[u64; 4]]) -> Vec<u8> {
     out
 }
 
+/// Why `cells` (a later file's tets) are not `first`'s, if they are not. A tet whose corners 1
+/// and 2 come swapped is the same tet: `vtk_grid` turns each tet by its file's own points,
+/// so a tet the move inverted comes back turned; it keeps the first file's order here, and
+/// the server refuses the step, naming the tet.
+fn same_cells(cells: &[[u64; 4]], first: &[[u64; 4]]) -> Result<(), String> {
+    if cells.len() != first.len() {
+        return Err(format!("{} tets, not {}", cells.len(), first.len()));
+    }
+    match cells
+        .iter()
+        .zip(first)
+        .position(|(c, f)| c != f && [c[0], c[2], c[1], c[3]] != *f)
+    {
+        Some(t) => Err(format!("tet {t} is {:?}, not {:?}", cells[t], first[t])),
+        None => Ok(()),
+    }
+}
+
 /// Pushes a series of `.vtu` files as a tet scene.
 pub fn run(args: &PushArgs) -> Result<(), String> {
     let files = expand(&args.files)?;
@@ -190,20 +210,33 @@ pub fn run(args: &PushArgs) -> Result<(), String> {
         let step = if i == 0 {
             None
         } else {
-            let s = read_tets(file, Some(&array))?;
-            if s.points != first.points || s.cells != first.cells {
-                return Err(format!(
-                    "{}: its mesh differs from {}'s; a series keeps the first file's points and cells",
+            Some(read_tets(file, Some(&array))?)
+        };
+        if let Some(s) = &step {
+            same_cells(&s.cells, &first.cells).map_err(|why| {
+                format!(
+                    "{}: its cells differ from {}'s ({why}); a series keeps the first file's \
+                     cells (its points may move)",
                     file.display(),
                     first_path.display()
-                ));
-            }
-            Some(s)
-        };
+                )
+            })?;
+        }
         let scalars = step.as_ref().map_or(&first.scalars, |s| &s.scalars);
-        let mut payload = npy_header_f32(scalars.len() as u64, 1);
-        for &v in scalars {
-            payload.extend_from_slice(&(v as f32).to_le_bytes());
+        // Moving points (Lagrangian and ALE codes): each row carries the vertex's position.
+        let moved = step
+            .as_ref()
+            .map(|s| &s.points)
+            .filter(|p| **p != first.points);
+        let columns = if moved.is_some() { 4 } else { 1 };
+        let mut payload = npy_header_f32(scalars.len() as u64, columns);
+        for (v, &value) in scalars.iter().enumerate() {
+            payload.extend_from_slice(&(value as f32).to_le_bytes());
+            if let Some(points) = moved {
+                for c in points[v] {
+                    payload.extend_from_slice(&(c as f32).to_le_bytes());
+                }
+            }
         }
         let time = pvd_time.or(args.time_step.map(|dt| index as f64 * dt));
         let path = step_path(&scene, index, time, args.replace);
@@ -216,10 +249,15 @@ pub fn run(args: &PushArgs) -> Result<(), String> {
             &format!("step {index} ({})", file.display()),
         )?;
         println!(
-            "step {index}: {} ({} scalars of {:?}, checksum {})",
+            "step {index}: {} ({} scalars of {:?}{}, checksum {})",
             answer["outcome"].as_str().unwrap_or("?"),
             scalars.len(),
             array,
+            if moved.is_some() {
+                " and moved points"
+            } else {
+                ""
+            },
             answer["step"]["checksum"].as_str().unwrap_or("?")
         );
         total_bytes += payload.len() as u64;

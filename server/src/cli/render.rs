@@ -8,8 +8,10 @@ use clap::Parser;
 use isoray_protocol::api::{ApiCamera, CreateScene, JsonStep};
 use isoray_protocol::effects::EffectChanges;
 use isoray_protocol::Codec;
+use isoray_render::kinds::metaballs::pdb::{is_molecule, read_models, MoleculeOptions};
 use isoray_render::scenes::DemoScene;
 use isoray_render::{Backend, Camera, Scene, View};
+use isoray_server::api::client::npy_header_f32;
 use isoray_server::body::BodyReader;
 use isoray_server::effects::{self, EffectLimits};
 use isoray_server::frame::{self, FrameRequest};
@@ -23,8 +25,9 @@ use std::sync::Arc;
 
 /// Render one image of a scene file, offline.
 ///
-/// Either a step file (`.npy`, a JSON step `.json`, a store `.step` file, or a raw `ISRA`
-/// array) with an optional scene description (`--spec`), or a built-in demo (`--demo ID`).
+/// Either a step file (`.npy`, a JSON step `.json`, a store `.step` file, a raw `ISRA`
+/// array, or a molecule: `.pdb`, `.ent`, `.cif`) with an optional scene description
+/// (`--spec`), or a built-in demo (`--demo ID`).
 /// The output's extension picks PNG or JPEG.
 #[derive(Debug, Parser)]
 #[command(name = "isoray render")]
@@ -39,6 +42,9 @@ pub struct RenderArgs {
     /// A built-in demo scene instead of a step file (e.g. `blobs`).
     #[arg(long)]
     pub demo: Option<String>,
+    /// Which model of a molecule file to show (the first is 1).
+    #[arg(long, default_value_t = 1, conflicts_with = "demo")]
+    pub model: usize,
     /// Time of the demo scene, seconds.
     #[arg(long, default_value_t = 0.0, requires = "demo")]
     pub time: f64,
@@ -122,7 +128,7 @@ pub fn run(args: RenderArgs) -> Result<(), String> {
                 .step
                 .as_deref()
                 .ok_or("a step file or --demo is needed")?;
-            load(args.spec.as_deref(), step)?
+            load(args.spec.as_deref(), step, args.model)?
         }
     };
     let error = |e: isoray_server::kinds::error::KindError| {
@@ -228,14 +234,38 @@ enum Format {
     Npy,
 }
 
-/// Reads the scene description and the step, checking both as the server would.
-fn load(spec_path: Option<&Path>, step_path: &Path) -> Result<Loaded, String> {
-    let spec: CreateScene = match spec_path {
-        Some(p) => {
+/// Reads the scene description and the step, checking both as the server would. A molecule
+/// file (`.pdb`, `.ent`, `.cif`) is read as `isoray push` reads it: its first model (or
+/// `model`) as the rows of a metaball step, with that command's scene description unless
+/// `spec_path` gives one.
+fn load(spec_path: Option<&Path>, step_path: &Path, model: usize) -> Result<Loaded, String> {
+    let molecule = if is_molecule(step_path) {
+        let models = read_models(step_path, MoleculeOptions::default())?;
+        let rows = models.get(model.wrapping_sub(1)).ok_or_else(|| {
+            format!(
+                "{}: --model {model}: the file has models 1 to {}",
+                step_path.display(),
+                models.len()
+            )
+        })?;
+        let mut npy = npy_header_f32(rows.len() as u64, 8);
+        npy.extend(rows.iter().flatten().flat_map(|v| v.to_le_bytes()));
+        let stem = step_path
+            .file_stem()
+            .map_or_else(String::new, |s| s.to_string_lossy().into_owned());
+        Some((super::push_molecule::spec(&models, &stem), npy))
+    } else {
+        None
+    };
+    let spec: CreateScene = match (spec_path, &molecule) {
+        (Some(p), _) => {
             let text = std::fs::read(p).map_err(|e| format!("{}: {e}", p.display()))?;
             serde_json::from_slice(&text).map_err(|e| format!("{}: {e}", p.display()))?
         }
-        None => serde_json::from_str(r#"{"kind":"metaballs"}"#).map_err(|e| e.to_string())?,
+        (None, Some((spec, _))) => serde_json::from_str(spec).map_err(|e| e.to_string())?,
+        (None, None) => {
+            serde_json::from_str(r#"{"kind":"metaballs"}"#).map_err(|e| e.to_string())?
+        }
     };
     let setup = SceneSetup::from_spec(&spec, &EffectLimits::ENGINE).map_err(|e| {
         format!(
@@ -245,11 +275,16 @@ fn load(spec_path: Option<&Path>, step_path: &Path) -> Result<Loaded, String> {
             e.message
         )
     })?;
-    let bytes = std::fs::read(step_path).map_err(|e| format!("{}: {e}", step_path.display()))?;
     let shown = step_path.display();
-    let ext = step_path
-        .extension()
-        .map(|e| e.to_string_lossy().to_ascii_lowercase());
+    let (bytes, ext) = match molecule {
+        Some((_, npy)) => (npy, Some("npy".to_string())),
+        None => (
+            std::fs::read(step_path).map_err(|e| format!("{shown}: {e}"))?,
+            step_path
+                .extension()
+                .map(|e| e.to_string_lossy().to_ascii_lowercase()),
+        ),
+    };
     let (columns, payload) = if ext.as_deref() == Some("step") {
         // A step file from a store's data directory, checked like the store checks it.
         let header = StepHeader::decode(&bytes).map_err(|e| format!("{shown}: {e}"))?;

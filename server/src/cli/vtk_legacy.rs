@@ -1,8 +1,9 @@
 //! Legacy `.vtk` unstructured grids (ASCII and binary), read with vtkio, which reads them
 //! correctly (its XML path is what `vtk_xml` replaces), into the same `Grid` as a `.vtu`.
+//! Version 5.1 (VTK 9's and meshio's default) is read by rewriting its cells section into
+//! the older layout vtkio knows ([`downgrade_version_5`]).
 
 use super::vtk_grid::{pick_array, Grid, Picked};
-use std::io::Read;
 use std::path::Path;
 use vtkio::model::{Attribute, DataSet};
 use vtkio::Vtk;
@@ -37,37 +38,197 @@ fn values(arrays: &[Attribute], name: &str) -> Option<Vec<f64>> {
     None
 }
 
-/// Refuses version 5 files (VTK 9's and meshio's default: offsets and connectivity apart),
-/// which vtkio 0.6.3 cannot parse, with a message saying what to write instead.
-fn check_version(path: &Path) -> Result<(), String> {
-    use std::io::BufRead;
+/// Whether the file is legacy version 5 (its first line says so); reads only that line.
+fn is_version_5(path: &Path) -> Result<bool, String> {
+    use std::io::{BufRead, Read};
     let file = std::fs::File::open(path).map_err(|e| e.to_string())?;
     let mut first = Vec::new();
     std::io::BufReader::new(file)
         .take(256)
         .read_until(b'\n', &mut first)
         .map_err(|e| e.to_string())?;
-    let line = String::from_utf8_lossy(&first);
-    let version = line
+    Ok(String::from_utf8_lossy(&first)
         .trim()
         .strip_prefix("# vtk DataFile Version ")
-        .unwrap_or("");
-    if version.trim_start().starts_with('5') {
+        .is_some_and(|v| v.trim_start().starts_with('5')))
+}
+
+/// A cursor over a legacy file's bytes: keyword lines, and numbers in ASCII or binary
+/// (big-endian, as the format stores them).
+struct Cursor<'a> {
+    bytes: &'a [u8],
+    pos: usize,
+}
+
+impl Cursor<'_> {
+    /// The next non-blank line, trimmed.
+    fn line(&mut self) -> Result<String, String> {
+        loop {
+            let rest = self.bytes.get(self.pos..).unwrap_or_default();
+            if rest.is_empty() {
+                return Err("the file ends inside the CELLS section".into());
+            }
+            let end = rest.iter().position(|&b| b == b'\n').unwrap_or(rest.len());
+            self.pos += (end + 1).min(rest.len());
+            let line = String::from_utf8_lossy(&rest[..end]).trim().to_string();
+            if !line.is_empty() {
+                return Ok(line);
+            }
+        }
+    }
+
+    /// `n` integers of `width` bytes (binary) or as text.
+    fn ints(
+        &mut self,
+        n: usize,
+        width: usize,
+        binary: bool,
+        what: &str,
+    ) -> Result<Vec<i64>, String> {
+        let short = || format!("{what}: the file ends before its {n} values");
+        if binary {
+            let end = n
+                .checked_mul(width)
+                .and_then(|len| self.pos.checked_add(len))
+                .ok_or_else(short)?;
+            let raw = self.bytes.get(self.pos..end).ok_or_else(short)?;
+            self.pos = end;
+            Ok(raw
+                .chunks_exact(width)
+                .map(|c| match width {
+                    4 => i64::from(i32::from_be_bytes([c[0], c[1], c[2], c[3]])),
+                    _ => i64::from_be_bytes([c[0], c[1], c[2], c[3], c[4], c[5], c[6], c[7]]),
+                })
+                .collect())
+        } else {
+            let mut out = Vec::with_capacity(n.min(1 << 24));
+            while out.len() < n {
+                let rest = self.bytes.get(self.pos..).unwrap_or_default();
+                let start = rest
+                    .iter()
+                    .position(|b| !b.is_ascii_whitespace())
+                    .ok_or_else(short)?;
+                let len = rest[start..]
+                    .iter()
+                    .position(u8::is_ascii_whitespace)
+                    .unwrap_or(rest.len() - start);
+                let word = String::from_utf8_lossy(&rest[start..start + len]);
+                out.push(
+                    word.parse().map_err(|_| {
+                        format!("{what}[{}]: `{word}` is not an integer", out.len())
+                    })?,
+                );
+                self.pos += start + len;
+            }
+            Ok(out)
+        }
+    }
+}
+
+/// The byte width of a version 5 array type.
+fn int_width(header: &str, keyword: &str) -> Result<usize, String> {
+    match header.strip_prefix(keyword).map(str::trim) {
+        Some("vtktypeint64") => Ok(8),
+        Some("vtktypeint32") => Ok(4),
+        _ => Err(format!(
+            "expected `{keyword} vtktypeint64` (or vtktypeint32), found `{header}`"
+        )),
+    }
+}
+
+/// VTK 9 and meshio write legacy version 5.1 by default, which keeps a grid's cells as two
+/// arrays, OFFSETS and CONNECTIVITY; vtkio 0.6.3 reads only the older layout, one list of
+/// `count id id ...` rows. This rewrites the CELLS section into that layout (checking the
+/// offsets: from 0, not decreasing, ending at the connectivity's length) and the first line
+/// to version 4.2; every other byte stays as it was. The answer is a reader over the file's
+/// own bytes with the new first line and cells section spliced in, so the file is not
+/// copied again before vtkio reads it.
+fn downgrade_version_5(bytes: &[u8]) -> Result<impl std::io::Read + '_, String> {
+    let binary = bytes.split(|&b| b == b'\n').nth(2).is_some_and(|l| {
+        String::from_utf8_lossy(l)
+            .trim()
+            .eq_ignore_ascii_case("BINARY")
+    });
+    let cells_at = bytes
+        .windows(7)
+        .position(|w| w == b"\nCELLS ")
+        .map(|p| p + 1)
+        .ok_or("version 5: no CELLS section")?;
+    let mut cur = Cursor {
+        bytes,
+        pos: cells_at,
+    };
+    let header = cur.line()?;
+    let sizes: Vec<usize> = header
+        .split_whitespace()
+        .skip(1)
+        .map(str::parse)
+        .collect::<Result<_, _>>()
+        .map_err(|_| format!("`{header}`: expected CELLS <offsets> <connectivity>"))?;
+    let [n_offsets, n_conn] = sizes[..] else {
         return Err(format!(
-            "line 1: legacy VTK version {} is not read; write version 4.2 (VTK: \
-             vtkUnstructuredGridWriter.SetFileVersion(42); meshio: file_format=\"vtk42\") or a \
-             .vtu file",
-            version.trim()
+            "`{header}`: expected CELLS <offsets> <connectivity>"
+        ));
+    };
+    let width = int_width(&cur.line()?, "OFFSETS")?;
+    let offsets = cur.ints(n_offsets, width, binary, "OFFSETS")?;
+    let width = int_width(&cur.line()?, "CONNECTIVITY")?;
+    let conn = cur.ints(n_conn, width, binary, "CONNECTIVITY")?;
+    if offsets.first().is_some_and(|&o| o != 0)
+        || offsets.last().is_some_and(|&o| o != n_conn as i64)
+    {
+        return Err(format!(
+            "OFFSETS must run from 0 to the connectivity's length {n_conn}"
         ));
     }
-    Ok(())
+    let cells = n_offsets.saturating_sub(1);
+    let mut out = Vec::with_capacity(4 * (cells + n_conn) + 32);
+    out.extend_from_slice(format!("CELLS {cells} {}\n", cells + n_conn).as_bytes());
+    for (c, pair) in offsets.windows(2).enumerate() {
+        let (a, b) = (pair[0], pair[1]);
+        if b < a || b > n_conn as i64 {
+            return Err(format!(
+                "OFFSETS[{}] = {b} is below OFFSETS[{c}] = {a} or past the connectivity",
+                c + 1
+            ));
+        }
+        let ids = &conn[a as usize..b as usize];
+        let count = i32::try_from(ids.len()).map_err(|_| format!("cell {c} is too large"))?;
+        let id =
+            |v: i64| i32::try_from(v).map_err(|_| format!("cell {c}: vertex {v} is out of range"));
+        if binary {
+            out.extend_from_slice(&count.to_be_bytes());
+            for &v in ids {
+                out.extend_from_slice(&id(v)?.to_be_bytes());
+            }
+        } else {
+            let row: Vec<String> = std::iter::once(count.to_string())
+                .chain(ids.iter().map(i64::to_string))
+                .collect();
+            out.extend_from_slice(row.join(" ").as_bytes());
+            out.push(b'\n');
+        }
+    }
+    out.push(b'\n');
+    use std::io::Read;
+    let first_line = bytes.iter().position(|&b| b == b'\n').unwrap_or(0);
+    Ok((&b"# vtk DataFile Version 4.2"[..])
+        .chain(&bytes[first_line..cells_at])
+        .chain(std::io::Cursor::new(out))
+        .chain(&bytes[cur.pos..]))
 }
 
 /// Reads a legacy `.vtk` unstructured grid with the scalar array `wanted` (or the first
 /// one-component point array, else cell array).
 pub fn read(path: &Path, wanted: Option<&str>) -> Result<Grid, String> {
-    check_version(path)?;
-    let vtk = Vtk::import(path).map_err(|e| e.to_string())?;
+    let vtk = if is_version_5(path)? {
+        let bytes = std::fs::read(path).map_err(|e| e.to_string())?;
+        let older = downgrade_version_5(&bytes).map_err(|e| format!("legacy VTK 5.1: {e}"))?;
+        Vtk::parse_legacy_be(older)
+    } else {
+        Vtk::import(path)
+    }
+    .map_err(|e| e.to_string())?;
     let DataSet::UnstructuredGrid { pieces, .. } = vtk.data else {
         return Err("not an unstructured grid (DATASET UNSTRUCTURED_GRID)".into());
     };

@@ -12,6 +12,11 @@ pub enum KindErrorKind {
     Unsupported,
     /// The scene is not ready for this (a tet step before the mesh: 409).
     NotReady,
+    /// Every value fits the OpenAPI document's schema, but together (or with the scene) they
+    /// break a rule a JSON Schema cannot state, which the document names in prose: eye and
+    /// target differ, low below high, indices within the mesh, an isovalue inside the scene's
+    /// range (422). A 400 means the request breaks the schema itself.
+    Relational,
 }
 
 /// A kind's check failed.
@@ -39,6 +44,11 @@ impl KindError {
     /// Wrong input (400).
     pub fn invalid(code: &'static str, message: impl Into<String>) -> KindError {
         KindError::new(KindErrorKind::Invalid, code, message)
+    }
+
+    /// Values that break a rule between them (422), see [`KindErrorKind::Relational`].
+    pub fn relational(code: &'static str, message: impl Into<String>) -> KindError {
+        KindError::new(KindErrorKind::Relational, code, message)
     }
 
     pub fn field(mut self, field: impl Into<String>) -> KindError {

@@ -28,6 +28,8 @@ use crate::kinds::histogram::Histogram;
 use crate::kinds::metaballs::histogram::field_histogram;
 use crate::kinds::metaballs::setup::{self as ball_setup, BallDefaults};
 use crate::kinds::surfels::histogram::displacement_histogram;
+use crate::kinds::surfels::setup::{self as surfel_setup, SurfelSetup};
+use crate::kinds::surfels::step as surfel_step;
 use crate::kinds::tets::histogram::vertex_histogram;
 use crate::kinds::tets::setup::{self as tet_setup, MeshSlot, TetSetup};
 use crate::kinds::tets::step as tet_step;
@@ -43,18 +45,21 @@ use std::sync::Arc;
 pub enum StepLayout {
     /// Rows are balls: `x y z [radius [strength [r g b]]]`.
     Metaballs,
-    /// Rows are the mesh's vertices, one column: the scalar (`vertices`: how many, once the
-    /// mesh is there).
+    /// Rows are the mesh's vertices: the scalar, and for a deforming mesh the vertex's
+    /// position this step (`scalar [x y z]`; `vertices`: how many, once the mesh is there).
     Tets { vertices: Option<u64> },
+    /// Rows are the simulation nodes (`nodes`: how many), three columns: their positions.
+    Surfels { nodes: u64 },
 }
 
 impl StepLayout {
-    /// The layout of `kind`'s steps, or `None` while the engine cannot trace that kind.
+    /// The layout of `kind`'s steps before the scene's static data is known, or `None` while
+    /// the engine cannot trace that kind.
     pub fn of(kind: SceneKind) -> Option<StepLayout> {
         match kind {
             SceneKind::Metaballs => Some(StepLayout::Metaballs),
             SceneKind::Tets => Some(StepLayout::Tets { vertices: None }),
-            SceneKind::Surfels => None,
+            SceneKind::Surfels => Some(StepLayout::Surfels { nodes: 0 }),
         }
     }
 
@@ -62,7 +67,8 @@ impl StepLayout {
     pub fn allowed_columns(self) -> &'static [u32] {
         match self {
             StepLayout::Metaballs => &ball_setup::COLUMNS,
-            StepLayout::Tets { .. } => &[1],
+            StepLayout::Tets { .. } => &tet_step::COLUMNS,
+            StepLayout::Surfels { .. } => &[3],
         }
     }
 
@@ -71,6 +77,7 @@ impl StepLayout {
         match self {
             StepLayout::Metaballs => ball_setup::COLUMNS_HELP,
             StepLayout::Tets { .. } => tet_step::COLUMNS_HELP,
+            StepLayout::Surfels { .. } => surfel_step::COLUMNS_HELP,
         }
     }
 
@@ -78,7 +85,8 @@ impl StepLayout {
     pub fn column_name(self, col: usize) -> &'static str {
         match self {
             StepLayout::Metaballs => ball_setup::column_name(col),
-            StepLayout::Tets { .. } => tet_step::COLUMN_NAME,
+            StepLayout::Tets { .. } => tet_step::column_name(col),
+            StepLayout::Surfels { .. } => surfel_step::column_name(col),
         }
     }
 
@@ -87,8 +95,8 @@ impl StepLayout {
     pub fn rows_valid(self, values: &[f32], columns: usize) -> bool {
         match self {
             StepLayout::Metaballs => ball_setup::rows_valid(values, columns),
-            // Any finite scalar will do.
-            StepLayout::Tets { .. } => true,
+            // Any finite scalar will do; any finite position.
+            StepLayout::Tets { .. } | StepLayout::Surfels { .. } => true,
         }
     }
 
@@ -98,6 +106,16 @@ impl StepLayout {
         match self {
             StepLayout::Metaballs => None,
             StepLayout::Tets { vertices } => tet_step::check_rows(vertices, rows),
+            StepLayout::Surfels { nodes } => surfel_step::check_rows(nodes, rows),
+        }
+    }
+
+    /// Whether a step of `columns` columns needs [`SceneSetup::check_step`] once its values
+    /// passed one by one: a tet step that moves the vertices does.
+    pub fn checks_whole_step(self, columns: u32) -> bool {
+        match self {
+            StepLayout::Metaballs | StepLayout::Surfels { .. } => false,
+            StepLayout::Tets { .. } => columns == 4,
         }
     }
 
@@ -105,7 +123,7 @@ impl StepLayout {
     pub fn check_value(self, col: usize, v: f32) -> Option<String> {
         match self {
             StepLayout::Metaballs => ball_setup::check_value(col, v),
-            StepLayout::Tets { .. } => None,
+            StepLayout::Tets { .. } | StepLayout::Surfels { .. } => None,
         }
     }
 }
@@ -115,6 +133,7 @@ impl StepLayout {
 pub enum KindSetup {
     Metaballs(BallDefaults),
     Tets(TetSetup),
+    Surfels(SurfelSetup),
 }
 
 /// Everything a scene was created with, validated and converted to engine types.
@@ -140,7 +159,7 @@ impl SceneSetup {
                 KindErrorKind::Unsupported,
                 "unsupported_kind",
                 format!(
-                    "kind `{}` is not supported yet: this server's engine traces `metaballs` only",
+                    "kind `{}` is not supported yet: this server's engine traces `metaballs`, `tets` and `surfels`",
                     spec.kind.as_str()
                 ),
             )
@@ -156,15 +175,18 @@ impl SceneSetup {
             },
         };
         let isovalue = finite(spec.isovalue.unwrap_or(0.5), "isovalue")?;
-        // A metaball field is positive; a tet scene's scalar may take any sign.
+        // A metaball field is positive; a tet scene's scalar may take any sign; surfels have
+        // no field (the isovalue is unused).
         let positive = match layout {
             StepLayout::Metaballs => true,
-            StepLayout::Tets { .. } => false,
+            StepLayout::Tets { .. } | StepLayout::Surfels { .. } => false,
         };
         if positive && isovalue <= 0.0 {
-            return Err(
-                KindError::invalid("invalid_value", "isovalue must be positive").field("isovalue"),
-            );
+            return Err(KindError::relational(
+                "invalid_value",
+                "isovalue must be positive in a metaball scene",
+            )
+            .field("isovalue"));
         }
         let slider = match spec.isovalue_slider {
             Some([lo, hi]) => {
@@ -174,7 +196,7 @@ impl SceneSetup {
                 );
                 if !(lo < hi && (!positive || 0.0 < lo)) {
                     let rule = if positive { "0 < lo < hi" } else { "lo < hi" };
-                    return Err(KindError::invalid(
+                    return Err(KindError::relational(
                         "invalid_value",
                         format!("isovalue_slider must be [lo, hi] with {rule}"),
                     )
@@ -185,6 +207,23 @@ impl SceneSetup {
             None => (0.05, 1.5),
         };
         let lighting = lighting(&spec.lighting.clone().unwrap_or_default(), limits)?;
+        // Another kind's settings are refused rather than ignored (they would go unchecked).
+        let others = [
+            ("metaballs", spec.metaballs.is_some(), SceneKind::Metaballs),
+            ("tets", spec.tets.is_some(), SceneKind::Tets),
+            ("surfels", spec.surfels.is_some(), SceneKind::Surfels),
+        ];
+        let this = spec.kind;
+        if let Some((field, _, _)) = others.iter().find(|(_, given, k)| *given && *k != this) {
+            return Err(KindError::relational(
+                "wrong_kind",
+                format!(
+                    "`{field}` holds the settings of {field} scenes; this scene's kind is `{}`",
+                    this.as_str()
+                ),
+            )
+            .field(*field));
+        }
         let kind = match layout {
             StepLayout::Metaballs => KindSetup::Metaballs(ball_setup::setup_from_spec(
                 &spec.metaballs.clone().unwrap_or_default(),
@@ -193,6 +232,9 @@ impl SceneSetup {
                 &spec.tets.clone().unwrap_or_default(),
                 slider,
             )?),
+            StepLayout::Surfels { .. } => {
+                KindSetup::Surfels(surfel_setup::setup_from_spec(spec.surfels.as_ref())?)
+            }
         };
         Ok(SceneSetup {
             camera,
@@ -210,6 +252,7 @@ impl SceneSetup {
             KindSetup::Tets(t) => StepLayout::Tets {
                 vertices: t.mesh.get().map(|m| m.vertices().len() as u64),
             },
+            KindSetup::Surfels(s) => StepLayout::Surfels { nodes: s.nodes() },
         }
     }
 
@@ -219,7 +262,7 @@ impl SceneSetup {
     pub fn isovalue_range(&self) -> (f32, f32) {
         match self.kind {
             KindSetup::Metaballs(_) => (0.0, 1.0e6),
-            KindSetup::Tets(_) => (-1.0e6, 1.0e6),
+            KindSetup::Tets(_) | KindSetup::Surfels(_) => (-1.0e6, 1.0e6),
         }
     }
 
@@ -228,6 +271,7 @@ impl SceneSetup {
         match &self.kind {
             KindSetup::Metaballs(_) => rows,
             KindSetup::Tets(t) => t.mesh.get().map_or(0, |m| m.tets().len() as u64),
+            KindSetup::Surfels(s) => s.model.len() as u64,
         }
     }
 
@@ -240,6 +284,7 @@ impl SceneSetup {
                 Geometry::Metaballs(ball_setup::scene(d, step, min_isovalue))
             }
             KindSetup::Tets(t) => Geometry::Tets(t.scene(step)),
+            KindSetup::Surfels(s) => Geometry::Surfels(s.scene(step)),
         };
         Scene {
             geometry,
@@ -247,11 +292,25 @@ impl SceneSetup {
         }
     }
 
+    /// The checks of a whole step, once its values passed one by one: a tet step that moves
+    /// the vertices may not invert or flatten a tet ([`tet_step::check_moved`]). `payload`
+    /// holds `rows × columns` little-endian f32, as stored.
+    pub fn check_step(&self, columns: u32, payload: &[u8]) -> Result<(), KindError> {
+        match &self.kind {
+            KindSetup::Metaballs(_) => Ok(()),
+            KindSetup::Tets(t) => match t.mesh.get() {
+                Some(mesh) => tet_step::check_moved(mesh, columns, payload),
+                None => Ok(()),
+            },
+            KindSetup::Surfels(_) => Ok(()),
+        }
+    }
+
     /// The slot of the static mesh, for a kind that has one (tets); `None` for the others.
     pub fn mesh_slot(&self) -> Option<&Arc<MeshSlot>> {
         match &self.kind {
             KindSetup::Tets(t) => Some(&t.mesh),
-            KindSetup::Metaballs(_) => None,
+            KindSetup::Metaballs(_) | KindSetup::Surfels(_) => None,
         }
     }
 
@@ -260,6 +319,7 @@ impl SceneSetup {
         match &self.kind {
             KindSetup::Metaballs(_) => ball_setup::prepared_bytes(rows),
             KindSetup::Tets(t) => t.prepared_bytes(),
+            KindSetup::Surfels(s) => s.prepared_bytes(),
         }
     }
 }
@@ -274,7 +334,7 @@ pub fn check_ready(setup: &SceneSetup) -> Result<(), KindError> {
             "this tet scene has no mesh yet: send it with PUT /api/v1/scenes/{id}/mesh, then its steps",
         )
         .field("mesh")),
-        KindSetup::Tets(_) | KindSetup::Metaballs(_) => Ok(()),
+        KindSetup::Tets(_) | KindSetup::Metaballs(_) | KindSetup::Surfels(_) => Ok(()),
     }
 }
 
@@ -292,7 +352,7 @@ pub fn histogram_of(geometry: &Geometry, lo: f32, hi: f32, bins: usize) -> Histo
 /// is a compile error here rather than a metaball scene by default.
 pub fn demo_kind(demo: DemoScene) -> SceneKind {
     match demo {
-        DemoScene::TetGyroid => SceneKind::Tets,
+        DemoScene::TetGyroid | DemoScene::TetBucky => SceneKind::Tets,
         DemoScene::Blobs
         | DemoScene::Scattered30k
         | DemoScene::Scattered100k
@@ -304,6 +364,9 @@ pub fn demo_kind(demo: DemoScene) -> SceneKind {
         | DemoScene::Glass
         | DemoScene::Clouds
         | DemoScene::Shells => SceneKind::Metaballs,
+        DemoScene::SurfelBalls | DemoScene::SurfelImpact | DemoScene::SurfelHeads => {
+            SceneKind::Surfels
+        }
     }
 }
 
@@ -341,7 +404,7 @@ mod tests {
     #[test]
     fn setup_errors_name_the_field() {
         for (json, field) in [
-            (r#"{"kind":"surfels"}"#, "kind"),
+            (r#"{"kind":"surfels"}"#, "surfels"),
             (
                 r#"{"kind":"tets","tets":{"mesh":{"vertices":[[0,0,0],[1,0,0],[0,1,0],[0,0,1]],"cells":[[0,1,2,7]]}}}"#,
                 "tets.mesh.cells[0][3]",

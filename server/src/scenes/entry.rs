@@ -6,7 +6,7 @@ use crate::scenes::cache::PreparedCache;
 use crate::scenes::demo::DemoPipeline;
 use crate::scenes::prepared::{micros, PreparedState};
 use crate::store::{StoredScene, StoredStep};
-use isoray_protocol::api::SceneInfo;
+use isoray_protocol::api::{SceneInfo, SceneKind};
 use isoray_protocol::SceneSummary;
 use isoray_render::scenes::DemoScene;
 use isoray_render::{Camera, Lighting};
@@ -61,15 +61,24 @@ enum Source {
 
 impl SceneEntry {
     pub(crate) fn demo_entry(demo: DemoScene, pipeline: DemoPipeline) -> SceneEntry {
-        let first = demo.state_at(0.0);
+        // A surfel demo simulates and builds its object on first use (seconds for the large
+        // one), so its entry is described without a state: surfels have no field, so every
+        // isovalue shows the same surface.
+        let (primitives, isovalue_range) = match crate::kinds::demo_kind(demo) {
+            SceneKind::Surfels => (demo.ball_count(), (f32::MIN, f32::MAX)),
+            SceneKind::Metaballs | SceneKind::Tets => {
+                let first = demo.state_at(0.0);
+                (first.primitive_count(), first.isovalue_range())
+            }
+        };
         SceneEntry {
             states_built: Default::default(),
             id: demo.id().to_string(),
             source: Source::Demo {
                 demo,
-                primitives: first.primitive_count(),
-                isovalue_range: first.isovalue_range(),
-                lighting: first.lighting.clone(),
+                primitives,
+                isovalue_range,
+                lighting: demo.lighting(),
                 pipeline,
             },
         }

@@ -166,7 +166,31 @@ async fn run_registered(
                 .await;
             tracing::info!(frames, "session closed: client idle");
         }
+        Ok(End::TooLarge(reason)) => {
+            let _ = sink
+                .send(Message::Close(Some(CloseFrame {
+                    code: 1009,
+                    reason: reason.clone().into(),
+                })))
+                .await;
+            tracing::info!(frames, %reason, "session closed: message too large");
+        }
         Err(e) => tracing::info!(frames, error = %e, "session ended by a connection error"),
+    }
+}
+
+/// `Some(reason)` when `error` is a client message over the size limit (the connection is
+/// still good for a close frame); `None` for a broken connection.
+fn too_large(error: axum::Error) -> Result<String, axum::Error> {
+    let inner = error.into_inner();
+    match inner.downcast_ref::<tungstenite::Error>() {
+        Some(tungstenite::Error::Capacity(tungstenite::error::CapacityError::MessageTooLong {
+            size,
+            max_size,
+        })) => Ok(format!(
+            "message of {size} bytes exceeds the limit of {max_size} bytes"
+        )),
+        _ => Err(axum::Error::new(inner)),
     }
 }
 
@@ -176,6 +200,8 @@ enum End {
     ClientGone,
     /// Nothing arrived from the client (not even a pong) for the idle timeout.
     Idle,
+    /// The client sent a message over the size limit (the reason says how large).
+    TooLarge(String),
     Shutdown,
 }
 
@@ -207,7 +233,11 @@ async fn read_loop(
         let Some(message) = message else {
             return Ok(End::ClientGone);
         };
-        let result = match message? {
+        let message = match message {
+            Ok(message) => message,
+            Err(e) => return too_large(e).map(End::TooLarge),
+        };
+        let result = match message {
             Message::Text(text) => input::parse(text.as_str()).and_then(|msg| match msg {
                 ClientMessage::Ack(FrameAck { sequence }) => acknowledge(sequence, shared, stats),
                 msg => {

@@ -11,7 +11,7 @@
 //! `descr`, `positions[3][1]`, …) or the byte offset in the body where the input went wrong.
 
 use crate::body::{BodyAbort, BodyError, BodyReader};
-use crate::kinds::error::KindError;
+use crate::kinds::error::{KindError, KindErrorKind};
 use crate::kinds::metaballs::step as ball_step;
 use crate::kinds::tets::step::raw_from_json;
 use crate::kinds::StepLayout;
@@ -49,6 +49,9 @@ pub enum IngestErrorKind {
     Io,
     /// The disk (or the user's quota) is full (507).
     StorageFull,
+    /// Values that break a rule between them, or with the scene (422; see
+    /// `KindErrorKind::Relational`).
+    Relational,
 }
 
 impl IngestError {
@@ -120,7 +123,8 @@ impl From<BodyError> for IngestError {
             } => IngestError {
                 kind: IngestErrorKind::Timeout,
                 code: "timeout",
-                message: "the body did not arrive within the time limit".into(),
+                message: "the body did not arrive within the time limit (--push-timeout-secs)"
+                    .into(),
                 field: None,
                 offset: Some(offset),
             },
@@ -136,8 +140,14 @@ impl From<BodyError> for IngestError {
 /// What a kind's step check found, as a push error.
 impl From<KindError> for IngestError {
     fn from(e: KindError) -> IngestError {
+        let kind = match e.kind {
+            KindErrorKind::Relational => IngestErrorKind::Relational,
+            KindErrorKind::Invalid | KindErrorKind::Unsupported | KindErrorKind::NotReady => {
+                IngestErrorKind::Invalid
+            }
+        };
         IngestError {
-            kind: IngestErrorKind::Invalid,
+            kind,
             code: e.code,
             message: e.message,
             field: e.field,
@@ -548,6 +558,14 @@ pub fn ingest_json(
 ) -> Result<WrittenStep, IngestError> {
     let columns = ball_step::json_columns(step)?;
     let rows = step.positions.len();
+    // A surfel step's rows against the scene's nodes: a rule between the body and the scene
+    // (422), as a tet step's scalars against its vertices.
+    if let Some(why) = limits.layout.check_rows(rows as u64) {
+        return Err(IngestError {
+            kind: IngestErrorKind::Relational,
+            ..IngestError::invalid("bad_shape", format!("positions: {why}")).at_field("positions")
+        });
+    }
     let columns_u32 = check_shape(rows as u64, columns as u64, limits)?;
     let values = ball_step::json_rows(step, columns);
     check_rows(limits.layout, &values, columns, 0, |_| 0).map_err(|mut e| {
@@ -593,11 +611,24 @@ pub fn ingest_json_tets(
     let vertices = match limits.layout {
         StepLayout::Tets { vertices } => vertices,
         StepLayout::Metaballs => {
-            return Err(IngestError::invalid(
-                "bad_shape",
-                "scalars: a metaball step is rows of balls, not scalars",
-            )
-            .at_field("scalars"))
+            return Err(IngestError {
+                kind: IngestErrorKind::Relational,
+                ..IngestError::invalid(
+                    "bad_shape",
+                    "scalars: a metaball step is rows of balls, not scalars",
+                )
+                .at_field("scalars")
+            })
+        }
+        StepLayout::Surfels { .. } => {
+            return Err(IngestError {
+                kind: IngestErrorKind::Relational,
+                ..IngestError::invalid(
+                    "bad_shape",
+                    "scalars: a surfel step is the simulation nodes' positions, not scalars",
+                )
+                .at_field("scalars")
+            })
         }
     };
     let raw = raw_from_json(step, vertices)?;
@@ -727,6 +758,7 @@ mod tests {
         let ok = ingest_json_tets(
             &JsonTetStep {
                 scalars: vec![0.0, 1.0, 2.0],
+                positions: None,
             },
             &limits,
             target("a"),
@@ -736,6 +768,7 @@ mod tests {
         let e = ingest_json_tets(
             &JsonTetStep {
                 scalars: vec![0.0, 1e300, 2.0],
+                positions: None,
             },
             &limits,
             target("b"),
@@ -745,6 +778,7 @@ mod tests {
         let e = ingest_json_tets(
             &JsonTetStep {
                 scalars: vec![0.0, 1.0],
+                positions: None,
             },
             &limits,
             target("c"),

@@ -148,3 +148,94 @@ async fn the_number_of_scenes_is_limited() {
     .await;
     server.stop().await;
 }
+
+/// `/render` is rate limited per client with `Retry-After`; behind a trusted proxy each
+/// forwarded client has its own allowance, and an untrusted peer's `X-Forwarded-For` is
+/// ignored (it cannot buy itself a fresh allowance by naming another address).
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn renders_are_limited_per_client_and_forwarded_addresses_count_only_from_trusted_proxies() {
+    let render = |base: &str, id: &str, forwarded: &str| {
+        Client::new(base)
+            .expect("url")
+            .request(
+                "POST",
+                &format!("/api/v1/scenes/{id}/render"),
+                &[
+                    ("Content-Type", "application/json"),
+                    ("X-Forwarded-For", forwarded),
+                ],
+                Body::Bytes(br#"{"width": 8, "height": 8}"#),
+            )
+            .expect("answer")
+    };
+    let limits = ["--render-rate", "0.01", "--render-burst", "2"];
+    let scene = |base: &str| {
+        let (id, token) = create(base);
+        let r = push(base, &id, "0", &token, NPY, &npy(&[0.0, 0.0, 0.0], 3));
+        assert_eq!(r.status, 201, "{}", r.text());
+        id
+    };
+
+    // Loopback is a trusted proxy: two forwarded clients, two allowances.
+    let dir = tempfile::tempdir().expect("temp dir");
+    let mut args = limits.to_vec();
+    args.extend(["--trusted-proxy", "127.0.0.1,::1"]);
+    let server = Server::start(dir.path(), &args).await;
+    let base = server.base.clone();
+    call(move || {
+        let id = scene(&base);
+        let a = "198.51.100.7";
+        let b = "203.0.113.9";
+        for i in 0..2 {
+            let r = render(&base, &id, a);
+            assert_eq!(r.status, 200, "render {i} of client a: {}", r.text());
+        }
+        let r = render(&base, &id, a);
+        assert_eq!(r.status, 429, "client a is over its burst: {}", r.text());
+        assert_eq!(json(&r)["code"], "rate_limited");
+        let retry: u64 = r
+            .header("retry-after")
+            .and_then(|v| v.parse().ok())
+            .expect("a Retry-After in seconds");
+        assert!((1..=100).contains(&retry), "at 0.01 per second: {retry}");
+        // A client prepending an address of its own to what the proxy appends changes nothing.
+        let r = render(&base, &id, &format!("192.0.2.1, {a}"));
+        assert_eq!(
+            r.status,
+            429,
+            "a spoofed hop left of the proxy's: {}",
+            r.text()
+        );
+        let r = render(&base, &id, b);
+        assert_eq!(
+            r.status,
+            200,
+            "client b has its own allowance: {}",
+            r.text()
+        );
+    })
+    .await;
+    server.stop().await;
+
+    // No trusted proxy: the header is ignored and every request is the peer's.
+    let dir = tempfile::tempdir().expect("temp dir");
+    let mut args = limits.to_vec();
+    args.extend(["--trusted-proxy", "10.9.9.9"]);
+    let server = Server::start(dir.path(), &args).await;
+    let base = server.base.clone();
+    call(move || {
+        let id = scene(&base);
+        assert_eq!(render(&base, &id, "198.51.100.7").status, 200);
+        assert_eq!(render(&base, &id, "203.0.113.9").status, 200);
+        let r = render(&base, &id, "192.0.2.55");
+        assert_eq!(
+            r.status,
+            429,
+            "an untrusted peer's X-Forwarded-For is not a new client: {}",
+            r.text()
+        );
+        assert!(r.header("retry-after").is_some());
+    })
+    .await;
+    server.stop().await;
+}

@@ -83,17 +83,28 @@ async fn a_viewers_look_through_the_render_endpoint_and_the_scene_bounds() {
         assert_eq!(added.status, 200, "{}", added.text());
         assert_ne!(added.body, plain.body, "the added isosurface shows");
 
-        for (effects, field) in [
-            (r#"{"color_map":{"name":"jet"}}"#, "effects.color_map"),
-            (r#"{"clip":{"min":[1,0,0],"max":[0,1,1]}}"#, "effects.clip"),
-            (r#"{"surfaces":[{"isovalue":1e9}]}"#, "effects.surfaces"),
+        // Outside the schema: 400; a rule between values (min below max, an isovalue inside
+        // the scene's range): 422.
+        for (effects, field, status) in [
+            (r#"{"color_map":{"name":"jet"}}"#, "effects.color_map", 400),
+            (
+                r#"{"clip":{"min":[1,0,0],"max":[0,1,1]}}"#,
+                "effects.clip",
+                422,
+            ),
+            (
+                r#"{"surfaces":[{"isovalue":1e9}]}"#,
+                "effects.surfaces",
+                422,
+            ),
             (
                 r#"{"surfaces":[{"isovalue":0.1,"opacity":2}]}"#,
                 "effects.surfaces",
+                400,
             ),
         ] {
             let r = render(&base, effects);
-            assert_eq!(r.status, 400, "{effects}: {}", r.text());
+            assert_eq!(r.status, status, "{effects}: {}", r.text());
             assert_eq!(json(&r)["field"], field, "{effects}: {}", r.text());
         }
 

@@ -6,17 +6,24 @@ mod bad_balls;
 mod cli;
 mod cors;
 mod crash;
+mod deforming;
 mod depth;
 mod disk_full;
 mod limits;
 mod look;
 mod molecules;
 mod openapi;
+mod particles;
+mod peers;
 mod push_errors;
 mod python_client;
 mod python_example;
 mod restart;
+mod schemathesis;
+mod slow_body;
 mod slow_headers;
+mod surfel_files;
+mod surfels;
 mod tets;
 mod vtk_files;
 
@@ -80,6 +87,60 @@ impl Server {
     }
 }
 
+/// Runs `isoray push --server base ARGS...` (options and files); returns whether it
+/// succeeded and its stdout and stderr together.
+pub fn push_files<S: AsRef<std::ffi::OsStr>>(base: &str, args: &[S]) -> (bool, String) {
+    let out = Command::new(isoray_binary())
+        .arg("push")
+        .args(["--server", base])
+        .args(args)
+        .output()
+        .expect("isoray push runs");
+    let text =
+        String::from_utf8_lossy(&out.stdout).to_string() + &String::from_utf8_lossy(&out.stderr);
+    (out.status.success(), text)
+}
+
+/// The id `isoray push` printed for the scene it created.
+pub fn created_scene_id(text: &str) -> String {
+    text.lines()
+        .find_map(|l| l.strip_prefix("created scene "))
+        .unwrap_or_else(|| panic!("the new scene's id is printed: {text}"))
+        .trim()
+        .to_string()
+}
+
+/// Runs a fixture script of `tests/fixtures` with `ISORAY_PYTHON`, writing into `dir`;
+/// returns what it printed.
+pub fn run_fixture(script: &str, dir: &Path) -> String {
+    let out = Command::new(python())
+        .arg(repo_root().join("tests/fixtures").join(script))
+        .arg(dir)
+        .output()
+        .expect("python runs (CI installs numpy, meshio and vtk into ISORAY_PYTHON)");
+    assert!(
+        out.status.success(),
+        "the fixture script {script} ran: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8_lossy(&out.stdout).into_owned()
+}
+
+/// `POST .../render` of `step` at 48×36 with the scene's own camera and isovalue: the PNG.
+pub fn render_png(base: &str, id: &str, step: u64) -> Vec<u8> {
+    let r = Client::new(base)
+        .expect("url")
+        .request(
+            "POST",
+            &format!("/api/v1/scenes/{id}/render"),
+            &[("Content-Type", "application/json")],
+            Body::Bytes(format!(r#"{{"step":{step},"width":48,"height":36}}"#).as_bytes()),
+        )
+        .expect("answer");
+    assert_eq!(r.status, 200, "{}", r.text());
+    r.body
+}
+
 /// Runs blocking client calls off the runtime.
 pub async fn call<T: Send + 'static>(f: impl FnOnce() -> T + Send + 'static) -> T {
     tokio::task::spawn_blocking(f).await.expect("client thread")
@@ -137,6 +198,21 @@ pub fn get(base: &str, path: &str) -> Response {
 
 pub fn steps(base: &str, id: &str) -> Value {
     json(&get(base, &format!("/api/v1/scenes/{id}/steps")))["steps"].clone()
+}
+
+/// Index → checksum of each step in a `steps` list as the API returns it.
+pub fn step_checksums(steps: &Value) -> BTreeMap<u64, String> {
+    steps
+        .as_array()
+        .expect("steps")
+        .iter()
+        .map(|s| {
+            (
+                s["index"].as_u64().expect("index"),
+                s["checksum"].as_str().expect("checksum").to_string(),
+            )
+        })
+        .collect()
 }
 
 pub const NPY: &str = "application/x-npy";

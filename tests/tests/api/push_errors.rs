@@ -132,16 +132,19 @@ async fn every_wrong_push_is_a_4xx_naming_where_and_changes_nothing() {
                 Where::Field("Authorization"),
             ),
             (
+                // Authorization comes before the lookup: a scene's token is refused for any
+                // other id, whether or not that scene exists (nothing says which ids exist).
                 "unknown scene",
                 push(&base, "0123456789abcdef0123456789abcdef", "1", &token, NPY, &good),
-                404,
-                Where::Field("id"),
+                403,
+                Where::Field("Authorization"),
             ),
             (
+                // Another scene's token is refused before the demo is looked up.
                 "a built-in demo scene",
                 push(&base, demo, "1", &token, NPY, &good),
-                409,
-                Where::Field("id"),
+                403,
+                Where::Field("Authorization"),
             ),
             ("wrong dtype (.npy)", p("1", NPY, &int_dtype), 400, Where::Field("descr")),
             ("wrong dtype (raw)", p("1", "application/octet-stream", &raw_bad_dtype), 400, Where::Field("dtype")),
@@ -176,7 +179,8 @@ async fn every_wrong_push_is_a_4xx_naming_where_and_changes_nothing() {
             (
                 "radii do not match positions (JSON)",
                 p("1", "application/json", br#"{"positions":[[0,0,0]],"radii":[0.1,0.2]}"#),
-                400,
+                // Each array fits the schema; the rule between them does not: 422.
+                422,
                 Where::Field("radii"),
             ),
             (
@@ -216,7 +220,7 @@ async fn every_wrong_push_is_a_4xx_naming_where_and_changes_nothing() {
                     r#"{"kind":"tets","tets":{"mesh":{"vertices":[[0,0,0],[1,0,0],[0,1,0],[0,0,1]],
                         "cells":[[0,1,2,3],[0,1,2,4]]}}}"#,
                 ),
-                400,
+                422,
                 Where::Field("tets.mesh.cells[1][3]"),
             ),
             (
@@ -228,13 +232,13 @@ async fn every_wrong_push_is_a_4xx_naming_where_and_changes_nothing() {
                     "application/json",
                     br#"{"vertices":[[0,0,0],[1,0,0],[0,1,0],[0,0,1]],"cells":[[0,1,2,3],[4,1,2,3]]}"#,
                 ),
-                400,
+                422,
                 Where::Field("cells[1][0]"),
             ),
             (
                 "a tet referencing a missing vertex (mesh upload, .npy)",
                 super::tets::put_mesh(&base, &bare_id, &bare_token, NPY, &missing_vertex),
-                400,
+                422,
                 Where::Offset(missing_at as u64),
             ),
             (
@@ -254,6 +258,14 @@ async fn every_wrong_push_is_a_4xx_naming_where_and_changes_nothing() {
                 push(&base, &tet_id, "0", &tet_token, "application/json", br#"{"scalars":[0,1,null,2]}"#),
                 400,
                 Where::Field("scalars[2]"),
+            ),
+            (
+                // Neither JsonStep (no `scalars`) nor JsonTetStep (`scalars` is an array): the
+                // document forbids it, so it is not read as "absent" (schemathesis, ST201).
+                "scalars: null beside a metaball step's positions",
+                push(&base, &id, "1", &token, "application/json", br#"{"positions":[],"scalars":null}"#),
+                400,
+                Where::Field("scalars"),
             ),
         ];
         // An oversized body without a declared length: cut off while streaming.

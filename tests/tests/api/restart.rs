@@ -1,10 +1,12 @@
-//! Scenes and steps survive a clean restart; kinds the engine cannot trace (surfels, so far)
-//! are refused with the field named; a one-shot render answers a PNG.
+//! Scenes and steps survive a clean restart; a kind's scene without its data (a surfel scene
+//! without its object), an unknown kind and another kind's settings are refused with the
+//! field named; a one-shot render
+//! answers a PNG.
 
 use super::*;
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn unsupported_kinds_are_refused_and_steps_survive_a_restart() {
+async fn scenes_without_their_kind_are_refused_and_steps_survive_a_restart() {
     let dir = tempfile::tempdir().expect("temp dir");
     let server = Server::start(dir.path(), &[]).await;
     let base = server.base.clone();
@@ -18,8 +20,30 @@ async fn unsupported_kinds_are_refused_and_steps_survive_a_restart() {
                 Body::Bytes(br#"{"kind":"surfels"}"#),
             )
             .expect("answer");
+        // Every value fits the schema, but a surfel scene needs its object: a 422.
         assert_eq!(r.status, 422, "{}", r.text());
-        assert_eq!(json(&r)["field"], "kind");
+        assert_eq!(json(&r)["field"], "surfels");
+        let r = c
+            .request(
+                "POST",
+                "/api/v1/scenes",
+                &[("Content-Type", "application/json")],
+                Body::Bytes(br#"{"kind":"voxels"}"#),
+            )
+            .expect("answer");
+        assert_eq!(r.status, 400, "not a kind of the schema: {}", r.text());
+        assert!(r.text().contains("kind"), "{}", r.text());
+        // Another kind's settings beside a kind are refused, not ignored unchecked.
+        let r = c
+            .request(
+                "POST",
+                "/api/v1/scenes",
+                &[("Content-Type", "application/json")],
+                Body::Bytes(br#"{"kind":"metaballs","tets":{"color_range":[0,1]}}"#),
+            )
+            .expect("answer");
+        assert_eq!(r.status, 422, "{}", r.text());
+        assert_eq!(json(&r)["field"], "tets");
         let (id, token) = create(&base);
         let js = br#"{"positions":[[0,0,0],[0.4,0,0]],"radii":[0.5,0.5]}"#;
         assert_eq!(

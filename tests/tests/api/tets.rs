@@ -113,7 +113,7 @@ async fn tet_scenes_are_validated_stored_streamed_and_reloaded() {
         let r = post_json(&base, "/api/v1/scenes", bad);
         refused(
             &r,
-            400,
+            422,
             "tets.mesh.cells[1][3]",
             &["tet 1", "vertex 9"],
             &root,
@@ -139,7 +139,7 @@ async fn tet_scenes_are_validated_stored_streamed_and_reloaded() {
         let r = put_mesh(&base, &id, &token, NPY, &body);
         refused(
             &r,
-            400,
+            422,
             "cells[7][2]",
             &["tet 7", &format!("vertex {}", nv + 5)],
             &root,
@@ -154,7 +154,7 @@ async fn tet_scenes_are_validated_stored_streamed_and_reloaded() {
         let mut cells = cells_of(&mesh);
         cells[3].swap(1, 2);
         let r = put_mesh(&base, &id, &token, NPY, &mesh_npy(mesh.vertices(), &cells));
-        refused(&r, 400, "cells[3]", &["tet 3", "inverted"], &root, &before);
+        refused(&r, 422, "cells[3]", &["tet 3", "inverted"], &root, &before);
         let mut vertices = mesh.vertices().to_vec();
         vertices[4].y = f32::NAN;
         let r = put_mesh(
@@ -177,7 +177,7 @@ async fn tet_scenes_are_validated_stored_streamed_and_reloaded() {
             "application/json",
             br#"{"vertices":[[0,0,0],[1,0,0],[0,1,0],[0,0,1]],"cells":[[0,1,2,4]]}"#,
         );
-        refused(&r, 400, "cells[0][3]", &["tet 0"], &root, &before);
+        refused(&r, 422, "cells[0][3]", &["tet 0"], &root, &before);
         // The wrong token changes nothing either.
         let r = put_mesh(
             &base,
@@ -246,7 +246,7 @@ async fn tet_scenes_are_validated_stored_streamed_and_reloaded() {
         let r = push(&base, &id, "0", &token, "application/json", js.as_bytes());
         refused(
             &r,
-            400,
+            422,
             "scalars",
             &[&format!("{nv} vertices")],
             &root,
@@ -278,6 +278,23 @@ async fn tet_scenes_are_validated_stored_streamed_and_reloaded() {
         assert_ne!(
             centre, corner,
             "the sphere covers the middle, not the corner"
+        );
+        // A step the scene does not hold: the scene exists, so the body's `step` is what is
+        // wrong (422 naming it), not a missing resource (a 404 here broke schemathesis's
+        // "created resource not found" check).
+        let missing = post_json(
+            &base,
+            &format!("/api/v1/scenes/{id}/render"),
+            r#"{"step":7,"width":64,"height":48}"#,
+        );
+        assert_eq!(missing.status, 422, "{}", missing.text());
+        let err = json(&missing);
+        assert_eq!(err["field"], "step", "{err}");
+        assert!(
+            err["message"]
+                .as_str()
+                .is_some_and(|m| m.contains("no step 7")),
+            "{err}"
         );
         (id, token, r.body, listed)
     })
@@ -487,7 +504,7 @@ async fn isoray_push_sends_a_vtu_series_as_a_tet_scene() {
         let text = String::from_utf8_lossy(&out.stderr).to_string();
         assert!(!out.status.success());
         assert!(
-            text.contains("changed.vtu") && text.contains("differs"),
+            text.contains("changed.vtu") && text.contains("cells differ"),
             "{text}"
         );
     })

@@ -1,49 +1,15 @@
 //! `isoray push` of VTK files as the tools scientists use write them: a fixture script
 //! (`tests/fixtures/vtk_meshes.py`, VTK's Python package and meshio) writes a mesh of
 //! 215,622 tets in every encoding they offer (raw, base64 and appended data; zlib, LZ4 and
-//! xz blocks; UInt32 and UInt64 headers; ASCII; legacy `.vtk` ASCII and binary; a `.pvd`
+//! xz blocks; UInt32 and UInt64 headers; ASCII; legacy `.vtk` ASCII and binary, versions
+//! 4.2 and 5.1; a `.pvd`
 //! series), and every file pushes through the real binary and renders the same image as
 //! the raw, uncompressed one. Hexahedra with cell data push and render alike from both
-//! tools; a legacy 5.1 file is refused, naming the line and what to write instead.
+//! tools; legacy files in each tool's default version (5.1) push like 4.2 ones, and a
+//! truncated 5.1 file is refused naming the array it ends in.
 
 use super::*;
 use crate::e2e::support::pixel_stddev;
-
-/// Runs `isoray push --server base files...`; returns (success, stdout + stderr).
-fn push_files(base: &str, files: &[PathBuf]) -> (bool, String) {
-    let out = Command::new(isoray_binary())
-        .arg("push")
-        .args(["--server", base])
-        .args(files)
-        .output()
-        .expect("isoray push runs");
-    let text =
-        String::from_utf8_lossy(&out.stdout).to_string() + &String::from_utf8_lossy(&out.stderr);
-    (out.status.success(), text)
-}
-
-fn scene_id(text: &str) -> String {
-    text.lines()
-        .find_map(|l| l.strip_prefix("created scene "))
-        .unwrap_or_else(|| panic!("the new scene's id is printed: {text}"))
-        .trim()
-        .to_string()
-}
-
-/// A small PNG of `step` with the scene's own camera and isovalue.
-fn render(base: &str, id: &str, step: u64) -> Vec<u8> {
-    let r = Client::new(base)
-        .expect("url")
-        .request(
-            "POST",
-            &format!("/api/v1/scenes/{id}/render"),
-            &[("Content-Type", "application/json")],
-            Body::Bytes(format!(r#"{{"step":{step},"width":48,"height":36}}"#).as_bytes()),
-        )
-        .expect("answer");
-    assert_eq!(r.status, 200, "{}", r.text());
-    r.body
-}
 
 fn not_blank(png: &[u8]) {
     let img = image::load_from_memory(png).expect("a PNG").to_rgb8();
@@ -54,16 +20,7 @@ fn not_blank(png: &[u8]) {
 async fn vtk_files_in_every_encoding_render_the_same_image() {
     let dir = tempfile::tempdir().expect("temp dir");
     let files = dir.path().join("files");
-    let out = Command::new(python())
-        .arg(repo_root().join("tests/fixtures/vtk_meshes.py"))
-        .arg(&files)
-        .output()
-        .expect("python runs (CI installs vtk and meshio into ISORAY_PYTHON)");
-    assert!(
-        out.status.success(),
-        "the fixture script ran: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    run_fixture("vtk_meshes.py", &files);
     let server = Server::start(&dir.path().join("data"), &[]).await;
     let base = server.base.clone();
     call(move || {
@@ -71,7 +28,7 @@ async fn vtk_files_in_every_encoding_render_the_same_image() {
         let (ok, text) = push_files(&base, &[f("vtk_raw.vtu")]);
         assert!(ok, "{text}");
         assert!(text.contains("215622 tets"), "{text}");
-        let reference = render(&base, &scene_id(&text), 0);
+        let reference = render_png(&base, &created_scene_id(&text), 0);
         not_blank(&reference);
         for name in [
             "vtk_default.vtu",
@@ -91,17 +48,19 @@ async fn vtk_files_in_every_encoding_render_the_same_image() {
             "meshio_lzma.vtu",
             "meshio_ascii.vtu",
             "meshio_legacy.vtk",
+            "vtk_legacy_default.vtk",
+            "meshio_legacy_default.vtk",
         ] {
             let (ok, text) = push_files(&base, &[f(name)]);
             assert!(ok, "{name}: {text}");
-            let png = render(&base, &scene_id(&text), 0);
+            let png = render_png(&base, &created_scene_id(&text), 0);
             assert!(png == reference, "{name} renders as the raw file does");
         }
 
         // A .pvd series: two steps at the collection's times, the first the same image.
         let (ok, text) = push_files(&base, &[f("series.pvd")]);
         assert!(ok, "{text}");
-        let id = scene_id(&text);
+        let id = created_scene_id(&text);
         let listed = steps(&base, &id);
         let times: Vec<f64> = listed
             .as_array()
@@ -110,9 +69,9 @@ async fn vtk_files_in_every_encoding_render_the_same_image() {
             .map(|s| s["time"].as_f64().expect("time"))
             .collect();
         assert_eq!(times, vec![0.0, 0.5]);
-        assert!(render(&base, &id, 0) == reference);
+        assert!(render_png(&base, &id, 0) == reference);
         assert!(
-            render(&base, &id, 1) != reference,
+            render_png(&base, &id, 1) != reference,
             "step 1's field is scaled"
         );
 
@@ -122,16 +81,23 @@ async fn vtk_files_in_every_encoding_render_the_same_image() {
             ok && text.contains("hexahedra") && text.contains("cell array"),
             "{text}"
         );
-        let hex = render(&base, &scene_id(&text), 0);
+        let hex = render_png(&base, &created_scene_id(&text), 0);
         not_blank(&hex);
         let (ok, text) = push_files(&base, &[f("hex_meshio.vtu")]);
         assert!(ok, "{text}");
-        assert!(render(&base, &scene_id(&text), 0) == hex);
+        assert!(render_png(&base, &created_scene_id(&text), 0) == hex);
 
-        let (ok, text) = push_files(&base, &[f("legacy51.vtk")]);
+        // A version 5.1 file cut inside its connectivity is refused, naming the array.
+        let whole = std::fs::read(f("meshio_legacy_default.vtk")).expect("read");
+        let conn = whole
+            .windows(12)
+            .position(|w| w == b"CONNECTIVITY")
+            .expect("a CONNECTIVITY array");
+        std::fs::write(f("cut51.vtk"), &whole[..conn + 4_000]).expect("write");
+        let (ok, text) = push_files(&base, &[f("cut51.vtk")]);
         assert!(!ok);
         assert!(
-            text.contains("legacy51.vtk") && text.contains("line 1") && text.contains("4.2"),
+            text.contains("cut51.vtk") && text.contains("CONNECTIVITY") && text.contains("ends"),
             "{text}"
         );
     })

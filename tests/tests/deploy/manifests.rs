@@ -9,10 +9,12 @@ use serde_json::Value;
 use std::path::Path;
 use std::process::Command;
 
-/// `python -m kubernetes_validate --strict FILE`: (passed, what it printed).
-fn kubernetes_validate(file: &Path) -> (bool, String) {
+/// `python -m MODULE ARGS... FILE` of a validator the CI venv has (`package` names it for the
+/// message when it is missing): (passed, what it printed).
+fn validate(module: &str, package: &str, args: &[&str], file: &Path) -> (bool, String) {
     let out = Command::new(python())
-        .args(["-m", "kubernetes_validate", "--strict", "--no-warn"])
+        .args(["-m", module])
+        .args(args)
         .arg(file)
         .output()
         .expect("python runs");
@@ -23,10 +25,20 @@ fn kubernetes_validate(file: &Path) -> (bool, String) {
     );
     assert!(
         !text.contains("No module named"),
-        "kubernetes-validate is missing: `bash .ci/run` installs it in the test venv \
+        "{package} is missing: `bash .ci/run` installs it in the test venv \
          (ISORAY_PYTHON): {text}"
     );
     (out.status.success(), text)
+}
+
+/// `python -m kubernetes_validate --strict FILE`: (passed, what it printed).
+fn kubernetes_validate(file: &Path) -> (bool, String) {
+    validate(
+        "kubernetes_validate",
+        "kubernetes-validate",
+        &["--strict", "--no-warn"],
+        file,
+    )
 }
 
 /// Every document of a YAML file, as JSON (parsed by PyYAML, which kubernetes-validate uses).
@@ -209,4 +221,63 @@ fn kubernetes_manifests_validate_and_route_each_shard_to_its_pod() {
         selector["app"],
         sts["spec"]["selector"]["matchLabels"]["app"]
     );
+}
+
+/// deploy/compose.yaml against the Compose specification's JSON schema (check-jsonschema's
+/// vendored copy, offline), and against deploy/nginx/isoray.conf, which it mounts unchanged:
+/// one isoray service per shard the nginx file routes to, listening on that shard's address
+/// inside the balancer's network namespace, each with its own store volume.
+#[test]
+fn compose_file_validates_and_matches_the_nginx_shards() {
+    let file = repo_root().join("deploy/compose.yaml");
+    let (passed, text) = validate(
+        "check_jsonschema",
+        "check-jsonschema",
+        &["--builtin-schema", "vendor.compose-spec"],
+        &file,
+    );
+    assert!(passed, "compose schema:\n{text}");
+
+    let docs = documents(&file);
+    let services = docs[0]["services"].as_object().expect("services");
+    let conf = crate::deploy::nginx::shipped_conf();
+    let shards = crate::deploy::nginx::shards_of(&conf);
+    assert_eq!(shards.len(), 3, "three shards in the nginx file");
+    let balancer = &services["balancer"];
+    assert!(
+        balancer["volumes"]
+            .as_array()
+            .expect("balancer volumes")
+            .iter()
+            .any(|v| v.as_str() == Some("./nginx/isoray.conf:/etc/nginx/conf.d/isoray.conf:ro")),
+        "the balancer mounts the shipped nginx file: {balancer}"
+    );
+    assert_eq!(balancer["ports"][0], "8080:8080");
+    assert!(conf.contains("listen 8080;"));
+    let mut volumes = std::collections::BTreeSet::new();
+    for (name, addr) in &shards {
+        let s = &services[name.as_str()];
+        assert_eq!(
+            s["environment"]["ISORAY_SHARD"],
+            name.as_str(),
+            "{name}: {s}"
+        );
+        assert_eq!(
+            s["environment"]["ISORAY_LISTEN"],
+            addr.as_str(),
+            "{name}: {s}"
+        );
+        assert_eq!(s["network_mode"], "service:balancer", "{name}");
+        assert_eq!(s["build"]["dockerfile"], "deploy/Dockerfile", "{name}");
+        let volume = s["volumes"][0].as_str().expect("a store volume");
+        assert!(volume.ends_with(":/data"), "{volume}");
+        assert_eq!(s["environment"]["ISORAY_DATA_DIR"], "/data");
+        volumes.insert(volume.to_string());
+    }
+    assert_eq!(
+        volumes.len(),
+        shards.len(),
+        "a volume per shard: {volumes:?}"
+    );
+    assert!(repo_root().join("deploy/Dockerfile").exists());
 }

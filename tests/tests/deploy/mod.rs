@@ -2,8 +2,10 @@
 //! several `isoray` processes on loopback (placement by shard, failure of one process), and
 //! the Kubernetes manifests checked against the Kubernetes schemas.
 
+mod kill_cycles;
 mod manifests;
 mod nginx;
+mod nginx_restart;
 
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
@@ -46,8 +48,14 @@ pub struct Backend {
 impl Backend {
     /// Starts `isoray --listen 127.0.0.1:0 ARGS` and waits for the address it prints.
     pub fn start(args: &[&str]) -> Backend {
+        Backend::start_on("127.0.0.1:0", args)
+    }
+
+    /// Starts `isoray --listen LISTEN ARGS` (a fixed address: a process restarted where its
+    /// balancer and its viewers expect it) and waits for the address it prints.
+    pub fn start_on(listen: &str, args: &[&str]) -> Backend {
         let mut child = Command::new(crate::api::isoray_binary())
-            .args(["--listen", "127.0.0.1:0", "--log", "warn"])
+            .args(["--listen", listen, "--log", "warn"])
             .args(args)
             .stdout(Stdio::piped())
             .stderr(Stdio::inherit())

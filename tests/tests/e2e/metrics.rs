@@ -56,6 +56,11 @@ async fn metrics_count_what_a_session_did() {
         ("isoray_render_queue_depth", &[]),
         ("isoray_render_jobs_running", &[]),
         ("isoray_depth_bytes_total", &[]),
+        (
+            "isoray_root_finder_capped_total",
+            &["kind=\"metaballs\""][..],
+        ),
+        ("isoray_root_finder_capped_total", &["kind=\"surfels\""][..]),
     ] {
         assert!(
             sample(&text, name, labels).is_some(),

@@ -5,6 +5,7 @@ mod bad_input;
 mod codecs;
 #[cfg(feature = "gpu")]
 mod gpu;
+mod faults;
 mod lifecycle;
 mod metrics;
 mod paper_scenes;

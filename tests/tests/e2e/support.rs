@@ -28,13 +28,19 @@ pub struct TestServer {
 impl TestServer {
     /// A server with default settings plus `args` (flags as on the command line).
     pub async fn start(args: &[&str]) -> TestServer {
+        let listener = tokio::net::TcpListener::bind("127.0.0.1:0")
+            .await
+            .expect("bind loopback");
+        TestServer::start_on(listener, args)
+    }
+
+    /// A server on a listener the test made (for example with small socket buffers, which
+    /// accepted connections inherit).
+    pub fn start_on(listener: tokio::net::TcpListener, args: &[&str]) -> TestServer {
         let mut argv = vec!["isoray", "--listen", "127.0.0.1:0"];
         argv.extend_from_slice(args);
         let config = <Config as clap::Parser>::parse_from(argv);
         let state = AppState::new(config).expect("valid test config");
-        let listener = tokio::net::TcpListener::bind("127.0.0.1:0")
-            .await
-            .expect("bind loopback");
         let addr = listener.local_addr().expect("local addr");
         let (tx, rx) = oneshot::channel::<()>();
         let handle = tokio::spawn(isoray_server::serve(listener, state.clone(), async move {

@@ -14,6 +14,9 @@ pub struct MetaballCounters {
     pub iterations: u64,
     /// Iterations of the searches that produced the hits.
     pub hit_iterations: u64,
+    /// Searches that stopped at their iteration cap (`roots::ITERATION_CAP`, or the secant
+    /// method's 200): a miss or a hit that may be wrong rather than a silent one.
+    pub capped: u64,
 }
 
 impl MetaballCounters {
@@ -25,6 +28,7 @@ impl MetaballCounters {
         self.metaballs_considered += o.metaballs_considered;
         self.iterations += o.iterations;
         self.hit_iterations += o.hit_iterations;
+        self.capped += o.capped;
     }
 }
 

@@ -21,6 +21,12 @@ use glam::{Mat3, Vec3};
 use std::cell::RefCell;
 use std::sync::{Arc, OnceLock};
 
+// Tiles of primary rays traced as one packet through the Fitted BVH.
+mod packet;
+#[cfg(test)]
+mod packet_tests;
+// Shadow rays towards one point light traced as one packet.
+mod shadows;
 // Secondary-ray queries (any hit, exit from the solid, optical depth): the effects layer's.
 mod queries;
 
@@ -47,6 +53,15 @@ pub struct PrepareOptions {
     pub finder: RootFinder,
     /// Absolute tolerance on hit distances, world units.
     pub tolerance: f32,
+    /// The finder's step ([`roots::FindParams::step`]); [`PrepareOptions::with_finder`] sets
+    /// the finder's default.
+    pub step: f32,
+    /// Refine each `f32` hit in `f64` (bisection on the exact field of the balls that hit,
+    /// from the `f32` bracket to `1e-12` relative), at the price of an `f64` search per hit.
+    pub refine_f64: bool,
+    /// Trace a tile of primary rays as one packet through the Fitted BVH (the default;
+    /// same hits ray for ray), or every ray alone (for comparison).
+    pub packets: bool,
 }
 
 impl PrepareOptions {
@@ -56,6 +71,9 @@ impl PrepareOptions {
             accel: AccelKind::Tree(BuildOptions::fitted(min_isovalue)),
             finder: RootFinder::BezierClipping,
             tolerance: 1e-4,
+            step: RootFinder::BezierClipping.default_step(),
+            refine_f64: false,
+            packets: true,
         }
     }
 
@@ -63,8 +81,13 @@ impl PrepareOptions {
         PrepareOptions { accel, ..self }
     }
 
+    /// `finder`, with its default step.
     pub fn with_finder(self, finder: RootFinder) -> PrepareOptions {
-        PrepareOptions { finder, ..self }
+        PrepareOptions {
+            finder,
+            step: finder.default_step(),
+            ..self
+        }
     }
 }
 
@@ -92,6 +115,9 @@ pub struct PreparedMetaballs {
     /// Built on first use when a query's isovalue is below the one the §5.3 optimisations
     /// were built for: the same structure without them.
     fallback: OnceLock<Accel>,
+    /// Whether `accel` is a Fitted BVH whose every box lies inside its parent's, the
+    /// condition under which a packet's per-ray leaf ranges equal the single ray's.
+    nested: bool,
 }
 
 /// Per-thread buffers of a ray query: the balls along the ray, the root finder's scratch and
@@ -131,6 +157,10 @@ impl PreparedMetaballs {
             })
             .collect();
         let accel = build_accel(&scene, options.accel);
+        let nested = match &accel {
+            Accel::Tree(tree) => tree.kind == TreeKind::Fitted && tree.boxes_nest(),
+            Accel::BruteForce | Accel::ActiveList => false,
+        };
         PreparedMetaballs {
             scene,
             balls,
@@ -139,6 +169,7 @@ impl PreparedMetaballs {
             accel,
             build_ms: started.elapsed().as_secs_f64() * 1e3,
             fallback: OnceLock::new(),
+            nested,
         }
     }
 
@@ -199,13 +230,17 @@ impl PreparedMetaballs {
             isovalue,
             tolerance: self.options.tolerance,
             owners_only: false,
+            step: self.options.step,
         };
         SCRATCH.with(|cell| {
             let mut guard = cell.borrow_mut();
             let (gathered, scratch, stack) = &mut *guard;
-            let t = self.trace(
+            let mut t = self.trace(
                 accel, ray, t_min, t_max, &params, gathered, scratch, stack, counters,
             )?;
+            if self.options.refine_f64 {
+                t = self.refine_f64(ray, t, t_min, t_max, isovalue, gathered);
+            }
             counters.hits += 1;
             Some(self.hit_at(ray, t, gathered))
         })
@@ -247,6 +282,7 @@ impl PreparedMetaballs {
             counters.leaf_tests += 1;
             counters.metaballs_considered += n as u64;
             counters.iterations += found.iterations as u64;
+            counters.capped += found.capped as u64;
             if found.t.is_some() {
                 counters.hit_iterations += found.hit_iterations as u64;
             }
@@ -317,6 +353,83 @@ impl PreparedMetaballs {
                 counters,
             ),
         }
+    }
+
+    /// `t`, an `f32` hit of `ray` found among `gathered`, refined in `f64`: the same balls along
+    /// the ray recomputed in `f64`, a bracket `g(lo) < 0 ≤ g(hi)` grown from the tolerance
+    /// about `t`, and bisection to `1e-12` relative. Without a bracket `t` is kept.
+    fn refine_f64(
+        &self,
+        ray: &Ray,
+        t: f32,
+        t_min: f32,
+        t_max: f32,
+        isovalue: f32,
+        gathered: &[RayBall<f32>],
+    ) -> f32 {
+        let kernel = KernelPoly::<f64>::new(self.scene.kernel);
+        let (o, d) = (ray.origin.as_dvec3(), ray.dir.as_dvec3());
+        let balls: Vec<RayBall<f64>> = gathered
+            .iter()
+            .filter_map(|rb| {
+                let b = &self.balls[rb.ball as usize];
+                let (e, g) = if b.frame == u32::MAX {
+                    let inv_r = 1.0 / self.scene.balls[rb.ball as usize].radius as f64;
+                    ((o - b.center.as_dvec3()) * inv_r, d * inv_r)
+                } else {
+                    let m = self.frames[b.frame as usize].as_dmat3();
+                    (m * (o - b.center.as_dvec3()), m * d)
+                };
+                let (t0, t1, a, tc, s_min) = RayBall::along(e.to_array(), g.to_array())?;
+                Some(RayBall {
+                    t0,
+                    t1,
+                    a,
+                    tc,
+                    s_min,
+                    q: b.strength as f64,
+                    ..RayBall::default()
+                })
+            })
+            .collect();
+        let g = |t: f64| balls.iter().map(|b| b.term(&kernel, t)).sum::<f64>() - isovalue as f64;
+        let step = (self.options.tolerance as f64).max(1e-7 * (t as f64).abs());
+        let (lo_limit, hi_limit) = (t_min as f64, t_max as f64);
+        let (mut lo, mut hi) = (t as f64, t as f64);
+        let mut grow = step;
+        for _ in 0..8 {
+            if g(hi) >= 0.0 {
+                break;
+            }
+            hi = (hi + grow).min(hi_limit);
+            grow *= 2.0;
+        }
+        grow = step;
+        for _ in 0..8 {
+            if lo <= lo_limit || g(lo) < 0.0 {
+                break;
+            }
+            lo = (lo - grow).max(lo_limit);
+            grow *= 2.0;
+        }
+        if lo <= lo_limit && g(lo) >= 0.0 {
+            return lo_limit as f32; // the segment starts inside
+        }
+        if !(g(lo) < 0.0 && g(hi) >= 0.0) {
+            return t;
+        }
+        for _ in 0..80 {
+            let mid = 0.5 * (lo + hi);
+            if hi - lo <= 1e-12 * hi.abs().max(1.0) || !(lo < mid && mid < hi) {
+                break;
+            }
+            if g(mid) < 0.0 {
+                lo = mid;
+            } else {
+                hi = mid;
+            }
+        }
+        hi as f32
     }
 
     /// Appends ball `i` if the ray's stretch `[lo, hi]` crosses its support.

@@ -61,7 +61,9 @@ impl PreparedKind for PreparedMetaballs {
         PreparedMetaballs::optical_depth(self, ray, t_min, t_max)
     }
 
-    /// Metaballs trace a tile ray by ray.
+    /// Metaballs trace a tile as one packet through the Fitted BVH
+    /// ([`PreparedMetaballs::primary_tile_packet`]), or ray by ray where packets do not apply
+    /// or are switched off.
     fn primary_tile(
         &self,
         rays: &PrimaryRays,
@@ -70,6 +72,10 @@ impl PreparedKind for PreparedMetaballs {
         t_max: f32,
         counters: &mut MetaballCounters,
     ) -> Vec<(Ray, Option<Hit>)> {
+        let rect = (x0, y0, x1, y1);
+        if let Some(hits) = self.primary_tile_packet(rays, rect, isovalue, t_max, counters) {
+            return hits;
+        }
         (y0..y1)
             .flat_map(|y| (x0..x1).map(move |x| rays.through_pixel(x, y)))
             .map(|ray| {

@@ -8,11 +8,13 @@
 //! scaled rotation for an ellipsoid, bezier-clipping-metaballs.txt §3.3). The hit is the
 //! smallest `t` in `[lo, hi]` with `F(t) ≥ T` (`F(lo) ≥ T` gives `lo`).
 //! - [`RootFinder::March`]: metaballs-tutorial.txt §II–III: walk the sorted entry/exit
-//!   sections with the active list, step a quarter of the smallest active radius, then bisect.
+//!   sections with the active list, step [`FindParams::step`] of the smallest active radius
+//!   (the tutorial's quarter by default no more: [`MARCH_STEP`]), then bisect.
 //! - [`RootFinder::Secant`]: fitted-bvh-metaballs.txt §3: evaluate `F` at the projections of the
 //!   owners' centres on the ray, take `b` as the first with `F ≥ T` and `a` as the sample
 //!   before it, then the secant method (Illinois variant, so it keeps a bracket). Rays that
-//!   graze the surface between projections are missed, as in the paper.
+//!   graze the surface between projections are missed, as in the paper, unless a finite
+//!   [`FindParams::step`] adds samples so that none is farther apart than that ([`SECANT_STEP`]).
 //! - [`RootFinder::BezierClipping`]: bezier-clipping-metaballs.txt §3.2: sort the entry/exit
 //!   points, and in each section between consecutive ones express every active ball's field
 //!   over the section as a polynomial of degree `2·deg_w` and add them up. The paper adds the
@@ -35,6 +37,15 @@ pub use crate::kinds::metaballs::bezier::{HalfStack, ITERATION_CAP, MAX_DEGREE};
 use crate::kinds::metaballs::kernel::MAX_W_DEGREE;
 pub use crate::kinds::metaballs::real::Real;
 
+/// Marching's default step, a fraction of the smallest active radius: the tutorial's 1/4 loses
+/// silhouette pixels on every paper scene (152 of 115k compared rays); 1/64 is the largest step
+/// of the accuracy study (`isoray-bench accuracy`, docs/accuracy.md) that loses none.
+pub const MARCH_STEP: f32 = 1.0 / 64.0;
+/// The secant method's default largest gap between samples, a fraction of the smallest radius:
+/// the paper's centre projections alone lose 32 silhouette pixels on the paper scenes; a gap of
+/// at most 1/32 of the smallest radius loses none in the accuracy study.
+pub const SECANT_STEP: f32 = 1.0 / 32.0;
+
 /// The closed set of root finders.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum RootFinder {
@@ -55,6 +66,17 @@ impl RootFinder {
         RootFinder::BezierClipping,
         RootFinder::SphereTracing,
     ];
+
+    /// The step [`FindParams::step`] this finder uses unless told otherwise: the accuracy study's
+    /// (`isoray-bench accuracy`, docs/accuracy.md) largest step that lost no silhouette pixel
+    /// against the reference on the paper scenes. Bézier clipping and sphere tracing take none.
+    pub fn default_step(self) -> f32 {
+        match self {
+            RootFinder::March => MARCH_STEP,
+            RootFinder::Secant => SECANT_STEP,
+            RootFinder::BezierClipping | RootFinder::SphereTracing => f32::INFINITY,
+        }
+    }
 
     pub fn name(self) -> &'static str {
         match self {
@@ -181,6 +203,10 @@ pub struct FindParams<R> {
     /// Only search where an owner's support covers the ray (the BVH's leaves, whose field is
     /// complete only inside their own balls).
     pub owners_only: bool,
+    /// Marching's step, and the secant method's largest gap between samples, as a fraction of
+    /// the smallest radius of the balls it searches (infinite: the secant method samples the
+    /// centre projections only, as in the paper). See [`RootFinder::default_step`].
+    pub step: R,
 }
 
 /// The outcome of one search.
@@ -191,6 +217,8 @@ pub struct Found<R> {
     pub iterations: u32,
     /// Iterations spent on the section or bracket that produced the hit.
     pub hit_iterations: u32,
+    /// Whether a search stopped at its iteration cap (a miss or a coarse hit that may be wrong).
+    pub capped: bool,
 }
 
 /// Reusable buffers, one set per thread.
@@ -316,19 +344,21 @@ fn walk_sections<R: Real>(
         let mut iters = 0;
         let hit = section(p, balls, active, t, next, &mut iters, &mut scratch.halves);
         found.iterations += iters;
+        found.capped |= iters >= ITERATION_CAP;
         if hit.is_some() {
             found.t = hit;
             found.hit_iterations = iters;
             return found;
         }
         if found.iterations > ITERATION_CAP {
+            found.capped = true;
             return found;
         }
     }
     found
 }
 
-/// (a) Fixed steps of a quarter of the smallest active radius, then bisection to tolerance.
+/// (a) Fixed steps of `p.step` times the smallest active radius, then bisection to tolerance.
 fn march_section<R: Real>(
     p: &FindParams<R>,
     balls: &[RayBall<R>],
@@ -342,7 +372,7 @@ fn march_section<R: Real>(
     for &i in active {
         step = step.min(balls[i as usize].min_radius);
     }
-    let step = step * R::of(0.25);
+    let step = step * p.step;
     let g = |t: R| field(&p.kernel, balls, active, t) - p.isovalue;
     let mut t0 = a;
     *iters += 1;
@@ -449,6 +479,19 @@ fn secant<R: Real>(
             .map(|b| b.projection())
             .filter(|&t| lo < t && t < hi),
     );
+    // A finite step also samples every `step` smallest radii, so that no gap between samples
+    // is wider than that (a thin stretch inside the surface between two projections).
+    let mut gap = R::of(f64::INFINITY);
+    for b in balls.iter() {
+        gap = gap.min(b.min_radius * p.step);
+    }
+    if gap > R::default() && (hi - lo) / gap < R::of(ITERATION_CAP as f64) {
+        let mut t = lo + gap;
+        while t < hi {
+            samples.push(t);
+            t = t + gap;
+        }
+    }
     samples.sort_unstable_by(|x, y| x.partial_cmp(y).unwrap_or(std::cmp::Ordering::Equal));
     let domains = &mut scratch.domains;
     domains.clear();
@@ -541,6 +584,7 @@ fn secant<R: Real>(
         found.t = Some(b);
         found.iterations += iters;
         found.hit_iterations = iters;
+        found.capped |= iters >= 200;
         return found;
     }
     found

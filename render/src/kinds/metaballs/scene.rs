@@ -1,5 +1,6 @@
 //! A metaball state: the balls, their kernel, and the checks made when one arrives.
 
+use crate::geom::frame::LocalFrame;
 use crate::kinds::metaballs::kernel::Kernel;
 use crate::ray::Ray;
 use glam::{Mat3, Quat, Vec3};
@@ -216,6 +217,15 @@ impl MetaballScene {
             Vec3::splat(0.5)
         };
         (normal, albedo, dominant.0)
+    }
+
+    /// The same scene moved into `frame` (each ball's centre, in `f64`).
+    pub fn in_frame(&self, frame: &LocalFrame) -> MetaballScene {
+        let mut s = self.clone();
+        for b in &mut s.balls {
+            b.center = frame.local_from_world(b.center);
+        }
+        s
     }
 
     /// Axis-aligned bounds of every ball's support, or `None` for an empty scene.

@@ -21,6 +21,12 @@ pub struct SurfelCounters {
     pub cache_hits: u64,
     /// Intersections rejected by a clipping surface (§4.3).
     pub clipped: u64,
+    /// Intersections that ran out of MLS iterations without converging (a miss, counted).
+    pub capped: u64,
+    /// Of `rays`, the any-hit (shadow and occlusion) queries, and their sphere + surfel
+    /// tests: the rest are nearest-hit queries, the ones the cache of §4.2.2 serves.
+    pub any_rays: u64,
+    pub any_tests: u64,
 }
 
 impl KindCounters for SurfelCounters {
@@ -34,6 +40,9 @@ impl KindCounters for SurfelCounters {
         self.surfel_updates += o.surfel_updates;
         self.cache_hits += o.cache_hits;
         self.clipped += o.clipped;
+        self.capped += o.capped;
+        self.any_rays += o.any_rays;
+        self.any_tests += o.any_tests;
     }
 
     fn totals(&self) -> RayTotals {

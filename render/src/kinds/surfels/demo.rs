@@ -262,3 +262,36 @@ fn heads(per_side: usize) -> Result<(Arc<SurfelModel>, Simulation, Camera), Surf
     };
     Ok((model, sim, camera))
 }
+
+/// Surfels of demo `kind` at `detail`, without building it (the demo list shows the count
+/// before anyone watches; [`build`] makes exactly this many).
+pub fn surfel_count(kind: SurfelDemoKind, detail: f32) -> usize {
+    let count = |n: f32| ((n * detail) as usize).max(64);
+    match kind {
+        SurfelDemoKind::Balls => 40 * count(6000.0),
+        SurfelDemoKind::Impact => count(150_000.0) + count(3000.0),
+        SurfelDemoKind::Heads => {
+            let per_side = ((60.0 * detail.sqrt()) as usize).max(8);
+            3 * 6 * (per_side + 4) * (per_side + 4)
+        }
+    }
+}
+
+#[cfg(test)]
+mod count_tests {
+    use super::*;
+
+    #[test]
+    fn surfel_count_is_what_build_makes() {
+        for kind in SurfelDemoKind::ALL {
+            for detail in [0.005, 0.02] {
+                let demo = build(kind, detail, 1).expect("valid demo");
+                assert_eq!(
+                    demo.model.len(),
+                    surfel_count(kind, detail),
+                    "{kind:?} {detail}"
+                );
+            }
+        }
+    }
+}

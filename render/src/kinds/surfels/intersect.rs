@@ -16,11 +16,6 @@ use crate::kinds::surfels::prepared::PreparedSurfels;
 use crate::ray::Ray;
 use glam::Vec3;
 
-/// MLS iterations before a leaf gives up.
-pub const MAX_ITERATIONS: u32 = 12;
-/// Convergence: `|f(x)| < EPSILON · h`.
-pub const EPSILON: f32 = 1e-4;
-
 /// A converged, unclipped intersection with one leaf.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct LeafHit {
@@ -78,18 +73,24 @@ pub fn intersect_leaf(
     let h = p.model.support[s] * stretch.max(1e-3);
     let neighbours = p.model.neighbours.row(s);
     let mut x = ray.at(t0);
-    for _ in 0..MAX_ITERATIONS {
+    let (iterations, epsilon) = (p.options.mls_iterations, p.options.mls_epsilon);
+    let inv_h2 = 1.0 / (h * h);
+    for _ in 0..iterations {
         c.iterations += 1;
-        let (mut sw, mut sp, mut sn, mut sc) = (0.0f32, Vec3::ZERO, Vec3::ZERO, Vec3::ZERO);
+        let (mut sw, mut sp, mut sn) = (0.0f32, Vec3::ZERO, Vec3::ZERO);
         for &k in neighbours {
             let mut fresh = false;
             let d = p.surfel(k as usize, &mut fresh);
             c.surfel_updates += fresh as u64;
-            let w = weight((x - d.centre).length() / h);
+            // Outside the support the weight is 0: no square root for those.
+            let r2 = (x - d.centre).length_squared() * inv_h2;
+            if r2 >= 1.0 {
+                continue;
+            }
+            let w = weight(r2.sqrt());
             sw += w;
             sp += w * d.centre;
             sn += w * d.normal;
-            sc += w * p.model.surfels[k as usize].colour;
         }
         if !(sw > 0.0) {
             return None;
@@ -99,7 +100,7 @@ pub fn intersect_leaf(
         if n == Vec3::ZERO {
             return None;
         }
-        if n.dot(x - avg).abs() < EPSILON * h {
+        if n.dot(x - avg).abs() < epsilon * h {
             let t = (x - ray.origin).dot(ray.dir);
             if !(t >= t_min && t <= t_max) || clipped(p, s, x, c) {
                 return None;
@@ -108,7 +109,7 @@ pub fn intersect_leaf(
                 t,
                 position: x,
                 normal: n,
-                colour: sc / sw,
+                colour: colour_at(p, neighbours, x, inv_h2),
                 surfel: s as u32,
             });
         }
@@ -121,11 +122,36 @@ pub fn intersect_leaf(
             return None;
         }
     }
+    c.capped += 1;
     None
+}
+
+/// The weighted average colour of the neighbourhood at the converged point (eq. 12's
+/// weights), computed once per hit rather than on every iteration.
+fn colour_at(p: &PreparedSurfels, neighbours: &[u32], x: Vec3, inv_h2: f32) -> Vec3 {
+    let (mut sw, mut sc) = (0.0f32, Vec3::ZERO);
+    for &k in neighbours {
+        // Every neighbour is already deformed: the iteration that converged read it.
+        let Some(d) = p.surfels[k as usize].get() else {
+            continue;
+        };
+        let r2 = (x - d.centre).length_squared() * inv_h2;
+        if r2 >= 1.0 {
+            continue;
+        }
+        let w = weight(r2.sqrt());
+        sw += w;
+        sc += w * p.model.surfels[k as usize].colour;
+    }
+    sc / sw
 }
 
 /// Whether `x` on surfel `s`'s surface lies outside a surface that clips it (§4.3).
 fn clipped(p: &PreparedSurfels, s: usize, x: Vec3, c: &mut SurfelCounters) -> bool {
+    // Test-only mutation (issue 13): clipping relations ignored; the stability suite's
+    // `sharp_clipped_corners` must fail.
+    #[cfg(isoray_mutation = "surfel-clip")]
+    return false;
     for pair in p.model.clip.row(s) {
         let mut fresh = false;
         let a = *p.surfel(pair[0] as usize, &mut fresh);

@@ -8,6 +8,7 @@ use crate::kinds::counters::SceneCounters;
 use crate::kinds::surfels::counters::SurfelCounters;
 use crate::kinds::surfels::intersect::LeafHit;
 use crate::kinds::surfels::prepared::{Accel, PreparedSurfels};
+use crate::kinds::surfels::scene::SurfelRuntime;
 use crate::kinds::surfels::traverse::{self, FixedView, LazyView};
 use crate::ray::{Hit, Ray};
 
@@ -24,12 +25,8 @@ impl PreparedSurfels {
     ) -> Option<LeafHit> {
         c.rays += 1;
         let hit = match &self.accel {
-            Accel::Lazy { nodes, refined } => {
-                let v = LazyView {
-                    p: self,
-                    nodes,
-                    refined,
-                };
+            Accel::Lazy(nodes) => {
+                let v = LazyView { p: self, nodes };
                 traverse::first_hit(&v, self, ray, t_min, t_max, hint, c)
             }
             Accel::Fixed(nodes) => {
@@ -74,7 +71,15 @@ impl PreparedKind for PreparedSurfels {
         _isovalue: f32,
         c: &mut SurfelCounters,
     ) -> Option<Hit> {
-        self.nearest(ray, t_min, t_max, None, c).map(Self::record)
+        // A camera ray of the effects integrator (no pixel here) starts at 0: with the cache
+        // on, its last nearest surfel is tested first (§4.2.2). The image is the same.
+        if !(self.options.cache && t_min == 0.0) {
+            return self.nearest(ray, t_min, t_max, None, c).map(Self::record);
+        }
+        let key = SurfelRuntime::ray_key(ray);
+        let hit = self.nearest(ray, t_min, t_max, self.runtime.cached_ray(key), c);
+        self.runtime.remember_ray(key, hit.map(|h| h.surfel));
+        hit.map(Self::record)
     }
 
     #[inline]
@@ -87,18 +92,17 @@ impl PreparedKind for PreparedSurfels {
         c: &mut SurfelCounters,
     ) -> Option<f32> {
         c.rays += 1;
+        let before = c.sphere_tests + c.surfel_tests;
         let hit = match &self.accel {
-            Accel::Lazy { nodes, refined } => {
-                let v = LazyView {
-                    p: self,
-                    nodes,
-                    refined,
-                };
+            Accel::Lazy(nodes) => {
+                let v = LazyView { p: self, nodes };
                 traverse::any_hit(&v, self, ray, t_min, t_max, c)
             }
             Accel::Fixed(nodes) => traverse::any_hit(&FixedView(nodes), self, ray, t_min, t_max, c),
         };
         c.hits += hit.is_some() as u64;
+        c.any_rays += 1;
+        c.any_tests += c.sphere_tests + c.surfel_tests - before;
         hit
     }
 
@@ -112,7 +116,8 @@ impl PreparedKind for PreparedSurfels {
         isovalue: f32,
         c: &mut SurfelCounters,
     ) -> Option<Hit> {
-        <PreparedSurfels as PreparedKind>::first_hit(self, ray, t_min, t_max, isovalue, c)
+        let _ = isovalue;
+        self.nearest(ray, t_min, t_max, None, c).map(Self::record)
     }
 
     /// Surfels have no density.

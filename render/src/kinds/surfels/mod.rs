@@ -5,6 +5,7 @@
 pub mod counters;
 pub mod deform;
 pub mod demo;
+pub mod input;
 pub mod intersect;
 pub mod kernel;
 pub mod kind;
@@ -12,6 +13,7 @@ pub mod knn;
 pub mod miniball;
 pub mod model;
 pub mod prepared;
+pub mod reference;
 pub mod rigid;
 pub mod sample;
 pub mod scene;

@@ -10,6 +10,7 @@
 //! (§4.3) stores the two nearest surfels of that group. The hierarchy is
 //! [`crate::kinds::surfels::tree::SphereTree`].
 
+use crate::geom::frame::LocalFrame;
 use crate::kinds::surfels::kernel::{sigma_max, weight, Rows};
 use crate::kinds::surfels::knn::Grid;
 use crate::kinds::surfels::tree::SphereTree;
@@ -160,6 +161,39 @@ impl SurfelModel {
             tree,
             groups,
         })
+    }
+
+    /// The same object moved into `frame` (surfel centres, simulation nodes and the
+    /// hierarchy's sphere centres, in `f64`; everything else is translation-invariant).
+    /// O(surfels): only a state far from the origin pays it (see [`LocalFrame`]).
+    pub fn in_frame(&self, frame: &LocalFrame) -> SurfelModel {
+        let mut surfels = self.surfels.clone();
+        for s in &mut surfels {
+            s.centre = frame.local_from_world(s.centre);
+        }
+        let mut tree = self.tree.clone();
+        for n in &mut tree.nodes {
+            n.centre = frame.local_from_world(n.centre);
+        }
+        SurfelModel {
+            surfels,
+            nodes: self
+                .nodes
+                .iter()
+                .map(|&p| frame.local_from_world(p))
+                .collect(),
+            node_mass: self.node_mass.clone(),
+            node_body: self.node_body.clone(),
+            bodies: self.bodies,
+            embed: self.embed.clone(),
+            neighbours: self.neighbours.clone(),
+            support: self.support.clone(),
+            clip: self.clip.clone(),
+            leaf_radius: self.leaf_radius.clone(),
+            orient: self.orient.clone(),
+            tree,
+            groups: self.groups,
+        }
     }
 
     pub fn len(&self) -> usize {

@@ -2,13 +2,14 @@
 //! (deforming-point-sampled-surfaces.txt §4.1.2, §4.4, §5's baseline, §6's heuristic).
 //!
 //! How it works: preparing a step computes only the optimal rigid frame and the per-node
-//! relative terms (linear in the simulation nodes). In lazy mode every inner sphere and every
-//! surfel has a once-only slot for this step, filled by whichever ray touches it first; a
-//! filled value is a pure function of the step (eq. 4 and 9 for spheres, eq. 1 for surfels),
-//! so it is the same whatever thread computes it, and no lock is taken. A sphere seen while
-//! both its children are filled is tightened by eq. 11 and the smallest radius so far kept
-//! in an atomic (`fetch_min`); which rays see the tighter radius depends on timing, but every radius in use is a
-//! conservative bound, so the set of hits, and the image, do not (the traversal returns the
+//! relative terms (linear in the simulation nodes). In lazy mode every inner sphere has a
+//! [`LazyNode`] record (its children, centre and radius together) and every surfel a
+//! once-only slot for this step, filled by whichever ray touches it first; a filled value is
+//! a pure function of the step (eq. 4 and 9 for spheres, eq. 1 for surfels), so it is the
+//! same whatever thread computes it, and no lock is taken. A traversal that has updated both
+//! children of a sphere tightens it by eq. 11 (the radius kept by `fetch_min`); which rays
+//! see the tighter radius depends on timing, but every radius in use is a conservative
+//! bound, so the set of hits, and the image, do not (the traversal returns the
 //! nearest hit, ties to the lower surfel).
 
 use crate::kinds::surfels::deform::{
@@ -31,16 +32,68 @@ pub const LOOSE_GRADIENT: f32 = 4.0;
 pub const LOOSE_MOVE: f32 = 2.0;
 /// Auto mode refits eagerly when the previous step touched more than this share of surfels.
 pub const EAGER_SHARE: f32 = 0.6;
-/// `refined` slot not yet tightened by eq. 11.
-pub const UNSET: u32 = u32::MAX;
+/// A [`LazyNode`]'s radius before the node is updated (above every positive `f32`'s bits).
+const EMPTY: u32 = u32::MAX;
+
+/// One sphere of a lazy step, with the node's children alongside so that a traversal reads
+/// one 24-byte record per node: empty until a ray first touches it, then its eq. 4 centre
+/// and its radius (eq. 9, lowered by eq. 11 once both children are updated); a leaf's is
+/// its deformed surfel's sphere.
+///
+/// Lock-free and deterministic: the centre and eq. 9 radius are a pure function of the
+/// step, so threads that race to fill a node store the same bits; the radius is written only
+/// by `fetch_min` (a positive `f32`'s bits order like its value), so it only ever shrinks
+/// and the first fill publishes the centre (release, read with acquire).
+#[derive(Debug)]
+pub struct LazyNode {
+    pub kids: [u32; 2],
+    centre: [AtomicU32; 3],
+    radius: AtomicU32,
+}
+
+impl LazyNode {
+    fn new(kids: [u32; 2]) -> LazyNode {
+        LazyNode {
+            kids,
+            centre: [AtomicU32::new(0), AtomicU32::new(0), AtomicU32::new(0)],
+            radius: AtomicU32::new(EMPTY),
+        }
+    }
+
+    /// The sphere in use, if the node is updated.
+    #[inline]
+    pub fn get(&self) -> Option<(Vec3, f32)> {
+        let r = self.radius.load(Ordering::Acquire);
+        if r == EMPTY {
+            return None;
+        }
+        let c = self
+            .centre
+            .each_ref()
+            .map(|a| f32::from_bits(a.load(Ordering::Relaxed)));
+        Some((Vec3::from_array(c), f32::from_bits(r)))
+    }
+
+    /// Fills the node with its eq. 4 centre and eq. 9 radius.
+    #[inline]
+    pub fn set(&self, centre: Vec3, radius: f32) {
+        for (a, v) in self.centre.iter().zip(centre.to_array()) {
+            a.store(v.to_bits(), Ordering::Relaxed);
+        }
+        self.radius.fetch_min(radius.to_bits(), Ordering::Release);
+    }
+
+    /// Lowers an updated node's radius to `radius` if that is smaller (eq. 11).
+    #[inline]
+    pub fn lower(&self, radius: f32) {
+        self.radius.fetch_min(radius.to_bits(), Ordering::Relaxed);
+    }
+}
 
 /// The hierarchy of one step.
 pub enum Accel {
     /// The model's hierarchy, spheres filled on first touch.
-    Lazy {
-        nodes: Vec<OnceLock<(Vec3, f32)>>,
-        refined: Vec<AtomicU32>,
-    },
+    Lazy(Vec<LazyNode>),
     /// Every sphere known before tracing (eager refit on the model's topology, or a rebuilt
     /// tree); leaves carry their surfel's deformed sphere.
     Fixed(Vec<TreeNode>),
@@ -114,14 +167,11 @@ impl PreparedSurfels {
             build_ms: 0.0,
         };
         p.accel = match used {
-            UpdateMode::Lazy | UpdateMode::Auto => Accel::Lazy {
-                nodes: (0..p.model.tree.nodes.len())
-                    .map(|_| OnceLock::new())
+            UpdateMode::Lazy | UpdateMode::Auto => Accel::Lazy(
+                (p.model.tree.nodes.iter())
+                    .map(|n| LazyNode::new(n.kids))
                     .collect(),
-                refined: (0..p.model.tree.nodes.len())
-                    .map(|_| AtomicU32::new(UNSET))
-                    .collect(),
-            },
+            ),
             UpdateMode::Eager => Accel::Fixed(p.eager_refit()),
             UpdateMode::Rebuild => Accel::Fixed(p.rebuild()),
         };
@@ -206,17 +256,14 @@ impl PreparedSurfels {
     /// the radius in use, or `None` if not updated.
     pub fn current_spheres(&self) -> Vec<Option<(Vec3, f32)>> {
         match &self.accel {
-            Accel::Lazy { nodes, refined } => (0..nodes.len())
-                .map(|i| {
-                    let n = self.model.tree.nodes[i];
+            Accel::Lazy(nodes) => (nodes.iter().zip(&self.model.tree.nodes))
+                .map(|(lazy, n)| {
                     if n.is_leaf() {
                         return self.surfels[n.kids[1] as usize]
                             .get()
                             .map(|d| (d.centre, d.leaf_radius));
                     }
-                    let (c, r) = *nodes[i].get()?;
-                    let rf = refined[i].load(Ordering::Relaxed);
-                    Some((c, if rf == UNSET { r } else { f32::from_bits(rf) }))
+                    lazy.get()
                 })
                 .collect(),
             Accel::Fixed(nodes) => nodes.iter().map(|n| Some((n.centre, n.radius))).collect(),

@@ -3,10 +3,12 @@
 //! to frame (the per-pixel sphere-node cache of deforming-point-sampled-surfaces.txt §4.2.2
 //! and the statistics the lazy-or-refit heuristic reads).
 
+use crate::geom::frame::LocalFrame;
 use crate::kinds::surfels::deform::{check_step, deform_surfel};
 use crate::kinds::surfels::model::{SurfelError, SurfelModel};
+use crate::ray::Ray;
 use glam::{Mat3, Vec3};
-use std::sync::atomic::{AtomicU32, Ordering};
+use std::sync::atomic::{AtomicU32, AtomicU64, Ordering};
 use std::sync::Arc;
 
 /// How a step's hierarchy follows the deformation.
@@ -34,11 +36,26 @@ impl UpdateMode {
 }
 
 /// Tracing options of a surfel scene.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SurfelOptions {
     pub mode: UpdateMode,
     /// Test each primary ray's cached sphere node first (§4.2.2).
     pub cache: bool,
+    /// MLS iterations (§4.2.1) before a leaf gives up (counted as capped).
+    pub mls_iterations: u32,
+    /// Convergence: `|f(x)| < mls_epsilon · h`.
+    pub mls_epsilon: f32,
+}
+
+impl SurfelOptions {
+    /// `mode` and `cache` with the default MLS settings.
+    pub fn new(mode: UpdateMode, cache: bool) -> SurfelOptions {
+        SurfelOptions {
+            mode,
+            cache,
+            ..SurfelOptions::default()
+        }
+    }
 }
 
 impl Default for SurfelOptions {
@@ -46,19 +63,34 @@ impl Default for SurfelOptions {
         SurfelOptions {
             mode: UpdateMode::Auto,
             cache: true,
+            mls_iterations: MLS_ITERATIONS,
+            mls_epsilon: MLS_EPSILON,
         }
     }
 }
+
+/// MLS iterations before a leaf gives up, by default (the accuracy study: docs/accuracy.md).
+pub const MLS_ITERATIONS: u32 = 12;
+/// Default convergence threshold, relative to the support radius `h`.
+pub const MLS_EPSILON: f32 = 1e-4;
 
 /// Pixels the cache distinguishes: `(y · CACHE_ROW + x) mod CACHE_SLOTS` (other sizes alias,
 /// which costs work, never correctness: a cached node is only a first guess).
 const CACHE_ROW: u32 = 2048;
 const CACHE_SLOTS: usize = 1 << 21;
+/// Slots of the per-ray cache (rays without a pixel: the effects integrator's camera rays).
+const RAY_SLOTS: usize = 1 << 19;
 
 /// What a surfel scene keeps between steps; shared by all steps of one object.
 pub struct SurfelRuntime {
     /// Per pixel: 1 + the surfel whose leaf held the last nearest hit, or 0.
     cache: Vec<AtomicU32>,
+    /// Per ray (keyed by a hash of its origin and direction bits): the hash's upper 32 bits
+    /// as a tag, and 1 + the surfel of its last nearest hit, or 0. The effects integrator
+    /// asks for a camera ray's nearest hit without its pixel; the same camera sends the very
+    /// same ray through a pixel every frame, so its hash finds last frame's surfel (§4.2.2
+    /// "for each ray we store the sphere node..."). A moving camera finds no tags: no hint.
+    rays: Vec<AtomicU64>,
     /// Share of surfels the last lazy step touched, as `f32` bits.
     touched: AtomicU32,
 }
@@ -75,6 +107,7 @@ impl Default for SurfelRuntime {
     fn default() -> Self {
         SurfelRuntime {
             cache: (0..CACHE_SLOTS).map(|_| AtomicU32::new(0)).collect(),
+            rays: (0..RAY_SLOTS).map(|_| AtomicU64::new(0)).collect(),
             touched: AtomicU32::new(0f32.to_bits()),
         }
     }
@@ -102,6 +135,37 @@ impl SurfelRuntime {
         for c in &self.cache {
             c.store(0, Ordering::Relaxed);
         }
+        for c in &self.rays {
+            c.store(0, Ordering::Relaxed);
+        }
+    }
+
+    /// The key of a ray without a pixel: its slot and tag.
+    #[inline]
+    pub fn ray_key(ray: &Ray) -> (usize, u32) {
+        let mut h: u64 = 0;
+        for v in [ray.origin, ray.dir] {
+            for b in v.to_array() {
+                h = (h.rotate_left(5) ^ b.to_bits() as u64).wrapping_mul(0x51_7c_c1_b7_27_22_0a_95);
+            }
+        }
+        ((h as usize) % RAY_SLOTS, (h >> 32) as u32)
+    }
+
+    /// The surfel cached for the ray of `key`, if its tag matches.
+    #[inline]
+    pub fn cached_ray(&self, (slot, tag): (usize, u32)) -> Option<u32> {
+        let v = self.rays[slot].load(Ordering::Relaxed);
+        if (v >> 32) as u32 != tag {
+            return None;
+        }
+        (v as u32).checked_sub(1)
+    }
+
+    #[inline]
+    pub fn remember_ray(&self, (slot, tag): (usize, u32), surfel: Option<u32>) {
+        let v = ((tag as u64) << 32) | surfel.map_or(0, |s| s as u64 + 1);
+        self.rays[slot].store(v, Ordering::Relaxed);
     }
 
     pub fn touched_share(&self) -> f32 {
@@ -189,8 +253,55 @@ impl SurfelScene {
         (lo.cmple(hi).all()).then_some((lo, hi))
     }
 
+    /// The world bounds of the deformed simulation nodes (rest position plus displacement):
+    /// O(nodes), what the [`LocalFrame`] of a step is chosen from (the surfels follow the
+    /// nodes they are embedded in).
+    pub fn node_bounds(&self) -> Option<(Vec3, Vec3)> {
+        let moved: Vec<Vec3> = (self.model.nodes.iter())
+            .zip(self.displacement.iter())
+            .map(|(p, u)| *p + *u)
+            .collect();
+        bounds_of(&moved)
+    }
+
+    /// This step moved into `frame`, the move split where the magnitude is: a rest model far
+    /// from the origin is moved by its own frame (a new model, O(surfels)), the rest of the
+    /// move is taken off the displacements (O(nodes)), each in `f64`. Jacobians are
+    /// translation-invariant. A displacement that carries the object far away thus never
+    /// meets a rest position of the opposite sign in `f32` (eq. 1 sums them).
+    pub fn in_frame(&self, frame: &LocalFrame) -> SurfelScene {
+        let mut s = self.clone();
+        if frame.is_world() {
+            return s;
+        }
+        let rest = LocalFrame::for_bounds(bounds_of(&self.model.nodes));
+        if !rest.is_world() {
+            s.model = Arc::new(self.model.in_frame(&rest));
+        }
+        let shift = LocalFrame {
+            origin: frame.origin - rest.origin,
+        };
+        s.displacement = self
+            .displacement
+            .iter()
+            .map(|&u| shift.local_from_world(u))
+            .collect();
+        s
+    }
+
     /// Surfels have no scalar field: every isovalue shows the same surface.
     pub fn isovalue_range(&self) -> (f32, f32) {
         (f32::MIN, f32::MAX)
     }
+}
+
+/// Axis-aligned bounds of `points`, or `None` for none.
+fn bounds_of(points: &[Vec3]) -> Option<(Vec3, Vec3)> {
+    let lo = points
+        .iter()
+        .fold(Vec3::splat(f32::INFINITY), |a, p| a.min(*p));
+    let hi = points
+        .iter()
+        .fold(Vec3::splat(f32::NEG_INFINITY), |a, p| a.max(*p));
+    (lo.cmple(hi).all()).then_some((lo, hi))
 }

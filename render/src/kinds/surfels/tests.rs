@@ -148,7 +148,7 @@ mod containment {
             let (u, g) = random_step(&mut rng, &model, scale);
             let scene = SurfelScene::new(
                 model.clone(), u.into(), g.into(),
-                SurfelOptions { mode: UpdateMode::Lazy, cache: false },
+                SurfelOptions::new(UpdateMode::Lazy, false),
                 Arc::new(SurfelRuntime::default()),
             ).expect("valid");
             let p = PreparedSurfels::new(scene);
@@ -177,7 +177,7 @@ fn prepare(
     cache: bool,
     rt: &Arc<SurfelRuntime>,
 ) -> PreparedSurfels {
-    PreparedSurfels::new(demo.scene(step, SurfelOptions { mode, cache }, rt.clone()))
+    PreparedSurfels::new(demo.scene(step, SurfelOptions::new(mode, cache), rt.clone()))
 }
 
 /// Depth per pixel (primary rays through the kind contract's tile query).

@@ -10,89 +10,79 @@
 use crate::kinds::surfels::counters::SurfelCounters;
 use crate::kinds::surfels::deform::{node_sphere, radius_from_children};
 use crate::kinds::surfels::intersect::{intersect_leaf, LeafHit};
-use crate::kinds::surfels::prepared::{PreparedSurfels, UNSET};
-use crate::kinds::surfels::tree::TreeNode;
+use crate::kinds::surfels::prepared::{LazyNode, PreparedSurfels};
+use crate::kinds::surfels::tree::{TreeNode, LEAF};
 use crate::ray::Ray;
 use glam::Vec3;
-use std::sync::atomic::{AtomicU32, Ordering};
-use std::sync::OnceLock;
 
 /// Deep enough for any median-split tree of `u32` surfels (depth ≤ 33, two entries a level).
 const STACK: usize = 80;
 
 /// Where a traversal gets node spheres.
 pub trait Spheres {
-    fn node(&self, n: u32) -> TreeNode;
+    /// Node `n`'s children (`[LEAF, surfel]` for a leaf).
+    fn kids(&self, n: u32) -> [u32; 2];
     /// The sphere of node `n`, updating it if this view is lazy.
     fn sphere(&self, n: u32, c: &mut SurfelCounters) -> (Vec3, f32);
     /// Whether node `n` already has its sphere for this step.
     fn updated(&self, n: u32) -> bool;
+    /// Told the spheres of both children of inner node `n` (whose sphere is `centre`,
+    /// `radius`): a lazy view tightens `n` by eq. 11.
+    fn tighten(&self, _n: u32, _centre: Vec3, _radius: f32, _kids: [(Vec3, f32); 2]) {}
 }
 
 /// The model's hierarchy, updated on first touch.
 pub struct LazyView<'a> {
     pub p: &'a PreparedSurfels,
-    pub nodes: &'a [OnceLock<(Vec3, f32)>],
-    pub refined: &'a [AtomicU32],
-}
-
-impl LazyView<'_> {
-    /// The sphere in use for node `n` if it has one, without updating anything.
-    #[inline]
-    fn peek(&self, n: u32) -> Option<(Vec3, f32)> {
-        let node = self.p.model.tree.nodes[n as usize];
-        if node.is_leaf() {
-            return self.p.surfels[node.kids[1] as usize]
-                .get()
-                .map(|d| (d.centre, d.leaf_radius));
-        }
-        let (c, r) = *self.nodes[n as usize].get()?;
-        let rf = self.refined[n as usize].load(Ordering::Relaxed);
-        Some((c, if rf == UNSET { r } else { f32::from_bits(rf) }))
-    }
+    pub nodes: &'a [LazyNode],
 }
 
 impl Spheres for LazyView<'_> {
     #[inline]
-    fn node(&self, n: u32) -> TreeNode {
-        self.p.model.tree.nodes[n as usize]
+    fn kids(&self, n: u32) -> [u32; 2] {
+        self.nodes[n as usize].kids
     }
 
     #[inline]
     fn sphere(&self, n: u32, c: &mut SurfelCounters) -> (Vec3, f32) {
-        let node = self.p.model.tree.nodes[n as usize];
-        if node.is_leaf() {
+        let node = &self.nodes[n as usize];
+        if let Some(s) = node.get() {
+            return s;
+        }
+        if node.kids[0] == LEAF {
+            // The leaf's sphere is copied into its record, so that later tests read the
+            // tree's records only (the surfels lie in input order, not tree order).
             let mut fresh = false;
             let d = self.p.surfel(node.kids[1] as usize, &mut fresh);
             c.surfel_updates += fresh as u64;
+            node.set(d.centre, d.leaf_radius);
             return (d.centre, d.leaf_radius);
         }
-        let (centre, r9) = *self.nodes[n as usize].get_or_init(|| {
-            c.node_updates += 1;
-            node_sphere(&self.p.model, &self.p.step, n as usize)
-        });
-        // Eq. 11 whenever both children are updated (§4.4: "if a node is already visited
-        // before, update the radius using Equation 11"); radii only ever shrink, and a
-        // positive f32's bits order like the value, so `fetch_min` keeps the tightest.
-        let rf = self.refined[n as usize].load(Ordering::Relaxed);
-        let mut r = if rf == UNSET { r9 } else { f32::from_bits(rf) };
-        if let (Some(a), Some(b)) = (self.peek(node.kids[0]), self.peek(node.kids[1])) {
-            let r11 = radius_from_children(centre, [a, b]);
-            if r11 < r {
-                r = r11;
-                self.refined[n as usize].fetch_min(r.to_bits(), Ordering::Relaxed);
-            }
+        c.node_updates += 1;
+        let (centre, radius) = node_sphere(&self.p.model, &self.p.step, n as usize);
+        node.set(centre, radius);
+        (centre, radius)
+    }
+
+    /// Eq. 11 once both children are updated (§4.4: "if a node is already visited before,
+    /// update the radius using Equation 11"): the traversal calls this right after it has
+    /// updated and tested both children, so their spheres come for free; the node's radius
+    /// is written only when it actually shrinks.
+    #[inline]
+    fn tighten(&self, n: u32, centre: Vec3, radius: f32, kids: [(Vec3, f32); 2]) {
+        let r11 = radius_from_children(centre, kids);
+        if r11 < radius {
+            self.nodes[n as usize].lower(r11);
         }
-        (centre, r)
     }
 
     #[inline]
     fn updated(&self, n: u32) -> bool {
-        let node = self.p.model.tree.nodes[n as usize];
-        if node.is_leaf() {
+        let node = &self.nodes[n as usize];
+        if node.kids[0] == LEAF {
             self.p.surfels[node.kids[1] as usize].get().is_some()
         } else {
-            self.nodes[n as usize].get().is_some()
+            node.get().is_some()
         }
     }
 }
@@ -102,8 +92,8 @@ pub struct FixedView<'a>(pub &'a [TreeNode]);
 
 impl Spheres for FixedView<'_> {
     #[inline]
-    fn node(&self, n: u32) -> TreeNode {
-        self.0[n as usize]
+    fn kids(&self, n: u32) -> [u32; 2] {
+        self.0[n as usize].kids
     }
 
     #[inline]
@@ -151,43 +141,46 @@ pub fn first_hit<V: Spheres>(
         best = intersect_leaf(p, ray, s as usize, t_min, t_max, c);
         c.cache_hits += best.is_some() as u64;
     }
-    let mut stack = [(0u32, 0f32); STACK];
+    let mut stack = [(0u32, 0f32, Vec3::ZERO, 0f32); STACK];
     let mut top = 0;
     c.sphere_tests += 1;
     let (rc, rr) = v.sphere(0, c);
     if let Some(t) = sphere_entry(ray, rc, rr, t_min, t_max) {
-        stack[0] = (0, t);
+        stack[0] = (0, t, rc, rr);
         top = 1;
     }
     while top > 0 {
         top -= 1;
-        let (n, entry) = stack[top];
+        let (n, entry, centre, radius) = stack[top];
         let limit = best.map_or(t_max, |b| b.t);
         if entry > limit {
             continue;
         }
-        let node = v.node(n);
-        if node.is_leaf() {
-            if Some(node.kids[1]) == hint {
+        let kids_of = v.kids(n);
+        if kids_of[0] == LEAF {
+            if Some(kids_of[1]) == hint {
                 continue;
             }
-            if let Some(h) = intersect_leaf(p, ray, node.kids[1] as usize, t_min, limit, c) {
+            if let Some(h) = intersect_leaf(p, ray, kids_of[1] as usize, t_min, limit, c) {
                 if best.is_none_or(|b| h.before(&b)) {
                     best = Some(h);
                 }
             }
             continue;
         }
-        let mut kids = [(0u32, f32::INFINITY); 2];
+        let mut kids = [(0u32, f32::INFINITY, Vec3::ZERO, 0f32); 2];
+        let mut spheres = [(Vec3::ZERO, 0f32); 2];
         let mut count = 0;
-        for k in node.kids {
+        for (slot, k) in kids_of.into_iter().enumerate() {
             c.sphere_tests += 1;
             let (kc, kr) = v.sphere(k, c);
+            spheres[slot] = (kc, kr);
             if let Some(t) = sphere_entry(ray, kc, kr, t_min, limit) {
-                kids[count] = (k, t);
+                kids[count] = (k, t, kc, kr);
                 count += 1;
             }
         }
+        v.tighten(n, centre, radius, spheres);
         if count == 2 && kids[1].1 > kids[0].1 {
             kids.swap(0, 1);
         }
@@ -222,15 +215,14 @@ pub fn any_hit<V: Spheres>(
         if sphere_entry(ray, sc, sr, t_min, t_max).is_none() {
             continue;
         }
-        let node = v.node(n);
-        if node.is_leaf() {
-            if let Some(h) = intersect_leaf(p, ray, node.kids[1] as usize, t_min, t_max, c) {
+        let [a, b] = v.kids(n);
+        if a == LEAF {
+            if let Some(h) = intersect_leaf(p, ray, b as usize, t_min, t_max, c) {
                 return Some(h.t);
             }
             continue;
         }
         // §4.4: if only one child is updated, it goes on top (is tried first).
-        let [a, b] = node.kids;
         let (first, second) = if !v.updated(a) && v.updated(b) {
             (b, a)
         } else {

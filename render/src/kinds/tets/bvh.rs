@@ -231,6 +231,22 @@ impl Bvh {
         self.kind
     }
 
+    /// The tree's surface-area cost: the summed surface areas of every node's box (`xyz`)
+    /// over the root's, the expected number of nodes a random ray through the root visits
+    /// (the SAH with unit costs). Scale-free, so a refitted tree can be compared with the
+    /// same tree when it was built. `0` for an empty tree.
+    pub fn area_cost(&self) -> f64 {
+        let area = |n: &Node| {
+            let d = (n.hi.xyz() - n.lo.xyz()).max(glam::Vec3::ZERO).as_dvec3();
+            2.0 * (d.x * d.y + d.y * d.z + d.z * d.x)
+        };
+        let root = area(&self.nodes[0]);
+        if self.leaf_tets.is_empty() || !(root > 0.0) {
+            return 0.0;
+        }
+        self.nodes.iter().map(area).sum::<f64>() / root
+    }
+
     pub fn nodes(&self) -> &[Node] {
         &self.nodes
     }

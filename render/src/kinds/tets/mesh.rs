@@ -3,7 +3,7 @@
 
 use crate::kinds::tets::bvh::{BuildKind, Bvh};
 use glam::Vec3;
-use std::sync::{Arc, OnceLock};
+use std::sync::{Arc, Mutex, OnceLock};
 
 /// At most this many isosurfaces are traced at once (§7, "up to four different isosurfaces").
 pub const MAX_ISOSURFACES: usize = 4;
@@ -61,6 +61,17 @@ pub struct TetMesh {
     shared: [OnceLock<Arc<Bvh>>; 2],
     /// The tets around each vertex (for smoothed normals), built on first use.
     vertex_tets: OnceLock<VertexTets>,
+    /// For a deforming mesh, per build kind: the tree whose structure steps refit, the last
+    /// one rebuilt when a refit degraded too far (see `prepared::REFIT_DEGRADATION`).
+    moving: [Mutex<Option<Topology>>; 2],
+}
+
+/// The structure a deforming mesh's steps refit, and its surface-area cost when it was
+/// built ([`Bvh::area_cost`]).
+#[derive(Clone, Debug)]
+pub struct Topology {
+    pub bvh: Arc<Bvh>,
+    pub built_cost: f64,
 }
 
 /// The tets around each vertex, in increasing tet order: those of vertex `v` are
@@ -104,6 +115,7 @@ impl TetMesh {
             tets,
             shared: [OnceLock::new(), OnceLock::new()],
             vertex_tets: OnceLock::new(),
+            moving: [Mutex::new(None), Mutex::new(None)],
         })
     }
 
@@ -143,6 +155,33 @@ impl TetMesh {
         };
         slot.get_or_init(|| Arc::new(Bvh::build(&self.tets, &self.vertices, kind)))
             .clone()
+    }
+
+    /// The structure deforming steps of `kind` refit now: the shared BVH over the rest
+    /// positions until a refit degraded and a step rebuilt it.
+    pub fn moving_topology(&self, kind: BuildKind) -> Topology {
+        let mut slot = self.moving_slot(kind);
+        slot.get_or_insert_with(|| {
+            let bvh = self.shared_bvh(kind);
+            Topology {
+                built_cost: bvh.area_cost(),
+                bvh,
+            }
+        })
+        .clone()
+    }
+
+    /// Makes `topology` (a tree just built for a deformed step) the one later steps refit.
+    pub fn set_moving_topology(&self, kind: BuildKind, topology: Topology) {
+        *self.moving_slot(kind) = Some(topology);
+    }
+
+    fn moving_slot(&self, kind: BuildKind) -> std::sync::MutexGuard<'_, Option<Topology>> {
+        let slot = match kind {
+            BuildKind::Bih => &self.moving[0],
+            BuildKind::Sah => &self.moving[1],
+        };
+        slot.lock().unwrap_or_else(|e| e.into_inner())
     }
 
     /// The tets around each vertex (built on first call; the connectivity never changes).
@@ -365,29 +404,36 @@ pub fn signed_volume6(p: [Vec3; 4]) -> f64 {
 
 fn check_volumes(positions: &[Vec3], tets: &[[u32; 4]]) -> Result<(), TetError> {
     for (tet, t) in tets.iter().enumerate() {
-        let p = t.map(|i| positions[i as usize]);
-        let volume6 = signed_volume6(p);
-        let d = p.map(|v| v.as_dvec3());
-        let mut longest2 = 0.0f64;
-        for i in 0..4 {
-            for j in i + 1..4 {
-                longest2 = longest2.max((d[i] - d[j]).length_squared());
-            }
+        check_tet(tet, t.map(|i| positions[i as usize]))?;
+    }
+    Ok(())
+}
+
+/// The check every tet gets when a mesh is made or a step moves it: not degenerate (volume
+/// above [`DEGENERATE_RELATIVE_VOLUME`] of its longest edge cubed) and not inverted; `tet`
+/// names it in the error.
+pub fn check_tet(tet: usize, p: [Vec3; 4]) -> Result<(), TetError> {
+    let volume6 = signed_volume6(p);
+    let d = p.map(|v| v.as_dvec3());
+    let mut longest2 = 0.0f64;
+    for i in 0..4 {
+        for j in i + 1..4 {
+            longest2 = longest2.max((d[i] - d[j]).length_squared());
         }
-        let relative = volume6.abs() / 6.0 / (longest2 * longest2.sqrt());
-        if !(relative > DEGENERATE_RELATIVE_VOLUME) {
-            return Err(TetError::Degenerate {
-                tet,
-                volume: volume6 / 6.0,
-                relative,
-            });
-        }
-        if volume6 < 0.0 {
-            return Err(TetError::Inverted {
-                tet,
-                volume: volume6 / 6.0,
-            });
-        }
+    }
+    let relative = volume6.abs() / 6.0 / (longest2 * longest2.sqrt());
+    if !(relative > DEGENERATE_RELATIVE_VOLUME) {
+        return Err(TetError::Degenerate {
+            tet,
+            volume: volume6 / 6.0,
+            relative,
+        });
+    }
+    if volume6 < 0.0 {
+        return Err(TetError::Inverted {
+            tet,
+            volume: volume6 / 6.0,
+        });
     }
     Ok(())
 }

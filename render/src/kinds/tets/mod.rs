@@ -17,13 +17,15 @@
 //! - [`prepared`]: one time step ready to trace: vertex data, the BVH (rebuilt per step or a
 //!   shared one refitted, §6), smoothed normals.
 //! - [`reference`]: the `f64` reference intersection used by tests.
-//! - [`generate`]: deterministic generated meshes and analytic fields (demo and benchmarks).
+//! - [`generate`]: deterministic generated meshes and analytic fields (demo and benchmarks);
+//!   [`bucky`]: the deforming bucky ball demo (Fig. 4).
 //!
 //! The connectivity and rest positions ([`TetMesh`]) are static and shared, behind an `Arc`,
 //! by every step; a step ([`TetScene`]) adds the per-vertex scalars and, for a deforming
 //! mesh, per-vertex positions. Both are checked when made and immutable afterwards, so
 //! everything downstream may index without checks.
 
+pub mod bucky;
 pub mod bvh;
 pub mod counters;
 pub mod generate;
@@ -43,8 +45,8 @@ pub use crate::geom::clip::ClipBox;
 pub use bvh::{BuildKind, Bvh, BvhStats};
 pub use counters::TetCounters;
 pub use mesh::{
-    colormap, signed_volume6, TetError, TetMesh, TetScene, VertexTets, DEGENERATE_RELATIVE_VOLUME,
-    MAX_ISOSURFACES,
+    check_tet, colormap, signed_volume6, TetError, TetMesh, TetScene, VertexTets,
+    DEGENERATE_RELATIVE_VOLUME, MAX_ISOSURFACES,
 };
 pub use packet::{PacketScratch, RayPacket};
 pub use prepared::{Normals, PreparedTets, TetOptions, TimeScheme};

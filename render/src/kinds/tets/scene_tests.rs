@@ -556,3 +556,61 @@ fn the_effects_layer_covers_tets() {
     });
     assert!(all.get(RayKind::Shadow) > 0 && all.get(RayKind::Transparency) > 0);
 }
+
+/// `p` turned about `z` by `turns` full turns at the top, none at the bottom (`z = -1`).
+fn twisted(p: Vec3, turns: f32) -> Vec3 {
+    let a = std::f32::consts::TAU * turns * (p.z + 1.0) / 2.0;
+    let (s, c) = a.sin_cos();
+    Vec3::new(c * p.x - s * p.y, s * p.x + c * p.y, p.z)
+}
+
+#[test]
+fn a_deforming_mesh_refits_until_the_tree_degrades_then_rebuilds() {
+    use crate::kinds::tets::prepared::REFIT_DEGRADATION;
+    let (mesh, scalars) = radial_mesh(10);
+    let options = TetOptions {
+        normals: Normals::Faceted,
+        ..TetOptions::default()
+    };
+    let rest_cost = mesh.shared_bvh(options.build).area_cost();
+    let q = TetQuery::single(0.7);
+    let mut log = Vec::new();
+    for turns in [0.05, 0.25, 1.0, 1.02] {
+        let moved: Arc<[Vec3]> = mesh.vertices().iter().map(|p| twisted(*p, turns)).collect();
+        let step = TetScene::new(mesh.clone(), scalars.clone())
+            .expect("valid")
+            .with_positions(moved)
+            .expect("a twist inverts no tet");
+        let refit = prepared(&step, options);
+        let fresh = prepared(
+            &step,
+            TetOptions {
+                time: TimeScheme::Rebuild,
+                ..options
+            },
+        );
+        // Whatever the tree, the same hits.
+        assert_eq!(
+            hits_single(&refit, &camera(), 32, 24, &q),
+            hits_single(&fresh, &camera(), 32, 24, &q),
+            "{turns} turns"
+        );
+        refit
+            .bvh()
+            .validate(refit.vertices())
+            .expect("a sound tree");
+        log.push((turns, refit.rebuilt(), refit.bvh().area_cost()));
+        eprintln!(
+            "{turns} turns: rebuilt {}, area cost {:.2} (rest {rest_cost:.2}, fresh {:.2})",
+            refit.rebuilt(),
+            refit.bvh().area_cost(),
+            fresh.bvh().area_cost()
+        );
+    }
+    // A small twist refits; a full turn swells the refitted boxes past the bound and
+    // rebuilds; the next step, close to it, refits the rebuilt structure.
+    assert!(!log[0].1 && !log[1].1, "{log:?}");
+    assert!(log[2].1, "{log:?}");
+    assert!(!log[3].1, "{log:?}");
+    assert!(log[3].2 <= REFIT_DEGRADATION * log[2].2, "{log:?}");
+}

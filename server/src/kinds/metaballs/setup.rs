@@ -45,7 +45,7 @@ pub fn check_value(col: usize, v: f32) -> Option<String> {
 }
 
 /// Kernel names accepted in `metaballs.kernel`.
-const KERNEL_NAMES: &str = "wyvill, quartic, tutorial, power1, power2, power3, power4";
+pub const KERNEL_NAMES: &str = "wyvill, quartic, tutorial, power1, power2, power3, power4";
 
 fn kernel(name: &str) -> Result<Kernel, KindError> {
     Ok(match name {

@@ -26,7 +26,7 @@ pub fn json_columns(step: &JsonStep) -> Result<usize, KindError> {
     ];
     for (name, len) in lengths {
         if let Some(len) = len.filter(|&l| l != rows) {
-            return Err(KindError::invalid(
+            return Err(KindError::relational(
                 "bad_shape",
                 format!("{name} has {len} entries but positions has {rows}"),
             )
@@ -34,14 +34,16 @@ pub fn json_columns(step: &JsonStep) -> Result<usize, KindError> {
         }
     }
     if columns == 8 && (step.radii.is_none() || step.strengths.is_none()) {
-        return Err(KindError::invalid(
+        return Err(KindError::relational(
             "bad_shape",
             "colors need radii and strengths too (rows are x y z radius strength r g b)",
         )
         .field("colors"));
     }
     if columns == 5 && step.radii.is_none() {
-        return Err(KindError::invalid("bad_shape", "strengths need radii too").field("strengths"));
+        return Err(
+            KindError::relational("bad_shape", "strengths need radii too").field("strengths"),
+        );
     }
     Ok(columns)
 }
@@ -63,7 +65,11 @@ pub fn json_rows(step: &JsonStep, columns: usize) -> Vec<f32> {
         if let Some(c) = &step.colors {
             row[5..8].copy_from_slice(&c[i]);
         }
-        values.extend(row[..columns].iter().map(|&v| v as f32));
+        values.extend(
+            row[..columns]
+                .iter()
+                .map(|&v| crate::kinds::convert::to_f32(v)),
+        );
     }
     values
 }

@@ -1,4 +1,7 @@
-//! The surfel kind on the server (deforming-point-sampled-surfaces.txt): so far its
-//! histogram; scene setup and step ingest are still to come (the API refuses the kind).
+//! The surfel kind on the server (deforming-point-sampled-surfaces.txt): the undeformed
+//! object checked and precomputed at creation (`setup`), its steps' layout (`step`: node
+//! positions) and its histogram (node displacement lengths).
 
 pub mod histogram;
+pub mod setup;
+pub mod step;

@@ -3,6 +3,7 @@
 //! [`KindError`]s that name the field (tet and corner) and, for a binary body, the byte
 //! offset of the value.
 
+use crate::kinds::convert::to_f32;
 use crate::kinds::error::KindError;
 use glam::Vec3;
 use isoray_protocol::api::TetMeshData;
@@ -16,7 +17,7 @@ pub fn mesh_from_spec(data: &TetMeshData) -> Result<TetMesh, KindError> {
 pub fn mesh_from_json(data: &TetMeshData, prefix: &str) -> Result<TetMesh, KindError> {
     let mut vertices = Vec::with_capacity(data.vertices.len());
     for (i, v) in data.vertices.iter().enumerate() {
-        let p = Vec3::new(v[0] as f32, v[1] as f32, v[2] as f32);
+        let p = Vec3::new(to_f32(v[0]), to_f32(v[1]), to_f32(v[2]));
         if !p.is_finite() {
             return Err(KindError::invalid(
                 "invalid_value",
@@ -67,7 +68,15 @@ pub fn mesh_error(e: TetError, prefix: &str, at: &Offsets) -> KindError {
         }
         _ => (format!("{prefix}cells"), None),
     };
-    let err = KindError::invalid("invalid_mesh", e.to_string()).field(field);
+    // Which vertices a tet joins, and the tet's shape, are rules between values (422); a
+    // position that is not a finite f32, or a mesh too large, breaks the document's schema.
+    let err = match &e {
+        TetError::NotFinite { .. } | TetError::TooManyVertices { .. } => {
+            KindError::invalid("invalid_mesh", e.to_string())
+        }
+        _ => KindError::relational("invalid_mesh", e.to_string()),
+    }
+    .field(field);
     match offset {
         Some(o) => err.offset(o),
         None => err,

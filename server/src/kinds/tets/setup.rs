@@ -5,6 +5,7 @@
 use crate::kinds::convert::finite;
 use crate::kinds::error::KindError;
 use crate::kinds::tets::mesh::mesh_from_spec;
+use crate::kinds::tets::step::{positions_of, scalars_of, COLUMNS};
 use isoray_protocol::api::TetSpec;
 use isoray_render::kinds::tets::{TetMesh, TetScene};
 use std::sync::{Arc, Mutex, MutexGuard, OnceLock};
@@ -53,12 +54,15 @@ impl MeshSlot {
 }
 
 impl TetSetup {
-    /// The engine scene of one step: the mesh with `payload`'s `rows × 1` scalars, or an
-    /// empty scene before the mesh or the first step.
+    /// The engine scene of one step: the mesh with `payload`'s `rows × 1` scalars (or
+    /// `rows × 4`: scalars and this step's positions), or an empty scene before the mesh or
+    /// the first step.
     pub fn scene(&self, step: Option<(u32, &[u8])>) -> TetScene {
         let built = self.mesh.get().and_then(|mesh| {
             let (columns, payload) = step?;
-            if columns != 1 || payload.len() != mesh.vertices().len() * 4 {
+            let fits = COLUMNS.contains(&columns)
+                && payload.len() == mesh.vertices().len() * 4 * columns as usize;
+            if !fits {
                 tracing::warn!(
                     columns,
                     bytes = payload.len(),
@@ -66,18 +70,25 @@ impl TetSetup {
                 );
                 return None;
             }
-            let scalars: Vec<f32> = payload
-                .chunks_exact(4)
-                .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
-                .collect();
-            TetScene::new(Arc::clone(mesh), scalars.into()).ok()
+            let scalars = scalars_of(payload, columns as usize);
+            let scene = TetScene::new(Arc::clone(mesh), scalars.into()).ok()?;
+            if columns == 1 {
+                return Some(scene);
+            }
+            // Checked when pushed; a step that fails now (a store written by hand) shows
+            // nothing rather than a mesh turned inside out.
+            scene
+                .with_positions(positions_of(payload).into())
+                .map_err(|e| tracing::warn!(error = %e, "a stored tet step inverts its mesh"))
+                .ok()
         });
         let scene = built.unwrap_or_else(empty_scene);
         scene.with_color_range(self.color_range.0, self.color_range.1)
     }
 
     /// Memory of a prepared step, roughly: 4-D vertices and gradients per vertex, BVH nodes
-    /// (about one per six tets) per tet.
+    /// (about one per six tets) per tet. (A deforming step's positions, 12 bytes a vertex,
+    /// are within the margin.)
     pub fn prepared_bytes(&self) -> u64 {
         self.mesh.get().map_or(0, |m| {
             m.vertices().len() as u64 * 28 + m.tets().len() as u64 * 8
@@ -100,7 +111,7 @@ pub fn setup_from_spec(spec: &TetSpec, slider: (f32, f32)) -> Result<TetSetup, K
                 finite(hi, "tets.color_range[1]")?,
             );
             if lo == hi {
-                return Err(KindError::invalid(
+                return Err(KindError::relational(
                     "invalid_value",
                     "tets.color_range must be two different values",
                 )

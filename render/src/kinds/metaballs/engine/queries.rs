@@ -19,12 +19,12 @@
 use super::{build_fallback, Accel, AccelKind, PreparedMetaballs, SCRATCH};
 use crate::kinds::metaballs::counters::MetaballCounters;
 use crate::kinds::metaballs::roots::{self, FindParams, KernelPoly, RayBall, RootFinder, Scratch};
-use crate::kinds::metaballs::tree::{BuildOptions, Tree, TreeKind};
+use crate::kinds::metaballs::tree::{BuildOptions, Node, Tree, TreeKind};
 use crate::ray::{Hit, Ray};
 
 impl PreparedMetaballs {
     /// The structure a query at `isovalue` may use (the fallback below the build's floor).
-    fn accel_for(&self, isovalue: f32) -> &Accel {
+    pub(super) fn accel_for(&self, isovalue: f32) -> &Accel {
         match (&self.options.accel, &self.accel) {
             (AccelKind::Tree(opts), Accel::Tree(_))
                 if opts.depends_on_isovalue() && isovalue < opts.isovalue =>
@@ -49,12 +49,13 @@ impl PreparedMetaballs {
             .get_or_init(|| build_fallback(&self.scene, opts))
     }
 
-    fn params(&self, isovalue: f32) -> FindParams<f32> {
+    pub(super) fn params(&self, isovalue: f32) -> FindParams<f32> {
         FindParams {
             kernel: KernelPoly::new(self.scene.kernel),
             isovalue,
             tolerance: self.options.tolerance,
             owners_only: false,
+            step: self.options.step,
         }
     }
 
@@ -116,6 +117,7 @@ impl PreparedMetaballs {
             isovalue: -isovalue,
             tolerance: self.options.tolerance,
             owners_only: false,
+            step: self.options.step,
         };
         SCRATCH.with(|cell| {
             let mut guard = cell.borrow_mut();
@@ -153,6 +155,7 @@ impl PreparedMetaballs {
                     counters.leaf_tests += 1;
                     counters.metaballs_considered += gathered.len() as u64;
                     counters.iterations += found.iterations as u64;
+                    counters.capped += found.capped as u64;
                     found.t?
                 }
             };
@@ -199,30 +202,18 @@ impl PreparedMetaballs {
             stack,
             &mut node_traversals,
             |node, near, far, best| {
-                let leaf = tree.leaf_balls(node);
-                if leaf.is_empty() {
-                    return None;
-                }
-                gathered.clear();
-                for (k, &b) in leaf.iter().enumerate() {
-                    self.gather(
-                        ray,
-                        b,
-                        fitted || k < node.owned as usize,
-                        near,
-                        far,
-                        gathered,
-                    );
-                }
-                if gathered.is_empty() {
-                    return None;
-                }
-                let found = roots::find_first(finder, &leaf_params, gathered, near, far, scratch);
-                counters.leaf_tests += 1;
-                counters.metaballs_considered += gathered.len() as u64;
-                counters.iterations += found.iterations as u64;
-                let t = found.t?;
-                counters.hit_iterations += found.hit_iterations as u64;
+                let t = self.search_leaf(
+                    tree,
+                    node,
+                    ray,
+                    near,
+                    far,
+                    &leaf_params,
+                    finder,
+                    gathered,
+                    scratch,
+                    counters,
+                )?;
                 if first_leaf {
                     return Some(t);
                 }
@@ -240,6 +231,47 @@ impl PreparedMetaballs {
             *gathered = best_balls;
         }
         best
+    }
+
+    /// One leaf of `tree` searched on `[near, far]` of `ray`: the balls whose support the
+    /// stretch crosses (owners only where `params.owners_only`), then one root search. On
+    /// return `gathered` holds those balls. The single-ray walk and the packet walk both call
+    /// this, so a packet's per-ray arithmetic is the single ray's.
+    #[allow(clippy::too_many_arguments)]
+    #[inline]
+    pub(super) fn search_leaf(
+        &self,
+        tree: &Tree,
+        node: &Node,
+        ray: &Ray,
+        near: f32,
+        far: f32,
+        params: &FindParams<f32>,
+        finder: RootFinder,
+        gathered: &mut Vec<RayBall<f32>>,
+        scratch: &mut Scratch<f32>,
+        counters: &mut MetaballCounters,
+    ) -> Option<f32> {
+        let leaf = tree.leaf_balls(node);
+        if leaf.is_empty() {
+            return None;
+        }
+        gathered.clear();
+        for (k, &b) in leaf.iter().enumerate() {
+            let owner = !params.owners_only || k < node.owned as usize;
+            self.gather(ray, b, owner, near, far, gathered);
+        }
+        if gathered.is_empty() {
+            return None;
+        }
+        let found = roots::find_first(finder, params, gathered, near, far, scratch);
+        counters.leaf_tests += 1;
+        counters.metaballs_considered += gathered.len() as u64;
+        counters.iterations += found.iterations as u64;
+        counters.capped += found.capped as u64;
+        let t = found.t?;
+        counters.hit_iterations += found.hit_iterations as u64;
+        Some(t)
     }
 
     /// `∫ F dt` over `[t_min, t_max]` of `ray`: the summed field integrated exactly.

@@ -145,6 +145,22 @@ impl Tree {
         &self.balls[node.first as usize..(node.first + node.count) as usize]
     }
 
+    /// Whether every non-empty child box lies inside its parent's (exact float comparisons;
+    /// the Fitted BVH's build intersects half boxes of the parent, so it holds there). Packet
+    /// traversal relies on it to give each ray the single ray's leaf ranges.
+    pub fn boxes_nest(&self) -> bool {
+        !self.nodes.is_empty()
+            && self.nodes.iter().all(|n| {
+                n.is_leaf()
+                    || [n.first, n.first + 1].iter().all(|&c| {
+                        let child = &self.nodes[c as usize];
+                        (child.is_leaf() && child.count == 0)
+                            || (child.bounds.min.cmpge(n.bounds.min).all()
+                                && child.bounds.max.cmple(n.bounds.max).all())
+                    })
+            })
+    }
+
     /// Counts nodes, leaves, depth and balls per leaf.
     pub fn stats(&self) -> TreeStats {
         let mut s = TreeStats {

@@ -1,0 +1,254 @@
+//! Packet traversal of the Fitted BVH: a tile of primary rays walks the tree once.
+//!
+//! How it works (tetrahedral-isosurface-ray-tracing.txt §5.2, after Wald et al.), for the
+//! rays of a tile of a camera's pixel grid, which share the eye as origin:
+//! 1. Frustum culling, sharpened to pixels: a node's box corners projected onto the image
+//!    bound (widened by a pixel) the tile's pixels whose rays can meet it; a node covering
+//!    none is skipped for the whole packet, and every later test looks only at the rays of
+//!    that rectangle (the corner-ray test of §4.3 on sub-rectangles of the tile).
+//! 2. First active ray: at an interior node the rays of the rectangle, from the packet's
+//!    first active ray on, are tested in turn until one hits the node's box; the rays
+//!    skipped cannot meet anything below it (every box lies inside its parent's), so the
+//!    children inherit that index. The children are visited in the order the side of their
+//!    separating plane the eye lies on gives (siblings of a Fitted BVH are split at a plane
+//!    and the rays share an origin, so it is the order of every ray that crosses both).
+//! 3. Leaves: each ray of the rectangle not yet done, from the first active one on, gets its
+//!    own slab test and, where it crosses the leaf, the single-ray leaf search
+//!    ([`PreparedMetaballs::search_leaf`]) on the same `[near, far]`. A ray is done at its
+//!    first root, as a single ray is at the first leaf with a root.
+//!
+//! Why the hits equal the single ray's: the single-ray walk searches a leaf on its slab range
+//! clamped to the ancestors' entries and to `[t_min, t_max]`; when every box lies inside its
+//! parent's (checked once per build by `Tree::boxes_nest`) the slab entry only grows downwards, so
+//! that range is the leaf's own slab range on `[t_min, t_max]`, which the packet computes per
+//! ray; the leaf search is the same function. Where the condition fails (or the tree is not
+//! a Fitted BVH, or the query needs the relaxed fallback tree) the tile falls back to single
+//! rays, as it does with [`super::PrepareOptions::packets`] off.
+
+use super::{Accel, PreparedMetaballs, SCRATCH};
+use crate::camera::PrimaryRays;
+use crate::geom::aabb::Aabb;
+use crate::kinds::metaballs::counters::MetaballCounters;
+use crate::ray::{Hit, Ray};
+use glam::Vec3;
+
+/// The pixels of a tile: `width × height` from `(x0, y0)` of a camera's image.
+struct Tile<'a> {
+    rays: &'a PrimaryRays,
+    x0: u32,
+    y0: u32,
+    width: u32,
+    height: u32,
+}
+
+/// The tile's pixels whose rays may meet a box.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Cover {
+    /// No bound (a corner is not in front of the eye).
+    Unknown,
+    /// No pixel of the tile.
+    Empty,
+    /// Tile-relative columns `c0..=c1` and rows `r0..=r1`.
+    Rect { c0: u32, c1: u32, r0: u32, r1: u32 },
+}
+
+impl Tile<'_> {
+    /// The pixels of the projection of `b`, widened by one pixel (far beyond rounding) and
+    /// clipped to the tile.
+    #[inline]
+    fn cover(&self, b: &Aabb) -> Cover {
+        let (mut lo_x, mut lo_y) = (f32::INFINITY, f32::INFINITY);
+        let (mut hi_x, mut hi_y) = (f32::NEG_INFINITY, f32::NEG_INFINITY);
+        for k in 0..8 {
+            let p = Vec3::new(
+                if k & 1 == 0 { b.min.x } else { b.max.x },
+                if k & 2 == 0 { b.min.y } else { b.max.y },
+                if k & 4 == 0 { b.min.z } else { b.max.z },
+            );
+            let Some((x, y)) = self.rays.pixel_of(p) else {
+                return Cover::Unknown;
+            };
+            lo_x = lo_x.min(x);
+            lo_y = lo_y.min(y);
+            hi_x = hi_x.max(x);
+            hi_y = hi_y.max(y);
+        }
+        let (x0, y0) = (self.x0 as f32, self.y0 as f32);
+        let (x1, y1) = (x0 + self.width as f32 - 1.0, y0 + self.height as f32 - 1.0);
+        let (lo_x, lo_y) = ((lo_x - 1.0).max(x0), (lo_y - 1.0).max(y0));
+        let (hi_x, hi_y) = ((hi_x + 1.0).min(x1), (hi_y + 1.0).min(y1));
+        if !(lo_x <= hi_x && lo_y <= hi_y) {
+            return Cover::Empty;
+        }
+        Cover::Rect {
+            c0: (lo_x.ceil() - x0) as u32,
+            c1: (hi_x.floor() - x0) as u32,
+            r0: (lo_y.ceil() - y0) as u32,
+            r1: (hi_y.floor() - y0) as u32,
+        }
+    }
+}
+
+impl Cover {
+    /// Calls `f` on the ray indices (row-major in a tile `width` wide) of the cover from
+    /// `from` on (all of `from..n` when there is no bound) until it returns `true`.
+    #[inline]
+    fn visit(self, width: usize, from: usize, n: usize, mut f: impl FnMut(usize) -> bool) {
+        match self {
+            Cover::Empty => {}
+            Cover::Unknown => {
+                for i in from..n {
+                    if f(i) {
+                        return;
+                    }
+                }
+            }
+            Cover::Rect { c0, c1, r0, r1 } => {
+                for r in (from / width).max(r0 as usize)..=r1 as usize {
+                    for c in c0 as usize..=c1 as usize {
+                        let i = r * width + c;
+                        if i >= from && f(i) {
+                            return;
+                        }
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// Whether box `a` comes before box `b` along every ray from `origin` that crosses both: the
+/// side of a separating plane (a Fitted BVH's siblings are split at one) the origin lies on;
+/// without one (boxes that touch on every axis), the nearer centre.
+#[inline]
+fn nearer_first(a: &Aabb, b: &Aabb, origin: Vec3) -> bool {
+    let (a_lo, a_hi, b_lo, b_hi) = (
+        a.min.to_array(),
+        a.max.to_array(),
+        b.min.to_array(),
+        b.max.to_array(),
+    );
+    let o = origin.to_array();
+    for k in 0..3 {
+        if a_hi[k] <= b_lo[k] {
+            return o[k] <= a_hi[k];
+        }
+        if b_hi[k] <= a_lo[k] {
+            return o[k] > b_hi[k];
+        }
+    }
+    let centre = |b: &Aabb| ((b.min + b.max) * 0.5 - origin).length_squared();
+    centre(a) <= centre(b)
+}
+
+impl PreparedMetaballs {
+    /// Each primary ray through pixels `x0..x1 × y0..y1` of `rays` (row by row) and its first
+    /// hit on `[0, t_max]`, the tile traced as one packet; `None` where packets do not apply
+    /// (packets off, not a nested Fitted BVH, an isovalue below the build's floor), and the
+    /// caller traces single rays. Hits equal [`PreparedMetaballs::first_hit_counted`]'s.
+    pub fn primary_tile_packet(
+        &self,
+        rays: &PrimaryRays,
+        (x0, y0, x1, y1): (u32, u32, u32, u32),
+        isovalue: f32,
+        t_max: f32,
+        counters: &mut MetaballCounters,
+    ) -> Option<Vec<(Ray, Option<Hit>)>> {
+        if !self.options.packets || !self.nested || x1 <= x0 || y1 <= y0 {
+            return None;
+        }
+        if !(isovalue > 0.0) || !isovalue.is_finite() || !(0.0 < t_max) {
+            return None;
+        }
+        let accel = self.accel_for(isovalue);
+        if !std::ptr::eq(accel, &self.accel) {
+            return None; // the relaxed fallback tree, not checked for nesting
+        }
+        let tree = match accel {
+            Accel::Tree(tree) => tree,
+            Accel::BruteForce | Accel::ActiveList => return None,
+        };
+        let tile = Tile {
+            rays,
+            x0,
+            y0,
+            width: x1 - x0,
+            height: y1 - y0,
+        };
+        let tile_rays: Vec<Ray> = (y0..y1)
+            .flat_map(|y| (x0..x1).map(move |x| rays.through_pixel(x, y)))
+            .collect();
+        let inv: Vec<Vec3> = tile_rays.iter().map(|r| r.dir.recip()).collect();
+        let n = tile_rays.len();
+        let origin = tile_rays[0].origin;
+        if tile_rays.iter().any(|r| r.origin != origin) {
+            return None;
+        }
+        let params = self.params(isovalue);
+        let finder = self.options.finder;
+        let width = tile.width as usize;
+        let mut hits: Vec<Option<Hit>> = vec![None; n];
+        let mut done = vec![false; n];
+        counters.rays += n as u64;
+        SCRATCH.with(|cell| {
+            let mut guard = cell.borrow_mut();
+            let (gathered, scratch, _) = &mut *guard;
+            let mut stack: Vec<(u32, u32)> = vec![(0, 0)];
+            while let Some((i, from)) = stack.pop() {
+                let node = &tree.nodes[i as usize];
+                if node.is_leaf() && node.count == 0 {
+                    continue;
+                }
+                counters.node_traversals += 1;
+                let cover = tile.cover(&node.bounds);
+                if node.is_leaf() {
+                    cover.visit(width, from as usize, n, |r| {
+                        if done[r] {
+                            return false;
+                        }
+                        let ray = &tile_rays[r];
+                        let Some((near, far)) = node.bounds.ray_range(origin, inv[r], 0.0, t_max)
+                        else {
+                            return false;
+                        };
+                        let found = self.search_leaf(
+                            tree, node, ray, near, far, &params, finder, gathered, scratch,
+                            counters,
+                        );
+                        if let Some(mut t) = found {
+                            if self.options.refine_f64 {
+                                t = self.refine_f64(ray, t, 0.0, t_max, isovalue, gathered);
+                            }
+                            counters.hits += 1;
+                            hits[r] = Some(self.hit_at(ray, t, gathered));
+                            done[r] = true;
+                        }
+                        false
+                    });
+                    continue;
+                }
+                // The first active ray: the first of the cover, from the packet's, that is not
+                // done and meets the box.
+                let mut first = None;
+                cover.visit(width, from as usize, n, |r| {
+                    let hit =
+                        !done[r] && node.bounds.ray_range(origin, inv[r], 0.0, t_max).is_some();
+                    if hit {
+                        first = Some(r);
+                    }
+                    hit
+                });
+                let Some(fa) = first else {
+                    continue;
+                };
+                let c = node.first;
+                let (a, b) = (&tree.nodes[c as usize], &tree.nodes[c as usize + 1]);
+                let left_first = nearer_first(&a.bounds, &b.bounds, origin);
+                let (near_child, far_child) = if left_first { (c, c + 1) } else { (c + 1, c) };
+                stack.push((far_child, fa as u32));
+                stack.push((near_child, fa as u32));
+            }
+        });
+        Some(tile_rays.into_iter().zip(hits).collect())
+    }
+}

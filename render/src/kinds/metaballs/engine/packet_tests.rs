@@ -1,0 +1,181 @@
+//! Packet against single-ray traversal on every metaball demo (the paper scenes among them):
+//! the same hits, ray for ray, whatever the thread count.
+
+use crate::kinds::dispatch::PreparedGeometry;
+use crate::kinds::metaballs::counters::MetaballCounters;
+use crate::kinds::metaballs::engine::PreparedMetaballs;
+use crate::ray::Ray;
+use crate::scene::PreparedScene;
+use crate::scenes::DemoScene;
+use glam::Vec3;
+use rayon::prelude::*;
+use std::sync::{Arc, OnceLock};
+
+const WIDTH: u32 = 48;
+const HEIGHT: u32 = 40;
+const TILE: u32 = 16;
+const T_MAX: f32 = 1.0e4;
+
+fn tiles() -> Vec<(u32, u32, u32, u32)> {
+    (0..HEIGHT)
+        .step_by(TILE as usize)
+        .flat_map(|y| {
+            (0..WIDTH)
+                .step_by(TILE as usize)
+                .map(move |x| (x, y, (x + TILE).min(WIDTH), (y + TILE).min(HEIGHT)))
+        })
+        .collect()
+}
+
+/// Every metaball demo prepared with the defaults, once for the tests of this file.
+fn demos() -> &'static [(DemoScene, PreparedScene, Arc<PreparedMetaballs>)] {
+    static DEMOS: OnceLock<Vec<(DemoScene, PreparedScene, Arc<PreparedMetaballs>)>> =
+        OnceLock::new();
+    DEMOS.get_or_init(|| {
+        DemoScene::ALL
+            .iter()
+            .filter_map(|&demo| {
+                let prepared = Arc::new(demo.state_at(1.0)).prepare();
+                let m = match prepared.geometry() {
+                    PreparedGeometry::Metaballs(m) => m.clone(),
+                    PreparedGeometry::Tets(_) | PreparedGeometry::Surfels(_) => return None,
+                };
+                Some((demo, prepared, m))
+            })
+            .collect()
+    })
+}
+
+#[test]
+fn packets_match_single_rays_on_every_demo_at_1_2_and_8_threads() {
+    let mut count = 0;
+    for (demo, prepared, m) in demos() {
+        let demo = *demo;
+        count += 1;
+        assert!(m.options().packets, "packets are the default");
+        let rays = prepared.primary_rays(&demo.default_camera(), WIDTH, HEIGHT);
+        let isovalue = demo.default_isovalue();
+        let tolerance = m.options().tolerance;
+        let single: Vec<_> = tiles()
+            .iter()
+            .flat_map(|&(x0, y0, x1, y1)| (y0..y1).flat_map(move |y| (x0..x1).map(move |x| (x, y))))
+            .map(|(x, y)| {
+                let ray = rays.through_pixel(x, y);
+                m.first_hit(&ray, 0.0, T_MAX, isovalue)
+            })
+            .collect();
+        let hits = single.iter().filter(|h| h.is_some()).count();
+        assert!(hits > 0, "{}: nothing hit", demo.id());
+        for threads in [1, 2, 8] {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .expect("pool");
+            let packet: Vec<_> = pool.install(|| {
+                tiles()
+                    .par_iter()
+                    .map(|&rect| {
+                        let mut c = MetaballCounters::default();
+                        m.primary_tile_packet(&rays, rect, isovalue, T_MAX, &mut c)
+                            .unwrap_or_else(|| panic!("{}: no packet", demo.id()))
+                    })
+                    .collect::<Vec<_>>()
+                    .concat()
+            });
+            assert_eq!(packet.len(), single.len());
+            for (k, ((_, p), s)) in packet.iter().zip(&single).enumerate() {
+                match (p, s) {
+                    (Some(p), Some(s)) => assert!(
+                        (p.t - s.t).abs() <= tolerance,
+                        "{} ray {k}, {threads} threads: t {} against {}",
+                        demo.id(),
+                        p.t,
+                        s.t
+                    ),
+                    (None, None) => {}
+                    (p, s) => panic!(
+                        "{} ray {k}, {threads} threads: packet {:?}, single {:?}",
+                        demo.id(),
+                        p.map(|h| h.t),
+                        s.map(|h| h.t)
+                    ),
+                }
+            }
+        }
+    }
+    assert!(count >= 10, "only {count} metaball demos");
+}
+
+#[test]
+fn packets_switched_off_leave_the_tile_to_single_rays() {
+    let demo = DemoScene::Blobs;
+    let scene = Arc::new(demo.state_at(0.0));
+    let options = scene.geometry.default_metaball_options();
+    let off = scene.prepare_with(crate::kinds::metaballs::engine::PrepareOptions {
+        packets: false,
+        ..options
+    });
+    let PreparedGeometry::Metaballs(m) = off.geometry() else {
+        panic!("blobs is a metaball scene");
+    };
+    let rays = off.primary_rays(&demo.default_camera(), WIDTH, HEIGHT);
+    let mut c = MetaballCounters::default();
+    let tile = (0, 0, TILE, TILE);
+    assert!(m
+        .primary_tile_packet(&rays, tile, demo.default_isovalue(), T_MAX, &mut c)
+        .is_none());
+}
+
+/// Shadow rays from every primary hit towards one point light: the packet's any-hit roots
+/// equal the single rays' (hit/miss identical, roots within the tolerance).
+#[test]
+fn shadow_packets_match_single_rays_on_every_demo() {
+    let mut shadowed = 0;
+    for (demo, prepared, m) in demos() {
+        let demo = *demo;
+        let camera = demo.default_camera();
+        let rays = prepared.primary_rays(&camera, WIDTH, HEIGHT);
+        let isovalue = demo.default_isovalue();
+        let tolerance = m.options().tolerance;
+        // A light above and beside the eye.
+        let eye = rays.through_pixel(0, 0).origin;
+        let light = eye + Vec3::new(3.0, 5.0, 1.0) * (1.0 + eye.length() * 0.2);
+        for rect in tiles() {
+            let mut c = MetaballCounters::default();
+            let hits = m
+                .primary_tile_packet(&rays, rect, isovalue, T_MAX, &mut c)
+                .expect("a packet");
+            let (shadow_rays, t_max): (Vec<Ray>, Vec<f32>) = hits
+                .iter()
+                .filter_map(|(_, h)| h.as_ref())
+                .map(|h| {
+                    let origin = h.position + h.normal * 1e-3;
+                    let to = light - origin;
+                    (Ray::new(origin, to), to.length())
+                })
+                .unzip();
+            if shadow_rays.is_empty() {
+                continue;
+            }
+            let packet = m
+                .any_hits_packet(&shadow_rays, 0.0, &t_max, light, isovalue, &mut c)
+                .expect("a shadow packet");
+            for (k, (ray, &hi)) in shadow_rays.iter().zip(&t_max).enumerate() {
+                let single = m.any_hit_counted(ray, 0.0, hi, isovalue, &mut c);
+                match (packet[k], single) {
+                    (Some(p), Some(s)) => {
+                        shadowed += 1;
+                        assert!(
+                            (p - s).abs() <= tolerance,
+                            "{} shadow ray {k}: {p} against {s}",
+                            demo.id()
+                        );
+                    }
+                    (None, None) => {}
+                    (p, s) => panic!("{} shadow ray {k}: packet {p:?}, single {s:?}", demo.id()),
+                }
+            }
+        }
+    }
+    assert!(shadowed > 0, "no shadow ray was blocked");
+}

@@ -1,0 +1,234 @@
+//! A brute-force `f64` reference for the surfel kind's ray–surface intersections, sharing no
+//! code with `intersect` (the accuracy study and tests compare against it).
+//!
+//! How it works: the surface of deforming-point-sampled-surfaces.txt §4.2.1 is the zero set of
+//! `f(x) = n(x)ᵀ(x − a(x))`, with `a(x)` and `n(x)` the weighted averages of eq. 12 over
+//! **every** surfel (eq. 2's weight `1 − 6r² + 8r³ − 3r⁴`, `r = |x − c_i| / h_i`, written out
+//! again here), not a leaf's fixed neighbourhood. Along a ray, `f` is sampled where some
+//! surfel's support covers it, at a step of 1/32 of the smallest support crossed; the first
+//! sign change from outside (`f > 0`, normals point out) to inside is bisected to `1e-13`
+//! relative, and kept if the point lies on a surfel's disc (within its reach of its centre,
+//! the paper's surfels being ellipses); otherwise the march goes on. No tree, no iteration
+//! from an ellipse, no convergence threshold, no clipping (§4.3): compare it on objects that
+//! clip nothing.
+
+use glam::DVec3;
+
+/// One surfel as the reference sees it.
+#[derive(Clone, Copy, Debug)]
+pub struct MlsSurfel {
+    pub centre: DVec3,
+    /// Unit outward normal.
+    pub normal: DVec3,
+    /// Support radius `h` of its weight.
+    pub support: f64,
+    /// How far from its centre its disc reaches (a hit must lie within one surfel's reach).
+    pub reach: f64,
+}
+
+/// A first hit: distance along the ray (in units of `|d|`) and the MLS normal there.
+#[derive(Clone, Copy, Debug)]
+pub struct MlsHit {
+    pub t: f64,
+    pub normal: DVec3,
+}
+
+/// Eq. 2's weight.
+fn w(r: f64) -> f64 {
+    if r >= 1.0 {
+        0.0
+    } else {
+        1.0 + r * r * (-6.0 + r * (8.0 - 3.0 * r))
+    }
+}
+
+/// `f(x)` and `n(x)` over `set`, or `None` where no support covers `x` or the normals cancel.
+fn implicit(set: &[&MlsSurfel], x: DVec3) -> Option<(f64, DVec3)> {
+    let (mut sw, mut sp, mut sn) = (0.0, DVec3::ZERO, DVec3::ZERO);
+    for s in set {
+        let k = w(x.distance(s.centre) / s.support);
+        sw += k;
+        sp += k * s.centre;
+        sn += k * s.normal;
+    }
+    if !(sw > 0.0) || !(sn.length() > 1e-12 * sw) {
+        return None;
+    }
+    let n = sn.normalize();
+    Some((n.dot(x - sp / sw), n))
+}
+
+/// The first point of `o + t d`, `t ∈ [t_min, t_max]`, where the MLS surface of `surfels` is
+/// crossed from outside.
+pub fn first_hit(
+    surfels: &[MlsSurfel],
+    o: DVec3,
+    d: DVec3,
+    t_min: f64,
+    t_max: f64,
+) -> Option<MlsHit> {
+    let dd = d.length_squared();
+    if !(dd > 0.0) {
+        return None;
+    }
+    // The surfels whose support the ray crosses, and the stretches they cover.
+    let mut crossed: Vec<&MlsSurfel> = Vec::new();
+    let mut spans: Vec<(f64, f64)> = Vec::new();
+    for s in surfels {
+        let tc = (s.centre - o).dot(d) / dd;
+        let miss2 = (o + tc * d).distance_squared(s.centre);
+        let h2 = s.support * s.support;
+        if miss2 >= h2 {
+            continue;
+        }
+        let half = ((h2 - miss2) / dd).sqrt();
+        let (a, b) = ((tc - half).max(t_min), (tc + half).min(t_max));
+        if a < b {
+            crossed.push(s);
+            spans.push((a, b));
+        }
+    }
+    if crossed.is_empty() {
+        return None;
+    }
+    let step = crossed
+        .iter()
+        .map(|s| s.support)
+        .fold(f64::INFINITY, f64::min)
+        / 32.0
+        / dd.sqrt();
+    spans.sort_by(|x, y| x.0.total_cmp(&y.0));
+    let on_disc = |x: DVec3| crossed.iter().any(|s| x.distance(s.centre) <= s.reach);
+    let mut prev: Option<(f64, f64)> = None;
+    let mut t = spans[0].0;
+    let mut k = 0;
+    while k < spans.len() {
+        if t > spans[k].1 {
+            k += 1;
+            if k < spans.len() && t < spans[k].0 {
+                t = spans[k].0;
+                prev = None;
+            }
+            continue;
+        }
+        let here = implicit(&crossed, o + t * d).map(|(f, _)| f);
+        if let (Some((tp, fp)), Some(f)) = (prev, here) {
+            if fp > 0.0 && f <= 0.0 {
+                let (mut lo, mut hi) = (tp, t);
+                for _ in 0..200 {
+                    let mid = 0.5 * (lo + hi);
+                    if hi - lo <= 1e-13 * hi.abs().max(1.0) || !(lo < mid && mid < hi) {
+                        break;
+                    }
+                    match implicit(&crossed, o + mid * d) {
+                        Some((fm, _)) if fm > 0.0 => lo = mid,
+                        _ => hi = mid,
+                    }
+                }
+                let x = o + hi * d;
+                if on_disc(x) {
+                    if let Some((_, n)) = implicit(&crossed, x) {
+                        return Some(MlsHit { t: hi, normal: n });
+                    }
+                }
+            }
+        }
+        prev = here.map(|f| (t, f));
+        t += step;
+    }
+    None
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Surfels on a square grid of the plane `z = 0`, normals `+z`.
+    fn plane(n: i32, spacing: f64) -> Vec<MlsSurfel> {
+        let mut v = Vec::new();
+        for i in -n..=n {
+            for j in -n..=n {
+                v.push(MlsSurfel {
+                    centre: DVec3::new(i as f64 * spacing, j as f64 * spacing, 0.0),
+                    normal: DVec3::Z,
+                    support: 2.5 * spacing,
+                    reach: 0.75 * spacing,
+                });
+            }
+        }
+        v
+    }
+
+    #[test]
+    fn a_plane_of_surfels_is_hit_exactly() {
+        let set = plane(10, 0.1);
+        for (k, dir) in [
+            DVec3::new(0.0, 0.0, -1.0),
+            DVec3::new(0.3, -0.2, -1.0),
+            DVec3::new(-0.7, 0.5, -0.4),
+        ]
+        .into_iter()
+        .enumerate()
+        {
+            let o = DVec3::new(0.013 * k as f64, -0.021, 0.4);
+            let hit = first_hit(&set, o, dir, 0.0, 100.0).expect("the plane is hit");
+            let exact = -o.z / dir.z;
+            assert!(
+                (hit.t - exact).abs() <= 1e-9 * exact,
+                "ray {k}: t {} against {exact}",
+                hit.t
+            );
+            assert!((hit.normal - DVec3::Z).length() < 1e-12, "{:?}", hit.normal);
+        }
+        // Beside the disc grid, the plane's continuation is not a surface.
+        let outside = first_hit(&set, DVec3::new(5.0, 0.0, 1.0), -DVec3::Z, 0.0, 10.0);
+        assert!(outside.is_none(), "{outside:?}");
+    }
+
+    #[test]
+    fn a_sampled_sphere_is_hit_within_the_mls_offset() {
+        // Fibonacci points on the unit sphere; the MLS surface of a sphere lies inside it by
+        // about h²/(8R) (the weighted chord), so |t − t_exact| must stay below h²/R.
+        let count = 3000;
+        let golden = std::f64::consts::PI * (3.0 - 5f64.sqrt());
+        let spacing = (4.0 * std::f64::consts::PI / count as f64).sqrt();
+        let h = 2.5 * spacing;
+        let set: Vec<MlsSurfel> = (0..count)
+            .map(|i| {
+                let y = 1.0 - 2.0 * (i as f64 + 0.5) / count as f64;
+                let r = (1.0 - y * y).sqrt();
+                let p = DVec3::new(
+                    r * (golden * i as f64).cos(),
+                    y,
+                    r * (golden * i as f64).sin(),
+                );
+                MlsSurfel {
+                    centre: p,
+                    normal: p,
+                    support: h,
+                    reach: spacing,
+                }
+            })
+            .collect();
+        for (k, impact) in [0.0, 0.3, 0.6, 0.9].into_iter().enumerate() {
+            let o = DVec3::new(impact, 0.1 * k as f64, 3.0);
+            let d = DVec3::new(0.0, 0.0, -1.0);
+            // |o + t d| = 1: t = o.z − sqrt(1 − x² − y²).
+            let (x, y) = (o.x, o.y);
+            let exact = o.z - (1.0 - x * x - y * y).sqrt();
+            let hit = first_hit(&set, o, d, 0.0, 10.0).expect("the sphere is hit");
+            assert!(
+                (hit.t - exact).abs() < h * h,
+                "impact {impact}: t {} against {exact} (h = {h})",
+                hit.t
+            );
+            let p = o + hit.t * d;
+            let angle = hit.normal.angle_between(p.normalize()).to_degrees();
+            assert!(
+                angle < 2.0,
+                "impact {impact}: normal {angle}° off the radius"
+            );
+        }
+        assert!(first_hit(&set, DVec3::new(1.2, 0.0, 3.0), -DVec3::Z, 0.0, 10.0).is_none());
+    }
+}
