@@ -8,7 +8,8 @@ use crate::backend::gpu::kind::{GpuKind, KindUpload};
 use crate::backend::gpu::layout::GpuFrame;
 use crate::backend::gpu::shader::WORKGROUP;
 use crate::backend::gpu::upload::LightingArrays;
-use std::sync::mpsc;
+use std::any::Any;
+use std::sync::{mpsc, Arc};
 
 /// A buffer and the bytes it holds.
 struct Slot {
@@ -30,6 +31,8 @@ struct KindBuffers {
     params: Option<Slot>,
     arrays: Vec<Option<Slot>>,
     key: Option<(usize, u64)>,
+    /// The state `key` names, alive while its arrays are here.
+    held: Option<Arc<dyn Any + Send + Sync>>,
 }
 
 /// Every buffer a frame uses.
@@ -126,6 +129,7 @@ impl FrameBuffers {
                 put(gpu, slot, &mut self.allocations, STORAGE, data)?;
             }
             k.key = Some(kind.key);
+            k.held = Some(kind.hold);
         }
         let allocations = &mut self.allocations;
         put(

@@ -369,28 +369,38 @@ fn segments(o: vec3<f32>, d: vec3<f32>, a: f32, b: f32) -> Segments {
 
 // Tracer::crossing_from: the first crossing of `iso` on [a, b] outside the clip box,
 // entering the solid or, when the ray starts inside it (or `inside`), leaving it.
+//
+// Every query site of the kind is inlined whole by the shader compilers (lavapipe's NIR
+// inlines every call), so the integrator asks the kind from as few places as it can: each of
+// kind_first_hit and kind_exit_hit is called once here, and crossing_from itself from two
+// places (closest, transmittance).
 fn crossing_from(o: vec3<f32>, d: vec3<f32>, a: f32, b: f32, iso: f32, inside: bool) -> KHit {
     let segs = segments(o, d, a, b);
     for (var k = 0u; k < segs.n; k = k + 1u) {
         let lo = segs.s[k].x;
         let hi = segs.s[k].y;
-        if (inside && k == 0u && lo == a) {
-            let exit = kind_exit_hit(o, d, lo, hi, iso);
-            if (exit.found) {
-                return exit;
+        var exit = inside && k == 0u && lo == a;
+        loop {
+            var h: KHit;
+            if (exit) {
+                h = kind_exit_hit(o, d, lo, hi, iso);
+            } else {
+                h = kind_first_hit(o, d, lo, hi, iso);
             }
-            continue;
-        }
-        let h = kind_first_hit(o, d, lo, hi, iso);
-        if (!h.found) {
-            continue;
-        }
-        if (h.t > lo + INSIDE_EPS) {
-            return h;
-        }
-        let exit = kind_exit_hit(o, d, lo, hi, iso);
-        if (exit.found) {
-            return exit;
+            if (exit) {
+                if (h.found) {
+                    return h;
+                }
+                break;
+            }
+            if (!h.found) {
+                break;
+            }
+            if (h.t > lo + INSIDE_EPS) {
+                return h;
+            }
+            // A root at the segment's start: the ray starts inside; the way out counts.
+            exit = true;
         }
     }
     return no_hit();
@@ -429,28 +439,35 @@ fn closest(o: vec3<f32>, d: vec3<f32>, t0: f32, t1: f32) -> SurfaceHit {
     var best = SurfaceHit(false, 0.0, vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0), 0u);
     var limit = t1;
     if (!has(FLAG_VOLUME)) {
-        let h = crossing_from(o, d, t0, limit, frame.isovalue, false);
-        if (h.found) {
+        var surfaces = 1u;
+        if (has(FLAG_ISOSURFACES)) {
+            surfaces = surfaces + frame.isosurface_count;
+        }
+        for (var k = 0u; k < surfaces; k = k + 1u) {
+            var iso = frame.isovalue;
+            if (k > 0u) {
+                iso = isosurfaces[k - 1u].isovalue;
+            }
+            let h = crossing_from(o, d, t0, limit, iso, false);
+            if (!h.found) {
+                continue;
+            }
             limit = h.t;
             var albedo = h.albedo;
-            if (has(FLAG_COLOR_MAP)) {
-                albedo = frame.mapped_albedo.xyz;
-            }
-            best = SurfaceHit(true, h.t, h.position, h.normal, albedo, material_of(h.primitive));
-        }
-        if (has(FLAG_ISOSURFACES)) {
-            for (var k = 0u; k < frame.isosurface_count; k = k + 1u) {
-                let s = isosurfaces[k];
-                let h = crossing_from(o, d, t0, limit, s.isovalue, false);
-                if (h.found) {
-                    limit = h.t;
-                    var albedo = h.albedo;
-                    if (s.color.w > 0.0) {
-                        albedo = s.color.xyz;
-                    }
-                    best = SurfaceHit(true, h.t, h.position, h.normal, albedo, s.material);
+            var m = 0u;
+            if (k == 0u) {
+                if (has(FLAG_COLOR_MAP)) {
+                    albedo = frame.mapped_albedo.xyz;
                 }
+                m = material_of(h.primitive);
+            } else {
+                let s = isosurfaces[k - 1u];
+                if (s.color.w > 0.0) {
+                    albedo = s.color.xyz;
+                }
+                m = s.material;
             }
+            best = SurfaceHit(true, h.t, h.position, h.normal, albedo, m);
         }
     }
     if (has(FLAG_FLOOR)) {
@@ -461,27 +478,6 @@ fn closest(o: vec3<f32>, d: vec3<f32>, t0: f32, t1: f32) -> SurfaceHit {
         }
     }
     return best;
-}
-
-// Tracer::blocked: whether `iso` crosses [a, b] outside the clip box (any hit).
-fn blocked(o: vec3<f32>, d: vec3<f32>, a: f32, b: f32, iso: f32) -> bool {
-    let segs = segments(o, d, a, b);
-    for (var k = 0u; k < segs.n; k = k + 1u) {
-        let lo = segs.s[k].x;
-        let hi = segs.s[k].y;
-        let t = kind_any_hit(o, d, lo, hi, iso);
-        if (t < 0.0) {
-            continue;
-        }
-        if (t > lo + INSIDE_EPS) {
-            return true;
-        }
-        // Starting inside the solid: its boundary blocks if the ray leaves it here.
-        if (kind_exit_hit(o, d, lo, hi, iso).found) {
-            return true;
-        }
-    }
-    return false;
 }
 
 fn optical_depth(o: vec3<f32>, d: vec3<f32>, a: f32, b: f32) -> f32 {
@@ -518,13 +514,8 @@ fn transmittance(o: vec3<f32>, d: vec3<f32>, t_max: f32) -> f32 {
             fixed = true;
             fixed_material = isosurfaces[k - 1u].material;
         }
-        if (frame.layers == 0u) {
-            if (blocked(o, d, 0.0, t_max, iso)) {
-                return 0.0;
-            }
-            continue;
-        }
-        // Walk the crossings, each letting 1 - α through.
+        // Walk the crossings, each letting 1 - α through. Without layers the first crossing
+        // blocks (Tracer::blocked's any hit, found here as the first one).
         var t = 0.0;
         var crossings = 0u;
         var inside = false;
@@ -549,65 +540,84 @@ fn transmittance(o: vec3<f32>, d: vec3<f32>, t_max: f32) -> f32 {
     return transmitted;
 }
 
-// Tracer::visibility: the share of `light` that reaches `origin`.
-fn visibility(light: Light, to_light: vec3<f32>, distance: f32, origin: vec3<f32>) -> f32 {
-    if (light.position.w == 2.0) {
-        let center = light.position.xyz;
-        let radius = light.color.w;
-        if (has(FLAG_SOFT_SHADOWS)) {
-            if (distance <= radius) {
-                return 1.0;
-            }
-            let q = radius / distance;
-            let cos_max = sqrt(max(1.0 - q * q, 0.0));
-            let n = max(frame.light_samples, 1u);
-            var seen = 0.0;
-            for (var k = 0u; k < n; k = k + 1u) {
-                let u1 = rng_next();
-                let u2 = rng_next();
-                let dir = uniform_cone(to_light, cos_max, u1, u2);
-                let oc = origin - center;
-                let b = dot(oc, dir);
-                let c = dot(oc, oc) - radius * radius;
-                let t = -b - sqrt(max(b * b - c, 0.0));
-                seen = seen + transmittance(origin, dir, max(t, 0.0));
-            }
-            return seen / f32(n);
-        }
-        return transmittance(origin, to_light, max(distance - radius, 0.0));
-    }
-    return transmittance(origin, to_light, min(distance, frame.t_max));
-}
-
-// Tracer::local: ambient (with occlusion) and every light (with shadows).
+// Tracer::local: ambient (with occlusion) and every light (with shadows, Tracer::visibility).
+// One loop over the occlusion rays, then each light's shadow rays, so that transmittance
+// (and the kind's queries in it) has one call site; the random numbers are drawn in the
+// CPU's order.
 fn local(m: Material, h: SurfaceHit, normal: vec3<f32>, view: vec3<f32>, above: vec3<f32>) -> vec3<f32> {
     let albedo = h.albedo * m.diffuse.xyz;
     var ambient = frame.ambient.xyz * albedo;
-    let ao = frame.ao_samples;
-    if (ao > 0u && max(max(ambient.x, ambient.y), ambient.z) > 0.0) {
-        var open = 0.0;
-        for (var k = 0u; k < ao; k = k + 1u) {
-            let u1 = rng_next();
-            let u2 = rng_next();
-            let dir = cosine_hemisphere(normal, u1, u2);
-            open = open + transmittance(above, dir, frame.occlusion_distance);
+    var ao = 0u;
+    if (frame.ao_samples > 0u && max(max(ambient.x, ambient.y), ambient.z) > 0.0) {
+        ao = frame.ao_samples;
+    }
+    var open = 0.0;
+    var color = vec3<f32>(0.0);
+    for (var j = 0u; j < ao + frame.light_count; j = j + 1u) {
+        let is_ao = j < ao;
+        var n = 1u;
+        var light: Light;
+        var l: LightSample;
+        var soft = false;
+        var cos_max = 1.0;
+        if (!is_ao) {
+            light = lights[j - ao];
+            l = toward(light, h.position);
+            // A light behind the surface adds nothing: no shadow ray for it.
+            if (!l.ok || dot(normal, l.to_light) <= 0.0) {
+                continue;
+            }
+            if (!has(FLAG_SHADOWS)) {
+                color = color + direct(m, albedo, normal, view, l, 1.0);
+                continue;
+            }
+            if (light.position.w == 2.0 && has(FLAG_SOFT_SHADOWS)) {
+                let radius = light.color.w;
+                if (l.distance <= radius) {
+                    color = color + direct(m, albedo, normal, view, l, 1.0);
+                    continue;
+                }
+                let q = radius / l.distance;
+                cos_max = sqrt(max(1.0 - q * q, 0.0));
+                soft = true;
+                n = max(frame.light_samples, 1u);
+            }
         }
+        var seen = 0.0;
+        for (var s = 0u; s < n; s = s + 1u) {
+            var dir = l.to_light;
+            var reach = 0.0;
+            if (is_ao) {
+                let u1 = rng_next();
+                let u2 = rng_next();
+                dir = cosine_hemisphere(normal, u1, u2);
+                reach = frame.occlusion_distance;
+            } else if (soft) {
+                let u1 = rng_next();
+                let u2 = rng_next();
+                dir = uniform_cone(l.to_light, cos_max, u1, u2);
+                // Distance to the sphere along dir, nearer root.
+                let oc = above - light.position.xyz;
+                let b = dot(oc, dir);
+                let c = dot(oc, oc) - light.color.w * light.color.w;
+                reach = max(-b - sqrt(max(b * b - c, 0.0)), 0.0);
+            } else if (light.position.w == 2.0) {
+                reach = max(l.distance - light.color.w, 0.0);
+            } else {
+                reach = min(l.distance, frame.t_max);
+            }
+            seen = seen + transmittance(above, dir, reach);
+        }
+        if (is_ao) {
+            open = open + seen;
+        } else {
+            color = color + direct(m, albedo, normal, view, l, seen / f32(n));
+        }
+    }
+    if (ao > 0u) {
         ambient = ambient * (open / f32(ao));
     }
-    var color = ambient;
-    for (var k = 0u; k < frame.light_count; k = k + 1u) {
-        let light = lights[k];
-        let l = toward(light, h.position);
-        if (!l.ok || dot(normal, l.to_light) <= 0.0) {
-            continue;
-        }
-        var vis = 1.0;
-        if (has(FLAG_SHADOWS)) {
-            vis = visibility(light, l.to_light, l.distance, above);
-        }
-        color = color + direct(m, albedo, normal, view, l, vis);
-    }
-    return color;
+    return ambient + color;
 }
 
 // A ray waiting to be traced: its radiance adds `weight` times itself to the pixel.
@@ -713,15 +723,17 @@ fn trace(@builtin(global_invocation_id) id: vec3<u32>) {
     var t = -1.0;
     if (has(FLAG_PASS)) {
         rng_seed(id.x, id.y, frame.pass_index);
-        task_count = 0u;
-        let first = radiance(Task(o, 0.0, d, 0u, vec3<f32>(1.0), frame.layers), &color);
-        if (first < BIG) {
-            t = first * dot(d, frame.forward.xyz);
-        }
+        tasks[0] = Task(o, 0.0, d, 0u, vec3<f32>(1.0), frame.layers);
+        task_count = 1u;
+        var primary = true;
         while (task_count > 0u) {
             task_count = task_count - 1u;
             let next = tasks[task_count];
-            radiance(next, &color);
+            let hit_t = radiance(next, &color);
+            if (primary && hit_t < BIG) {
+                t = hit_t * dot(d, frame.forward.xyz);
+            }
+            primary = false;
         }
     } else {
         let h = kind_first_hit(o, d, 0.0, frame.t_max, frame.isovalue);

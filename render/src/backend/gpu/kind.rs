@@ -7,6 +7,9 @@
 //! `kind_optical_depth`, the GPU twins of [`crate::kinds::contract::PreparedKind`]'s queries;
 //! the common integrator calls nothing else of it.
 
+use std::any::Any;
+use std::sync::Arc;
+
 /// The kinds the GPU traces, one pipeline each.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum GpuKind {
@@ -57,6 +60,9 @@ pub struct KindUpload<'a> {
     /// prepared state, and anything else the arrays depend on): they are built and uploaded
     /// only when the key changes.
     pub key: (usize, u64),
+    /// The state the key names, kept alive while its arrays are on the GPU: a freed state's
+    /// address could come back as another state's, and its key with it.
+    pub hold: Arc<dyn Any + Send + Sync>,
     /// The kind's uniform (group 1, binding 0): a `#[repr(C)]` Pod struct's bytes, a multiple
     /// of 16 bytes.
     pub params: Vec<u8>,

@@ -65,6 +65,7 @@ pub fn upload<'a>(
     Ok(KindUpload {
         kind: GpuKind::Metaballs,
         key,
+        hold: Arc::clone(metaballs) as Arc<dyn std::any::Any + Send + Sync>,
         params: bytemuck::bytes_of(&params).to_vec(),
         arrays: Box::new(move || {
             let (nodes, leaf_balls) = nodes(tree);
