@@ -13,42 +13,10 @@
 //! structure key the arrays, so they are rebuilt and uploaded once per step.
 
 use crate::backend::gpu::kind::{GpuKind, KindUpload};
+use crate::backend::gpu::tets_layout::{GpuTetNode, GpuTetParams, MAX_DEPTH};
 use crate::kinds::tets::prepared::PreparedTets;
 use crate::view::View;
-use bytemuck::{Pod, Zeroable};
 use std::sync::Arc;
-
-/// Storage arrays of the kind (bindings 1..=5 of group 1).
-pub const ARRAYS: usize = 5;
-
-/// Deepest tree the kernel's traversal stack holds (`TET_STACK_SIZE` - 1 in the shader): a
-/// depth-first walk that pushes both children keeps at most one entry per level.
-pub const MAX_DEPTH: usize = 63;
-
-/// The kind's uniform (`TetParams` in the shader).
-#[repr(C)]
-#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
-pub struct GpuTetParams {
-    pub node_count: u32,
-    /// 1: interpolate the per-vertex gradients; 0: the hit tet's own.
-    pub smooth_normals: u32,
-    /// The scalars mapped to the two ends of the colour map.
-    pub color_lo: f32,
-    pub color_hi: f32,
-}
-
-/// One BVH node (`TetNode` in the shader): 4-D bounds `{x, y, z, v}`, then two children at
-/// `first` (`count == 0`) or `count` tets at `first` in leaf order.
-#[repr(C)]
-#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
-pub struct GpuTetNode {
-    pub lo: [f32; 4],
-    pub hi: [f32; 4],
-    pub first: u32,
-    pub count: u32,
-    pub _pad0: u32,
-    pub _pad1: u32,
-}
 
 /// The step `prepared` ready for the GPU, or why the kernel cannot trace it. The view
 /// changes nothing: one tree serves every isovalue (the isorange culling is per query).
@@ -141,6 +109,7 @@ fn fingerprint(prepared: &PreparedTets) -> u64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::backend::gpu::tets_layout::ARRAYS;
     use crate::kinds::tets::generate;
     use crate::kinds::tets::march::{CASES, EDGES};
     use crate::kinds::tets::mesh::{signed_volume6, TetMesh, TetScene};

@@ -3,7 +3,7 @@
 // the isopolygon of each tet extracted on the fly and intersected by the edge-plane test
 // (march.rs `extract`, `intersect_one`), and the hit record (prepared.rs `hit_record`):
 // faceted or interpolated per-vertex gradients, the colour map of the isovalue.
-// tetrahedral-isosurface-ray-tracing.txt §4–5. The structs mirror backend/gpu/tets.rs.
+// tetrahedral-isosurface-ray-tracing.txt §4–5. The structs mirror backend/gpu/tets_layout.rs.
 
 struct TetParams {
     // Nodes of the BVH (at least 1: the root).
@@ -37,7 +37,7 @@ struct TetNode {
 // Per vertex: the smoothed gradient (xyz); one zero element with faceted normals.
 @group(1) @binding(5) var<storage, read> tet_gradients: array<vec4<f32>>;
 
-// Traversal stack; the upload refuses deeper trees (tets.rs MAX_DEPTH + 1).
+// Traversal stack; the upload refuses deeper trees (tets_layout.rs MAX_DEPTH + 1).
 const TET_STACK_SIZE: u32 = 64u;
 const TET_NONE: u32 = 0xffffffffu;
 
