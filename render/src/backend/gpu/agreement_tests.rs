@@ -56,7 +56,7 @@ fn setup(demo: DemoScene) -> (PreparedScene, View) {
 fn on_gpu(geometry: &Geometry) -> bool {
     match geometry {
         Geometry::Metaballs(_) => true,
-        Geometry::Tets(_) => false,
+        Geometry::Tets(_) => true,
         Geometry::Surfels(_) => false,
     }
 }

@@ -34,7 +34,7 @@ impl GpuKind {
     pub fn arrays(self) -> usize {
         match self {
             GpuKind::Metaballs => 3,
-            GpuKind::Tets => crate::backend::gpu::tets::ARRAYS,
+            GpuKind::Tets => crate::backend::gpu::tets_layout::ARRAYS,
             GpuKind::Surfels => crate::backend::gpu::surfels::ARRAYS,
         }
     }

@@ -13,6 +13,7 @@ pub mod metaballs;
 pub mod shader;
 pub mod surfels;
 pub mod tets;
+pub mod tets_layout;
 pub mod upload;
 
 #[cfg(test)]

@@ -282,6 +282,11 @@ impl TetScene {
         &self.mesh
     }
 
+    /// The scalar values mapped to the two ends of the colour map ([`TetScene::color_of`]).
+    pub fn color_range(&self) -> (f32, f32) {
+        self.color_range
+    }
+
     pub fn scalars(&self) -> &[f32] {
         &self.scalars
     }

@@ -136,6 +136,11 @@ impl PreparedTets {
         &self.verts
     }
 
+    /// The per-vertex gradients smooth normals interpolate (`None`: faceted normals).
+    pub fn vertex_gradients(&self) -> Option<&[Vec3]> {
+        self.vertex_gradients.as_deref()
+    }
+
     pub fn options(&self) -> TetOptions {
         self.options
     }
