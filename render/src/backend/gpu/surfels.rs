@@ -6,9 +6,6 @@ use crate::kinds::surfels::prepared::PreparedSurfels;
 use crate::view::View;
 use std::sync::Arc;
 
-/// Storage arrays of the surfel kind's bind group.
-pub const ARRAYS: usize = 0;
-
 /// What the GPU needs of `prepared`, or why it cannot trace it.
 pub fn upload<'a>(
     _prepared: &'a Arc<PreparedSurfels>,

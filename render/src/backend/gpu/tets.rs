@@ -38,6 +38,7 @@ pub fn upload<'a>(prepared: &'a Arc<PreparedTets>, _view: &View) -> Result<KindU
     Ok(KindUpload {
         kind: GpuKind::Tets,
         key: (Arc::as_ptr(prepared) as usize, fingerprint(prepared)),
+        hold: Arc::clone(prepared) as Arc<dyn std::any::Any + Send + Sync>,
         params: bytemuck::bytes_of(&params).to_vec(),
         arrays: Box::new(move || arrays(prepared)),
     })
