@@ -3,9 +3,9 @@
 mod adaptive;
 mod bad_input;
 mod codecs;
+mod faults;
 #[cfg(feature = "gpu")]
 mod gpu;
-mod faults;
 mod lifecycle;
 mod metrics;
 mod paper_scenes;

@@ -2,10 +2,9 @@
 //! frame after the device failed) to a CPU backend it keeps beside it, so a session always
 //! gets its frames.
 //!
-//! On the GPU today: metaball states with a Fitted BVH, ray casting and passes with hard
-//! shadows (the marching root finder). On the CPU: tets and surfels, and reflections,
-//! refraction, transparency, occlusion, soft shadows, volumes, the clip box and further
-//! isosurfaces, until the kernel learns them.
+//! On the GPU: ray casting and every effect of the plan (common.wgsl) for each kind whose
+//! upload accepts the state (metaball states with a Fitted BVH and the marching finder; see
+//! `kind_upload`); anything else goes to the CPU with the reason logged.
 
 use crate::backend::accumulator::{FrameRays, Pass, TracePasses};
 use crate::backend::cpu::CpuBackend;
@@ -109,11 +108,13 @@ impl GpuBackend {
     }
 
     /// Per pixel linear colour and view-axis depth (< 0: a miss) from the GPU, or why not.
+    /// `plan`: `None` for ray casting, else refinement pass `pass` with that plan.
     fn trace(
         &self,
         scene: &PreparedScene,
         view: &View,
         plan: Option<&EffectsPlan>,
+        pass: u32,
     ) -> Result<Vec<[f32; 4]>, GpuError> {
         let mut guard = self
             .live
@@ -122,24 +123,16 @@ impl GpuBackend {
         let Some(live) = guard.as_mut() else {
             return Err(GpuError::Unsupported("the device failed earlier".into()));
         };
-        let (metaballs, tree) =
-            upload::traceable(scene, view.isovalue).map_err(GpuError::Unsupported)?;
-        upload::check_tree(tree).map_err(GpuError::Unsupported)?;
         if let Some(plan) = plan {
             upload::check_plan(plan).map_err(GpuError::Unsupported)?;
         }
-        let lighting = scene.lighting();
-        let frame = upload::frame(view, lighting, metaballs, tree.nodes.len(), plan);
-        let (lights, materials, groups) = upload::lighting(lighting);
+        let kind = upload::kind_upload(scene, view, plan).map_err(GpuError::Unsupported)?;
+        let frame = upload::frame(scene, view, plan, pass);
+        let arrays = upload::lighting(scene.lighting_in_frame());
         let mut times = GpuTimes::default();
-        let result = live.buffers.run(
-            &live.device,
-            &frame,
-            metaballs,
-            tree,
-            (&lights, &materials, &groups),
-            &mut times,
-        );
+        let result = live
+            .buffers
+            .run(&live.device, &frame, kind, &arrays, &mut times);
         match result {
             Ok(pixels) => {
                 if let Ok(mut t) = self.last_times.lock() {
@@ -176,7 +169,7 @@ impl GpuBackend {
 
 impl TracePasses for GpuBackend {
     fn render_primary(&self, scene: &PreparedScene, view: &View) -> Framebuffer {
-        match self.trace(scene, view, None) {
+        match self.trace(scene, view, None, 0) {
             Ok(pixels) => {
                 self.gpu_frames.fetch_add(1, Ordering::Relaxed);
                 let mut fb = Framebuffer::new(view.width, view.height);
@@ -201,7 +194,7 @@ impl TracePasses for GpuBackend {
         plan: &EffectsPlan,
         pass: u32,
     ) -> Pass {
-        match self.trace(scene, view, Some(plan)) {
+        match self.trace(scene, view, Some(plan), pass) {
             Ok(pixels) => {
                 self.gpu_frames.fetch_add(1, Ordering::Relaxed);
                 let mut rays = FrameRays::default();

@@ -2,6 +2,7 @@
 //! device reports later (a lost device, an allocation that failed, a validation error) are
 //! caught here instead of panicking (wgpu's default), and turn the device `broken`.
 
+use crate::backend::gpu::kind::GpuKind;
 use crate::backend::gpu::shader;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
@@ -34,12 +35,21 @@ pub enum AdapterChoice {
     HardwareOnly,
 }
 
+/// One kind's trace pipeline and the layout of its bind group 1.
+pub struct KindPipeline {
+    pub pipeline: wgpu::ComputePipeline,
+    pub kind_layout: wgpu::BindGroupLayout,
+}
+
 /// A device ready to trace.
 pub struct GpuDevice {
     pub device: wgpu::Device,
     pub queue: wgpu::Queue,
-    pub pipeline: wgpu::ComputePipeline,
-    pub layout: wgpu::BindGroupLayout,
+    /// Bind group 0, the same for every kind: the frame, lights, materials, groups,
+    /// isosurfaces and the output.
+    pub common_layout: wgpu::BindGroupLayout,
+    /// One pipeline per [`GpuKind`], in [`GpuKind::ALL`]'s order.
+    pipelines: Vec<KindPipeline>,
     pub info: wgpu::AdapterInfo,
     /// Set by the device-lost and uncaptured-error callbacks.
     broken: Arc<AtomicBool>,
@@ -104,31 +114,29 @@ impl GpuDevice {
             });
         }
         let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
-        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-            label: Some("isoray metaballs"),
-            source: wgpu::ShaderSource::Wgsl(shader::SOURCE.into()),
-        });
-        let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-            label: Some("isoray trace"),
-            layout: None,
-            module: &module,
-            entry_point: Some(shader::ENTRY),
-            compilation_options: Default::default(),
-            cache: None,
-        });
+        let common_layout = layout(&device, "isoray common", 4, true);
+        let pipelines = GpuKind::ALL
+            .iter()
+            .map(|&kind| pipeline(&device, &common_layout, kind))
+            .collect();
         if let Some(e) = pollster::block_on(scope.pop()) {
             return Err(GpuError::Device(format!("the trace kernel: {e}")));
         }
-        let layout = pipeline.get_bind_group_layout(0);
         Ok(GpuDevice {
             device,
             queue,
-            pipeline,
-            layout,
+            common_layout,
+            pipelines,
             info,
             broken,
             error,
         })
+    }
+
+    /// The pipeline of `kind`.
+    pub fn pipeline(&self, kind: GpuKind) -> &KindPipeline {
+        let i = GpuKind::ALL.iter().position(|&k| k == kind).unwrap_or(0);
+        &self.pipelines[i]
     }
 
     /// The adapter's name and driver, for logs.
@@ -164,4 +172,72 @@ fn record(broken: &AtomicBool, error: &Mutex<Option<String>>, message: String) {
         e.get_or_insert(message);
     }
     broken.store(true, Ordering::Release);
+}
+
+/// A bind group layout: a uniform at binding 0, `arrays` read-only storage arrays after it,
+/// and (with `output`) one read-write storage array last.
+fn layout(
+    device: &wgpu::Device,
+    label: &str,
+    arrays: usize,
+    output: bool,
+) -> wgpu::BindGroupLayout {
+    let compute = wgpu::ShaderStages::COMPUTE;
+    let storage = |binding: u32, read_only: bool| wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility: compute,
+        ty: wgpu::BindingType::Buffer {
+            ty: wgpu::BufferBindingType::Storage { read_only },
+            has_dynamic_offset: false,
+            min_binding_size: None,
+        },
+        count: None,
+    };
+    let mut entries = vec![wgpu::BindGroupLayoutEntry {
+        binding: 0,
+        visibility: compute,
+        ty: wgpu::BindingType::Buffer {
+            ty: wgpu::BufferBindingType::Uniform,
+            has_dynamic_offset: false,
+            min_binding_size: None,
+        },
+        count: None,
+    }];
+    for k in 0..arrays {
+        entries.push(storage(k as u32 + 1, true));
+    }
+    if output {
+        entries.push(storage(arrays as u32 + 1, false));
+    }
+    device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+        label: Some(label),
+        entries: &entries,
+    })
+}
+
+/// Compiles `kind`'s kernel (common.wgsl + the kind's part) with explicit layouts.
+fn pipeline(device: &wgpu::Device, common: &wgpu::BindGroupLayout, kind: GpuKind) -> KindPipeline {
+    let kind_layout = layout(device, kind.name(), kind.arrays(), false);
+    let source = kind.kernel();
+    let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+        label: Some(kind.name()),
+        source: wgpu::ShaderSource::Wgsl(source.into()),
+    });
+    let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+        label: Some(kind.name()),
+        bind_group_layouts: &[Some(common), Some(&kind_layout)],
+        immediate_size: 0,
+    });
+    let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+        label: Some(kind.name()),
+        layout: Some(&pipeline_layout),
+        module: &module,
+        entry_point: Some(shader::ENTRY),
+        compilation_options: Default::default(),
+        cache: None,
+    });
+    KindPipeline {
+        pipeline,
+        kind_layout,
+    }
 }

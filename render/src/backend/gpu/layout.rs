@@ -1,5 +1,5 @@
 //! The data the GPU reads, as `#[repr(C)]` plain-old-data structs: the same bytes on both
-//! sides. Each struct here has a twin of the same name in `metaballs.wgsl`; every field is a
+//! sides. Each struct here has a twin in `common.wgsl` or `metaballs.wgsl`; every field is a
 //! `vec4`-sized group or a 4-byte scalar, so WGSL's uniform and storage layout rules place
 //! them exactly where `repr(C)` does (the tests compare sizes and every member offset with
 //! what naga computes for the shader).
@@ -8,15 +8,23 @@ use bytemuck::{Pod, Zeroable};
 
 /// Mode bits of [`GpuFrame::flags`].
 pub mod flags {
-    /// The integrator's pass (floor, shadows, an exit when the ray starts inside) rather than
-    /// ray casting's `Lighting::shade`.
+    /// One pass of the integrator with the frame's plan, rather than ray casting's
+    /// `Lighting::shade`.
     pub const PASS: u32 = 1;
-    /// Shadow rays towards every light (hard shadows).
+    /// Shadow rays towards every light.
     pub const SHADOWS: u32 = 2;
     /// The scene has a floor.
     pub const FLOOR: u32 = 4;
-    /// `mapped_albedo` replaces the balls' colours (a session's colour map).
+    /// `mapped_albedo` replaces the kind's colours (a session's colour map).
     pub const COLOR_MAP: u32 = 8;
+    /// Sphere lights sampled over their visible cap.
+    pub const SOFT_SHADOWS: u32 = 16;
+    /// The field is an absorbing volume (`volume`: colour, density).
+    pub const VOLUME: u32 = 32;
+    /// The clip box cuts the geometry.
+    pub const CLIP: u32 = 64;
+    /// The scene's further isosurfaces are drawn.
+    pub const ISOSURFACES: u32 = 128;
 }
 
 /// Light kinds of [`GpuLight::position`]'s `w`.
@@ -26,13 +34,13 @@ pub mod light_kind {
     pub const SPHERE: f32 = 2.0;
 }
 
-/// What one frame needs besides the scene's arrays: camera, background, kernel, floor and
-/// counts. The uniform buffer of the trace kernel.
+/// What one frame needs besides the arrays: camera, background, floor, the plan's effects and
+/// counts. The uniform of the kind-independent kernel (`Frame` in common.wgsl).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
 pub struct GpuFrame {
-    /// The camera (`PrimaryRays`): eye, the direction of the top-left corner, the steps of
-    /// one pixel right and down, and the view axis (for depth).
+    /// The camera (`PrimaryRays`, in the scene's local frame): eye, the direction of the
+    /// top-left corner, the steps of one pixel right and down, and the view axis (for depth).
     pub eye: [f32; 4],
     pub top_left: [f32; 4],
     pub right_step: [f32; 4],
@@ -43,15 +51,15 @@ pub struct GpuFrame {
     pub ambient: [f32; 4],
     /// The colour map's albedo of the isovalue (with [`flags::COLOR_MAP`]).
     pub mapped_albedo: [f32; 4],
-    /// The kernel as `Σ c_k w^k`: `c_0..c_3` here, `c_4` in `kernel_c4`.
-    pub kernel: [f32; 4],
     pub floor_color0: [f32; 4],
     pub floor_color1: [f32; 4],
-    pub kernel_c4: f32,
-    pub kernel_degree: u32,
+    /// Where the local frame's origin lies in the world (the floor's checker is the world's).
+    pub floor_origin: [f32; 4],
+    /// The volume's in-scattered colour (xyz) and density (w).
+    pub volume: [f32; 4],
+    pub clip_min: [f32; 4],
+    pub clip_max: [f32; 4],
     pub isovalue: f32,
-    /// The root finder's tolerance on hit distances, world units.
-    pub tolerance: f32,
     pub width: u32,
     pub height: u32,
     pub flags: u32,
@@ -60,11 +68,48 @@ pub struct GpuFrame {
     pub group_count: u32,
     /// Materials uploaded, the last being the fallback for an index past the scene's.
     pub material_count: u32,
-    pub node_count: u32,
     pub floor_height: f32,
     pub floor_checker: f32,
     pub floor_material: u32,
+    /// The refinement pass (seeds the random streams as `PixelRng::new(x, y, pass)`).
+    pub pass_index: u32,
+    pub reflection_depth: u32,
+    pub refraction_depth: u32,
+    pub layers: u32,
+    pub ao_samples: u32,
+    pub light_samples: u32,
+    pub occlusion_distance: f32,
+    pub isosurface_count: u32,
     pub _pad: u32,
+}
+
+/// One further isosurface: its isovalue and material, and `color` (xyz) when its own colour
+/// (or the colour map's) replaces the kind's (w = 1).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct GpuIsoSurface {
+    pub color: [f32; 4],
+    pub isovalue: f32,
+    pub material: u32,
+    pub _pad0: u32,
+    pub _pad1: u32,
+}
+
+/// The metaball kind's uniform (`MbParams` in metaballs.wgsl): the kernel as `Σ c_k w^k`
+/// (`c_0..c_3` in `kernel`, `c_4` in `kernel_c4`), the root finder's tolerance on hit
+/// distances and its marching step (a fraction of the smallest active radius).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct GpuMetaballParams {
+    pub kernel: [f32; 4],
+    pub kernel_c4: f32,
+    pub kernel_degree: u32,
+    pub tolerance: f32,
+    pub step: f32,
+    pub node_count: u32,
+    pub _pad0: u32,
+    pub _pad1: u32,
+    pub _pad2: u32,
 }
 
 /// One light: `position` is the direction towards a directional light or the position of a
@@ -130,7 +175,9 @@ mod tests {
 
     #[test]
     fn sizes_and_alignments_are_those_the_shader_expects() {
-        assert_eq!(size_of::<GpuFrame>(), 12 * 16 + 16 * 4);
+        assert_eq!(size_of::<GpuFrame>(), 15 * 16 + 20 * 4);
+        assert_eq!(size_of::<GpuIsoSurface>(), 32);
+        assert_eq!(size_of::<GpuMetaballParams>(), 48);
         assert_eq!(size_of::<GpuLight>(), 32);
         assert_eq!(size_of::<GpuMaterial>(), 48);
         assert_eq!(size_of::<GpuGroup>(), 16);
@@ -147,6 +194,16 @@ mod tests {
             ("group", size_of::<GpuGroup>(), align_of::<GpuGroup>()),
             ("node", size_of::<GpuNode>(), align_of::<GpuNode>()),
             ("ball", size_of::<GpuBall>(), align_of::<GpuBall>()),
+            (
+                "isosurface",
+                size_of::<GpuIsoSurface>(),
+                align_of::<GpuIsoSurface>(),
+            ),
+            (
+                "metaball params",
+                size_of::<GpuMetaballParams>(),
+                align_of::<GpuMetaballParams>(),
+            ),
         ] {
             assert_eq!(align, 4, "{name}: plain 4-byte fields, no Rust padding");
             assert_eq!(
@@ -159,6 +216,6 @@ mod tests {
         assert_eq!(offset_of!(GpuNode, first), 12);
         assert_eq!(offset_of!(GpuNode, max), 16);
         assert_eq!(offset_of!(GpuBall, strength), 12);
-        assert_eq!(offset_of!(GpuFrame, kernel_c4), 12 * 16);
+        assert_eq!(offset_of!(GpuFrame, isovalue), 15 * 16);
     }
 }

@@ -1,58 +1,21 @@
-// The metaball trace kernel: one invocation per pixel. It walks the flattened Fitted BVH
-// front to back (render/src/kinds/metaballs/tree/walk.rs), gathers each leaf's balls the ray
-// crosses (engine.rs `gather`), finds the first root with the CPU's marching finder over the
-// sorted entry/exit sections (roots.rs `walk_sections` + `march_section` + `bisect`), and
-// shades as the CPU does: `Lighting::shade` for ray casting, or the integrator's first pass
-// (floor, hard shadows) for a pass (integrator.rs `closest`, `local`, `transmittance`).
-// The structs mirror backend/gpu/layout.rs field by field.
+// The metaball part of the trace kernel (appended to common.wgsl): the kind's queries
+// `kind_first_hit`, `kind_exit_hit`, `kind_any_hit` and `kind_optical_depth`. It walks the
+// flattened Fitted BVH front to back (render/src/kinds/metaballs/tree/walk.rs), gathers each
+// leaf's balls the ray crosses (engine.rs `gather`), and finds the first root with the CPU's
+// marching finder over the sorted entry/exit sections (roots.rs `walk_sections` +
+// `march_section` + `bisect`), the step a parameter as on the CPU. The structs mirror
+// backend/gpu/layout.rs field by field.
 
-struct Frame {
-    eye: vec4<f32>,
-    top_left: vec4<f32>,
-    right_step: vec4<f32>,
-    down_step: vec4<f32>,
-    forward: vec4<f32>,
-    background_top: vec4<f32>,
-    background_bottom: vec4<f32>,
-    ambient: vec4<f32>,
-    mapped_albedo: vec4<f32>,
+struct MbParams {
     kernel: vec4<f32>,
-    floor_color0: vec4<f32>,
-    floor_color1: vec4<f32>,
     kernel_c4: f32,
     kernel_degree: u32,
-    isovalue: f32,
     tolerance: f32,
-    width: u32,
-    height: u32,
-    flags: u32,
-    t_max: f32,
-    light_count: u32,
-    group_count: u32,
-    material_count: u32,
+    step: f32,
     node_count: u32,
-    floor_height: f32,
-    floor_checker: f32,
-    floor_material: u32,
-    _pad: u32,
-}
-
-struct Light {
-    position: vec4<f32>,
-    color: vec4<f32>,
-}
-
-struct Material {
-    diffuse: vec4<f32>,
-    emission: vec4<f32>,
-    extra: vec4<f32>,
-}
-
-struct Group {
-    first: u32,
-    count: u32,
-    material: u32,
-    _pad: u32,
+    _pad0: u32,
+    _pad1: u32,
+    _pad2: u32,
 }
 
 struct Node {
@@ -71,20 +34,10 @@ struct Ball {
     color: vec4<f32>,
 }
 
-@group(0) @binding(0) var<uniform> frame: Frame;
-@group(0) @binding(1) var<storage, read> nodes: array<Node>;
-@group(0) @binding(2) var<storage, read> leaf_balls: array<u32>;
-@group(0) @binding(3) var<storage, read> balls: array<Ball>;
-@group(0) @binding(4) var<storage, read> lights: array<Light>;
-@group(0) @binding(5) var<storage, read> materials: array<Material>;
-@group(0) @binding(6) var<storage, read> groups: array<Group>;
-// Per pixel: linear colour, and the hit distance along the view axis (negative: a miss).
-@group(0) @binding(7) var<storage, read_write> pixels: array<vec4<f32>>;
-
-const FLAG_PASS: u32 = 1u;
-const FLAG_SHADOWS: u32 = 2u;
-const FLAG_FLOOR: u32 = 4u;
-const FLAG_COLOR_MAP: u32 = 8u;
+@group(1) @binding(0) var<uniform> mb: MbParams;
+@group(1) @binding(1) var<storage, read> nodes: array<Node>;
+@group(1) @binding(2) var<storage, read> leaf_balls: array<u32>;
+@group(1) @binding(3) var<storage, read> balls: array<Ball>;
 
 // Most balls one leaf may hand the root finder; the upload refuses trees with larger leaves.
 const MAX_GATHER: u32 = 192u;
@@ -92,9 +45,6 @@ const MAX_GATHER: u32 = 192u;
 const STACK_SIZE: u32 = 64u;
 // roots.rs / bezier.rs ITERATION_CAP.
 const ITERATION_CAP: u32 = 20000u;
-// integrator.rs INSIDE_EPS.
-const INSIDE_EPS: f32 = 2.0e-4;
-const BIG: f32 = 3.0e38;
 
 // One ball as one ray sees it (roots.rs RayBall): s(t) = a (t - tc)² + s_min on [t0, t1].
 struct RayBall {
@@ -112,17 +62,19 @@ var<private> gathered: array<RayBall, MAX_GATHER>;
 var<private> gathered_count: u32;
 var<private> stack_node: array<u32, STACK_SIZE>;
 var<private> stack_range: array<vec2<f32>, STACK_SIZE>;
+// The isovalue of the query under way.
+var<private> mb_iso: f32;
 
 // The kernel at w = 1 - s, times `sign` (-1: the exit query's negated field).
 fn kernel_at_w(w: f32) -> f32 {
-    var acc = frame.kernel_c4;
-    if (frame.kernel_degree < 4u) {
-        acc = frame.kernel[frame.kernel_degree];
+    var acc = mb.kernel_c4;
+    if (mb.kernel_degree < 4u) {
+        acc = mb.kernel[mb.kernel_degree];
     }
-    var k = frame.kernel_degree;
+    var k = mb.kernel_degree;
     while (k > 0u) {
         k = k - 1u;
-        acc = acc * w + frame.kernel[k];
+        acc = acc * w + mb.kernel[k];
     }
     return acc;
 }
@@ -135,10 +87,10 @@ fn kernel_derivative(s: f32) -> f32 {
     let w = 1.0 - s;
     var d = 0.0;
     var wk = 1.0;
-    for (var k = 1u; k <= frame.kernel_degree; k = k + 1u) {
-        var c = frame.kernel_c4;
+    for (var k = 1u; k <= mb.kernel_degree; k = k + 1u) {
+        var c = mb.kernel_c4;
         if (k < 4u) {
-            c = frame.kernel[k];
+            c = mb.kernel[k];
         }
         d = d + f32(k) * c * wk;
         wk = wk * w;
@@ -227,7 +179,7 @@ fn may_reach(a: f32, b: f32, lo: f32, hi: f32, sign: f32) -> bool {
             }
         }
     }
-    return !(bound < sign * frame.isovalue);
+    return !(bound < sign * mb_iso);
 }
 
 struct Root {
@@ -243,8 +195,8 @@ fn march_section(a: f32, b: f32, lo: f32, hi: f32, sign: f32, iters: ptr<functio
             step = min(step, gathered[k].min_radius);
         }
     }
-    step = step * 0.25;
-    let iso = sign * frame.isovalue;
+    step = step * mb.step;
+    let iso = sign * mb_iso;
     var t0 = a;
     *iters = *iters + 1u;
     if (field(t0, a, lo, hi, sign) - iso >= 0.0) {
@@ -264,7 +216,7 @@ fn march_section(a: f32, b: f32, lo: f32, hi: f32, sign: f32, iters: ptr<functio
             var l = t0;
             var h = t1;
             loop {
-                if (!(h - l > frame.tolerance && *iters < ITERATION_CAP)) {
+                if (!(h - l > mb.tolerance && *iters < ITERATION_CAP)) {
                     break;
                 }
                 let mid = 0.5 * (l + h);
@@ -365,7 +317,7 @@ fn safe_inverse(d: vec3<f32>) -> vec3<f32> {
 // tree/walk.rs Tree::walk with `first_leaf` (the Fitted BVH's disjoint leaves): the first
 // leaf with a root answers. On return `gathered` holds that leaf's balls.
 fn first_root(o: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f32, sign: f32) -> Root {
-    if (frame.node_count == 0u || !(t_min < t_max)) {
+    if (mb.node_count == 0u || !(t_min < t_max)) {
         return Root(false, 0.0);
     }
     let inv_d = safe_inverse(d);
@@ -429,27 +381,8 @@ fn first_root(o: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f32, sign: f32) -> 
     return Root(false, 0.0);
 }
 
-// What shading needs of a surface point.
-struct Surface {
-    t: f32,
-    position: vec3<f32>,
-    // Outward (or up from the floor); not turned towards the viewer.
-    normal: vec3<f32>,
-    albedo: vec3<f32>,
-    material: u32,
-}
-
-fn material_of(primitive: u32) -> u32 {
-    for (var g = 0u; g < frame.group_count; g = g + 1u) {
-        if (primitive - groups[g].first < groups[g].count) {
-            return groups[g].material;
-        }
-    }
-    return 0u;
-}
-
 // scene.rs surface_detail over the gathered balls at p.
-fn surface_at(t: f32, p: vec3<f32>) -> Surface {
+fn surface_at(t: f32, p: vec3<f32>) -> KHit {
     var gradient = vec3<f32>(0.0);
     var color = vec3<f32>(0.0);
     var weight = 0.0;
@@ -491,209 +424,126 @@ fn surface_at(t: f32, p: vec3<f32>) -> Surface {
     if (weight > 0.0) {
         albedo = color / weight;
     }
-    if ((frame.flags & FLAG_COLOR_MAP) != 0u) {
-        albedo = frame.mapped_albedo.xyz;
-    }
-    return Surface(t, p, normal, albedo, material_of(dominant));
+    return KHit(true, t, p, normal, albedo, dominant);
 }
 
-fn material(index: u32) -> Material {
-    return materials[min(index, frame.material_count - 1u)];
-}
 
-fn facing(normal: vec3<f32>, view: vec3<f32>) -> vec3<f32> {
-    if (dot(normal, view) > 0.0) {
-        return -normal;
-    }
-    return normal;
-}
+// The kind's queries (render/src/kinds/contract.rs).
 
-// A light seen from p: to_light (xyz) and distance (w; BIG for a directional light), and
-// its irradiance; `ok` false when p sits on a point light.
-struct LightSample {
-    ok: bool,
-    to_light: vec3<f32>,
-    distance: f32,
-    irradiance: vec3<f32>,
-}
-
-fn toward(light: Light, p: vec3<f32>) -> LightSample {
-    if (light.position.w == 0.0) {
-        return LightSample(true, light.position.xyz, BIG, light.color.xyz);
-    }
-    let d = light.position.xyz - p;
-    let d2 = dot(d, d);
-    if (!(d2 > 1.0e-12)) {
-        return LightSample(false, vec3<f32>(0.0), 0.0, vec3<f32>(0.0));
-    }
-    let distance = sqrt(d2);
-    return LightSample(true, d / distance, distance, light.color.xyz / d2);
-}
-
-// shade.rs direct.
-fn direct(m: Material, albedo: vec3<f32>, normal: vec3<f32>, view: vec3<f32>, l: LightSample, visibility: f32) -> vec3<f32> {
-    let n_dot_l = dot(normal, l.to_light);
-    if (n_dot_l <= 0.0 || visibility <= 0.0) {
-        return vec3<f32>(0.0);
-    }
-    let h = l.to_light - view;
-    let h2 = dot(h, h);
-    var half = vec3<f32>(0.0);
-    if (h2 > 0.0) {
-        half = h * inverseSqrt(h2);
-    }
-    var spec = 0.0;
-    let specular = m.diffuse.w;
-    if (specular > 0.0) {
-        let x = max(dot(normal, half), 0.0);
-        if (x > 0.0) {
-            spec = pow(x, m.emission.w) * specular;
-        }
-    }
-    return l.irradiance * (albedo * n_dot_l + vec3<f32>(spec)) * visibility;
-}
-
-fn background(dir_y: f32) -> vec3<f32> {
-    let a = 0.5 * (clamp(dir_y, -1.0, 1.0) + 1.0);
-    return frame.background_bottom.xyz + (frame.background_top.xyz - frame.background_bottom.xyz) * a;
-}
-
-// shade.rs Lighting::shade: every light, no shadows (ray casting).
-fn shade_cast(s: Surface, view: vec3<f32>) -> vec3<f32> {
-    let m = material(s.material);
-    let albedo = s.albedo * m.diffuse.xyz;
-    let normal = facing(s.normal, view);
-    var color = m.emission.xyz + frame.ambient.xyz * albedo;
-    for (var k = 0u; k < frame.light_count; k = k + 1u) {
-        let l = toward(lights[k], s.position);
-        if (l.ok) {
-            color = color + direct(m, albedo, normal, view, l, 1.0);
-        }
-    }
-    return color;
-}
-
-// integrator.rs crossing: the first crossing on [a, b], or the way out of the solid when the
-// ray starts inside it.
-fn crossing(o: vec3<f32>, d: vec3<f32>, a: f32, b: f32) -> Root {
-    let r = first_root(o, d, a, b, 1.0);
-    if (!r.found || r.t > a + INSIDE_EPS) {
-        return r;
-    }
-    return first_root(o, d, a, b, -1.0);
-}
-
-fn floor_t(o: vec3<f32>, d: vec3<f32>) -> f32 {
-    if (d.y == 0.0) {
-        return -1.0;
-    }
-    return (frame.floor_height - o.y) / d.y;
-}
-
-// integrator.rs transmittance with no layers, clip box or volume: 0 or 1.
-fn transmittance(o: vec3<f32>, d: vec3<f32>, t_max: f32) -> f32 {
-    if ((frame.flags & FLAG_FLOOR) != 0u) {
-        let t = floor_t(o, d);
-        if (t > 0.0 && t < t_max && material(frame.floor_material).extra.x >= 1.0) {
-            return 0.0;
-        }
-    }
-    let r = first_root(o, d, 0.0, t_max, 1.0);
+fn kind_first_hit(o: vec3<f32>, d: vec3<f32>, lo: f32, hi: f32, iso: f32) -> KHit {
+    mb_iso = iso;
+    let r = first_root(o, d, lo, hi, 1.0);
     if (!r.found) {
-        return 1.0;
+        return no_hit();
     }
-    if (r.t > INSIDE_EPS) {
-        return 0.0;
-    }
-    // Starting inside the solid: its boundary blocks if the ray leaves it here.
-    if (first_root(o, d, 0.0, t_max, -1.0).found) {
-        return 0.0;
-    }
-    return 1.0;
+    return surface_at(r.t, o + r.t * d);
 }
 
-// integrator.rs shade_hit (emission and `local`, no reflection or transmission rays).
-fn shade_pass(s: Surface, view: vec3<f32>) -> vec3<f32> {
-    let m = material(s.material);
-    let normal = facing(s.normal, view);
-    let ap = abs(s.position);
-    let eps = 1.0e-3 + 2.0e-5 * max(max(ap.x, ap.y), ap.z);
-    let above = s.position + normal * eps;
-    var color = m.emission.xyz;
-    let receives = max(max(m.diffuse.x, m.diffuse.y), m.diffuse.z) > 0.0 || m.diffuse.w > 0.0;
-    if (!receives) {
-        return color;
+fn kind_exit_hit(o: vec3<f32>, d: vec3<f32>, lo: f32, hi: f32, iso: f32) -> KHit {
+    mb_iso = iso;
+    let r = first_root(o, d, lo, hi, -1.0);
+    if (!r.found) {
+        return no_hit();
     }
-    let albedo = s.albedo * m.diffuse.xyz;
-    color = color + frame.ambient.xyz * albedo;
-    for (var k = 0u; k < frame.light_count; k = k + 1u) {
-        let light = lights[k];
-        let l = toward(light, s.position);
-        if (!l.ok || dot(normal, l.to_light) <= 0.0) {
-            continue;
+    return surface_at(r.t, o + r.t * d);
+}
+
+fn kind_any_hit(o: vec3<f32>, d: vec3<f32>, lo: f32, hi: f32, iso: f32) -> f32 {
+    mb_iso = iso;
+    let r = first_root(o, d, lo, hi, 1.0);
+    return select(-1.0, r.t, r.found);
+}
+
+// queries.rs ball_integral: ∫ of one ball's kernel over [lo, hi] (the polynomial in u = t - lo).
+fn ball_integral(b: RayBall, lo: f32, hi: f32) -> f32 {
+    let h = hi - lo;
+    let dd = lo - b.tc;
+    let s0 = b.a * dd * dd + b.s_min;
+    let s1 = 2.0 * b.a * dd;
+    let w = vec3<f32>(1.0 - s0, -s1, -b.a);
+    var wk: array<f32, 9>;
+    var poly: array<f32, 9>;
+    for (var j = 0u; j < 9u; j = j + 1u) {
+        wk[j] = 0.0;
+        poly[j] = 0.0;
+    }
+    wk[0] = 1.0;
+    var len = 1u;
+    poly[0] = mb.kernel[0];
+    for (var k = 1u; k <= mb.kernel_degree; k = k + 1u) {
+        var ck = mb.kernel_c4;
+        if (k < 4u) {
+            ck = mb.kernel[k];
         }
-        var visibility = 1.0;
-        if ((frame.flags & FLAG_SHADOWS) != 0u) {
-            var reach = min(l.distance, frame.t_max);
-            if (light.position.w == 2.0) {
-                reach = max(l.distance - light.color.w, 0.0);
+        var next: array<f32, 9>;
+        for (var j = 0u; j < 9u; j = j + 1u) {
+            next[j] = 0.0;
+        }
+        for (var j = 0u; j < len; j = j + 1u) {
+            for (var l = 0u; l < 3u; l = l + 1u) {
+                next[j + l] = next[j + l] + wk[j] * w[l];
             }
-            visibility = transmittance(above, l.to_light, reach);
         }
-        color = color + direct(m, albedo, normal, view, l, visibility);
+        wk = next;
+        len = len + 2u;
+        for (var j = 0u; j < len; j = j + 1u) {
+            poly[j] = poly[j] + ck * wk[j];
+        }
     }
-    return color;
+    var acc = 0.0;
+    var j = len;
+    while (j > 0u) {
+        j = j - 1u;
+        acc = acc * h + poly[j] / f32(j + 1u);
+    }
+    return acc * h;
 }
 
-@compute @workgroup_size(8, 8, 1)
-fn trace(@builtin(global_invocation_id) id: vec3<u32>) {
-    if (id.x >= frame.width || id.y >= frame.height) {
-        return;
+// queries.rs optical_depth through the Fitted BVH: every leaf the segment crosses, each ball's
+// integral over its part of the leaf's range.
+fn kind_optical_depth(o: vec3<f32>, d: vec3<f32>, lo: f32, hi: f32) -> f32 {
+    let t_max = min(hi, 1.0e30);
+    if (mb.node_count == 0u || !(lo < t_max)) {
+        return 0.0;
     }
-    let raw = frame.top_left.xyz + frame.right_step.xyz * (f32(id.x) + 0.5)
-        + frame.down_step.xyz * (f32(id.y) + 0.5);
-    let d = normalize(raw);
-    let o = frame.eye.xyz;
-    let in_pass = (frame.flags & FLAG_PASS) != 0u;
-    var color = background(d.y);
-    var t = -1.0;
-    var hit = false;
-    var s: Surface;
-    var limit = frame.t_max;
-    var root: Root;
-    if (in_pass) {
-        root = crossing(o, d, 0.0, frame.t_max);
-    } else {
-        root = first_root(o, d, 0.0, frame.t_max, 1.0);
+    let inv_d = safe_inverse(d);
+    var sum = 0.0;
+    var top = 0u;
+    let root = slab(0u, o, inv_d, lo, t_max);
+    if (root.z > 0.0) {
+        stack_node[0] = 0u;
+        stack_range[0] = root.xy;
+        top = 1u;
     }
-    if (root.found) {
-        s = surface_at(root.t, o + root.t * d);
-        hit = true;
-        limit = root.t;
-    }
-    if (in_pass && (frame.flags & FLAG_FLOOR) != 0u) {
-        let tf = floor_t(o, d);
-        if (tf > 0.0 && tf < limit) {
-            let p = o + tf * d;
-            var albedo = frame.floor_color0.xyz;
-            if (frame.floor_checker > 0.0) {
-                let ix = i32(floor(p.x / frame.floor_checker));
-                let iz = i32(floor(p.z / frame.floor_checker));
-                if (((ix + iz) & 1) != 0) {
-                    albedo = frame.floor_color1.xyz;
+    while (top > 0u) {
+        top = top - 1u;
+        let i = stack_node[top];
+        let near = stack_range[top].x;
+        let far = stack_range[top].y;
+        let node = nodes[i];
+        if (node.count > 0u || node.first == 0xffffffffu) {
+            gathered_count = 0u;
+            for (var k = 0u; k < node.count; k = k + 1u) {
+                gather(leaf_balls[node.first + k], o, d, near, far);
+            }
+            for (var k = 0u; k < gathered_count; k = k + 1u) {
+                let b = gathered[k];
+                let a = max(b.t0, near);
+                let z = min(b.t1, far);
+                if (a < z) {
+                    sum = sum + b.q * ball_integral(b, a, z);
                 }
             }
-            s = Surface(tf, p, vec3<f32>(0.0, 1.0, 0.0), albedo, frame.floor_material);
-            hit = true;
+            continue;
+        }
+        for (var c = node.first; c < node.first + 2u; c = c + 1u) {
+            let r = slab(c, o, inv_d, lo, t_max);
+            if (r.z > 0.0 && top < STACK_SIZE) {
+                stack_node[top] = c;
+                stack_range[top] = r.xy;
+                top = top + 1u;
+            }
         }
     }
-    if (hit) {
-        if (in_pass) {
-            color = shade_pass(s, d);
-        } else {
-            color = shade_cast(s, d);
-        }
-        t = s.t * dot(d, frame.forward.xyz);
-    }
-    pixels[id.y * frame.width + id.x] = vec4<f32>(color, t);
+    return sum;
 }

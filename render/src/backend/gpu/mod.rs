@@ -1,13 +1,18 @@
 //! The wgpu compute backend (feature `gpu`): the shared data layout (`layout`), the WGSL
-//! kernel (`shader`, `metaballs.wgsl`), what a frame uploads (`upload`), the device
-//! (`device`), the reused buffers of a frame (`buffers`) and the backend with its CPU
-//! fallback (`backend`).
+//! kernels (`common.wgsl` with the integrator, one part per kind joined at the seam of
+//! `kind`; `shader` checks them), what a frame uploads (`upload`, and per kind `metaballs`,
+//! `tets`, `surfels`), the device (`device`), the reused buffers of a frame (`buffers`) and
+//! the backend with its CPU fallback (`backend`).
 
 pub mod backend;
 pub mod buffers;
 pub mod device;
+pub mod kind;
 pub mod layout;
+pub mod metaballs;
 pub mod shader;
+pub mod surfels;
+pub mod tets;
 pub mod upload;
 
 #[cfg(test)]

@@ -1,9 +1,9 @@
-//! The WGSL source of the trace kernel, checked by naga in a unit test (no device needed):
-//! it parses, validates, and its structs have the sizes and member offsets of the Rust
-//! structs in [`crate::backend::gpu::layout`].
-
-/// The metaball trace kernel (entry point [`ENTRY`]).
-pub const SOURCE: &str = include_str!("metaballs.wgsl");
+//! The trace kernels' entry point, checked by naga in unit tests (no device needed): every
+//! kind's kernel (common.wgsl + the kind's part, [`GpuKind::kernel`]) parses and validates,
+//! and the structs have the sizes and member offsets of the Rust structs in
+//! [`crate::backend::gpu::layout`].
+//!
+//! [`GpuKind::kernel`]: crate::backend::gpu::kind::GpuKind::kernel
 
 /// The kernel's entry point.
 pub const ENTRY: &str = "trace";
@@ -14,33 +14,43 @@ pub const WORKGROUP: u32 = 8;
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::backend::gpu::kind::GpuKind;
     use crate::backend::gpu::layout::{
-        GpuBall, GpuFrame, GpuGroup, GpuLight, GpuMaterial, GpuNode,
+        GpuBall, GpuFrame, GpuGroup, GpuIsoSurface, GpuLight, GpuMaterial, GpuMetaballParams,
+        GpuNode,
     };
     use std::mem::{offset_of, size_of};
     use wgpu::naga;
 
+    fn module_of(kind: GpuKind) -> naga::Module {
+        let source = kind.kernel();
+        naga::front::wgsl::parse_str(&source)
+            .unwrap_or_else(|e| panic!("{}: {}", kind.name(), e.emit_to_string(&source)))
+    }
+
     fn module() -> naga::Module {
-        naga::front::wgsl::parse_str(SOURCE)
-            .unwrap_or_else(|e| panic!("{}", e.emit_to_string(SOURCE)))
+        module_of(GpuKind::Metaballs)
     }
 
     #[test]
-    fn the_kernel_parses_and_validates() {
-        let module = module();
-        naga::valid::Validator::new(
-            naga::valid::ValidationFlags::all(),
-            naga::valid::Capabilities::empty(),
-        )
-        .validate(&module)
-        .unwrap_or_else(|e| panic!("{}", e.emit_to_string(SOURCE)));
-        let entry = module
-            .entry_points
-            .iter()
-            .find(|e| e.name == ENTRY)
-            .expect("the entry point");
-        assert_eq!(entry.stage, naga::ShaderStage::Compute);
-        assert_eq!(entry.workgroup_size, [WORKGROUP, WORKGROUP, 1]);
+    fn every_kind_kernel_parses_and_validates() {
+        for kind in GpuKind::ALL {
+            let module = module_of(kind);
+            let source = kind.kernel();
+            naga::valid::Validator::new(
+                naga::valid::ValidationFlags::all(),
+                naga::valid::Capabilities::empty(),
+            )
+            .validate(&module)
+            .unwrap_or_else(|e| panic!("{}: {}", kind.name(), e.emit_to_string(&source)));
+            let entry = module
+                .entry_points
+                .iter()
+                .find(|e| e.name == ENTRY)
+                .expect("the entry point");
+            assert_eq!(entry.stage, naga::ShaderStage::Compute);
+            assert_eq!(entry.workgroup_size, [WORKGROUP, WORKGROUP, 1]);
+        }
     }
 
     /// The value of the shader's `u32` constant `name`.
@@ -59,12 +69,13 @@ mod tests {
 
     #[test]
     fn shader_limits_are_the_ones_the_upload_checks() {
-        use crate::backend::gpu::upload::{MAX_DEPTH, MAX_GATHER};
+        use crate::backend::gpu::upload::{MAX_DEPTH, MAX_GATHER, RAY_STACK};
         use crate::kinds::metaballs::bezier::ITERATION_CAP;
         let m = module();
         assert_eq!(constant(&m, "MAX_GATHER") as usize, MAX_GATHER);
         assert_eq!(constant(&m, "STACK_SIZE") as usize, MAX_DEPTH + 1);
         assert_eq!(constant(&m, "ITERATION_CAP"), ITERATION_CAP);
+        assert_eq!(constant(&m, "RAY_STACK") as usize, RAY_STACK);
     }
 
     /// The struct `name` of the shader: its size and its members' (name, offset).
@@ -114,10 +125,11 @@ mod tests {
             "Frame",
             size_of::<GpuFrame>(),
             offsets!(GpuFrame; eye, top_left, right_step, down_step, forward, background_top,
-                background_bottom, ambient, mapped_albedo, kernel, floor_color0, floor_color1,
-                kernel_c4, kernel_degree, isovalue, tolerance, width, height, flags, t_max,
-                light_count, group_count, material_count, node_count, floor_height,
-                floor_checker, floor_material, _pad),
+                background_bottom, ambient, mapped_albedo, floor_color0, floor_color1,
+                floor_origin, volume, clip_min, clip_max, isovalue, width, height, flags, t_max,
+                light_count, group_count, material_count, floor_height, floor_checker,
+                floor_material, pass_index, reflection_depth, refraction_depth, layers,
+                ao_samples, light_samples, occlusion_distance, isosurface_count, _pad),
         );
         same_layout(
             &m,
@@ -148,6 +160,19 @@ mod tests {
             "Ball",
             size_of::<GpuBall>(),
             offsets!(GpuBall; center, strength, m0, m1, m2, color),
+        );
+        same_layout(
+            &m,
+            "IsoSurface",
+            size_of::<GpuIsoSurface>(),
+            offsets!(GpuIsoSurface; color, isovalue, material, _pad0, _pad1),
+        );
+        same_layout(
+            &m,
+            "MbParams",
+            size_of::<GpuMetaballParams>(),
+            offsets!(GpuMetaballParams; kernel, kernel_c4, kernel_degree, tolerance, step,
+                node_count, _pad0, _pad1, _pad2),
         );
     }
 }

@@ -1,137 +1,51 @@
-//! From engine values to the GPU's structs: what a frame can be traced with on the GPU (a
-//! metaball state with a Fitted BVH, primary rays and hard shadows), the flattened tree and
-//! balls, the lights and materials, and the per-frame uniform.
+//! From engine values to the GPU's structs, for every kind: what a frame can be traced with
+//! on the GPU (the kind's data through [`kind_upload`], a plan whose rays fit the kernel's
+//! stack), the lights, materials and isosurfaces, and the per-frame uniform.
 
+use crate::backend::gpu::kind::KindUpload;
 use crate::backend::gpu::layout::{
-    flags, light_kind, GpuBall, GpuFrame, GpuGroup, GpuLight, GpuMaterial, GpuNode,
+    flags, light_kind, GpuFrame, GpuGroup, GpuIsoSurface, GpuLight, GpuMaterial,
 };
+use crate::backend::gpu::{metaballs, surfels, tets};
 use crate::effects::plan::EffectsPlan;
 use crate::integrator::T_MAX;
 use crate::kinds::dispatch::PreparedGeometry;
-use crate::kinds::metaballs::engine::PreparedMetaballs;
-use crate::kinds::metaballs::scene::{MetaballScene, Shape};
-use crate::kinds::metaballs::tree::{Tree, TreeKind};
 use crate::scene::PreparedScene;
 use crate::shade::{Light, Lighting, Material};
 use crate::view::View;
 use glam::Vec3;
-use std::sync::Arc;
 
-/// Most balls the kernel gathers from one leaf (`MAX_GATHER` in the shader).
-pub const MAX_GATHER: usize = 192;
-/// Deepest tree the kernel's traversal stack holds (`STACK_SIZE` in the shader).
-pub const MAX_DEPTH: usize = 63;
+pub use crate::backend::gpu::metaballs::{MAX_DEPTH, MAX_GATHER};
 
-/// The metaball state of `scene` and the tree a query at `isovalue` walks, if the GPU can
-/// trace them; otherwise why not.
-pub fn traceable(
-    scene: &PreparedScene,
-    isovalue: f32,
-) -> Result<(&Arc<PreparedMetaballs>, &Tree), String> {
-    let metaballs = match scene.geometry() {
-        PreparedGeometry::Metaballs(m) => m,
-        PreparedGeometry::Tets(_) => return Err("tetrahedral meshes are traced on the CPU".into()),
-        PreparedGeometry::Surfels(_) => return Err("surfels are traced on the CPU".into()),
-    };
-    if !(isovalue > 0.0) || !isovalue.is_finite() {
-        return Err(format!("isovalue {isovalue} has no surface"));
+/// Rays the kernel's integrator keeps waiting (`RAY_STACK` in common.wgsl).
+pub const RAY_STACK: usize = 24;
+
+/// The kind's data of `scene` for a frame of `view` (`plan`: `None` for ray casting), or why
+/// the GPU cannot trace it.
+pub fn kind_upload<'a>(
+    scene: &'a PreparedScene,
+    view: &View,
+    plan: Option<&EffectsPlan>,
+) -> Result<KindUpload<'a>, String> {
+    match scene.geometry() {
+        PreparedGeometry::Metaballs(m) => metaballs::upload(m, view, plan),
+        PreparedGeometry::Tets(t) => tets::upload(t, view),
+        PreparedGeometry::Surfels(s) => surfels::upload(s, view),
     }
-    let tree = metaballs
-        .tree_for(isovalue)
-        .ok_or("the GPU walks a Fitted BVH; this state has none")?;
-    if tree.kind != TreeKind::Fitted {
-        return Err("the GPU walks a Fitted BVH, not the BVH with split metaballs".into());
-    }
-    Ok((metaballs, tree))
 }
 
-/// Checks that the kernel can hold the tree (leaf size, depth).
-pub fn check_tree(tree: &Tree) -> Result<(), String> {
-    let stats = tree.stats();
-    if stats.max_depth > MAX_DEPTH {
+/// Whether the kernel's ray stack holds every ray `plan` can have waiting: a path of `d`
+/// bounces and `l` layers leaves at most two siblings per step on the stack.
+pub fn check_plan(plan: &EffectsPlan) -> Result<(), String> {
+    let path = plan.reflection_depth.max(plan.refraction_depth) as usize + plan.layers as usize;
+    if 2 * path + 1 > RAY_STACK {
         return Err(format!(
-            "tree depth {} exceeds the GPU stack of {MAX_DEPTH}",
-            stats.max_depth
+            "{} bounces and {} layers can leave more rays waiting than the GPU's {RAY_STACK}",
+            plan.reflection_depth.max(plan.refraction_depth),
+            plan.layers
         ));
     }
-    if let Some(n) = tree.nodes.iter().map(|n| n.count as usize).max() {
-        if n > MAX_GATHER {
-            return Err(format!(
-                "a leaf of {n} balls exceeds the GPU's {MAX_GATHER}"
-            ));
-        }
-    }
     Ok(())
-}
-
-/// The effects the kernel traces: primary rays, and hard shadows. Anything else in `plan`
-/// (reflections, refraction, transparency, occlusion, soft shadows, volumes, the clip box,
-/// further isosurfaces) is traced on the CPU for now.
-pub fn check_plan(plan: &EffectsPlan) -> Result<(), String> {
-    let unsupported = [
-        (plan.soft_shadows, "soft shadows"),
-        (plan.reflection_depth > 0, "reflections"),
-        (plan.refraction_depth > 0, "refraction"),
-        (plan.layers > 0, "transparency layers"),
-        (plan.ao_samples > 0, "ambient occlusion"),
-        (plan.volume, "volumes"),
-        (plan.clip_box.is_some(), "the clip box"),
-        (plan.isosurfaces, "further isosurfaces"),
-    ];
-    match unsupported.iter().find(|(on, _)| *on) {
-        Some((_, name)) => Err(format!("{name} are not traced on the GPU yet")),
-        None => Ok(()),
-    }
-}
-
-/// The tree's nodes and leaf-ball indices, as the GPU reads them.
-pub fn nodes(tree: &Tree) -> (Vec<GpuNode>, Vec<u32>) {
-    let nodes = tree
-        .nodes
-        .iter()
-        .map(|n| GpuNode {
-            min: n.bounds.min.to_array(),
-            first: n.first,
-            max: n.bounds.max.to_array(),
-            count: n.count,
-        })
-        .collect();
-    (nodes, tree.balls.clone())
-}
-
-/// Every ball of `scene`, as the GPU reads it.
-pub fn balls(scene: &MetaballScene) -> Vec<GpuBall> {
-    scene
-        .balls
-        .iter()
-        .map(|b| {
-            let min_radius = b.min_semi_axis();
-            let (m0, m1, m2) = match b.shape {
-                Shape::Sphere => (
-                    [1.0 / b.radius, 0.0, 0.0, min_radius],
-                    [0.0, 1.0 / b.radius, 0.0, 0.0],
-                    [0.0, 0.0, 1.0 / b.radius, 0.0],
-                ),
-                Shape::Ellipsoid { .. } => {
-                    // Rows of M (glam stores columns).
-                    let m = b.normalizing().transpose();
-                    (
-                        m.x_axis.extend(min_radius).to_array(),
-                        m.y_axis.extend(1.0).to_array(),
-                        m.z_axis.extend(0.0).to_array(),
-                    )
-                }
-            };
-            GpuBall {
-                center: b.center.to_array(),
-                strength: b.strength,
-                m0,
-                m1,
-                m2,
-                color: b.color.extend(0.0).to_array(),
-            }
-        })
-        .collect()
 }
 
 fn material(m: &Material) -> GpuMaterial {
@@ -142,9 +56,18 @@ fn material(m: &Material) -> GpuMaterial {
     }
 }
 
-/// Lights, materials (the scene's, then the fallback for an index past them) and groups.
-pub fn lighting(l: &Lighting) -> (Vec<GpuLight>, Vec<GpuMaterial>, Vec<GpuGroup>) {
-    let lights = l
+/// The arrays of bind group 0 besides the output: lights, materials (the scene's, then the
+/// fallback for an index past them), groups and further isosurfaces (each with its own
+/// colour, or the colour map's of its isovalue, when one replaces the kind's).
+pub struct LightingArrays {
+    pub lights: Vec<GpuLight>,
+    pub materials: Vec<GpuMaterial>,
+    pub groups: Vec<GpuGroup>,
+    pub isosurfaces: Vec<GpuIsoSurface>,
+}
+
+pub fn lighting(l: &Lighting) -> LightingArrays {
+    let mut lights: Vec<GpuLight> = l
         .lights
         .iter()
         .map(|light| match *light {
@@ -168,7 +91,7 @@ pub fn lighting(l: &Lighting) -> (Vec<GpuLight>, Vec<GpuMaterial>, Vec<GpuGroup>
         .collect();
     let mut materials: Vec<GpuMaterial> = l.materials.iter().map(material).collect();
     materials.push(material(&Material::default()));
-    let groups = l
+    let mut groups: Vec<GpuGroup> = l
         .groups
         .iter()
         .map(|g| GpuGroup {
@@ -178,31 +101,83 @@ pub fn lighting(l: &Lighting) -> (Vec<GpuLight>, Vec<GpuMaterial>, Vec<GpuGroup>
             _pad: 0,
         })
         .collect();
-    (lights, materials, groups)
+    let mut isosurfaces: Vec<GpuIsoSurface> = l
+        .isosurfaces
+        .iter()
+        .map(|s| {
+            let color = match &l.color_map {
+                Some(map) => Some(map.albedo(s.isovalue)),
+                None => s.color,
+            };
+            GpuIsoSurface {
+                color: color.map_or([0.0; 4], |c| c.extend(1.0).to_array()),
+                isovalue: s.isovalue,
+                material: s.material as u32,
+                ..GpuIsoSurface::default()
+            }
+        })
+        .collect();
+    // Storage bindings may not be empty.
+    if lights.is_empty() {
+        lights.push(GpuLight::default());
+    }
+    if groups.is_empty() {
+        groups.push(GpuGroup::default());
+    }
+    if isosurfaces.is_empty() {
+        isosurfaces.push(GpuIsoSurface::default());
+    }
+    LightingArrays {
+        lights,
+        materials,
+        groups,
+        isosurfaces,
+    }
 }
 
-/// The frame's uniform. `plan`: `None` for ray casting (`Lighting::shade`), else one pass
+/// The frame's uniform. `plan`: `None` for ray casting (`Lighting::shade`), else pass `pass`
 /// of the integrator with that plan (already checked by [`check_plan`]).
 pub fn frame(
+    scene: &PreparedScene,
     view: &View,
-    lighting: &Lighting,
-    metaballs: &PreparedMetaballs,
-    node_count: usize,
     plan: Option<&EffectsPlan>,
+    pass: u32,
 ) -> GpuFrame {
-    let [eye, top_left, right_step, down_step, forward] =
-        view.camera.rays(view.width, view.height).parts();
+    let lighting = scene.lighting_in_frame();
+    let [eye, top_left, right_step, down_step, forward] = scene
+        .primary_rays(&view.camera, view.width, view.height)
+        .parts();
     let v4 = |v: Vec3| v.extend(0.0).to_array();
-    let c = metaballs.scene().kernel.w_coefficients();
     let mut bits = 0;
+    let mut effects = GpuFrame::default();
     if let Some(plan) = plan {
         bits |= flags::PASS;
         if plan.shadows {
             bits |= flags::SHADOWS;
         }
+        if plan.soft_shadows {
+            bits |= flags::SOFT_SHADOWS;
+        }
         if lighting.floor.is_some() {
             bits |= flags::FLOOR;
         }
+        if plan.isosurfaces {
+            bits |= flags::ISOSURFACES;
+        }
+        if let (true, Some(volume)) = (plan.volume, lighting.volume) {
+            bits |= flags::VOLUME;
+            effects.volume = volume.color.extend(volume.density).to_array();
+        }
+        if let Some(clip) = &plan.clip_box {
+            bits |= flags::CLIP;
+            effects.clip_min = v4(clip.min);
+            effects.clip_max = v4(clip.max);
+        }
+        effects.reflection_depth = plan.reflection_depth;
+        effects.refraction_depth = plan.refraction_depth;
+        effects.layers = plan.layers;
+        effects.ao_samples = plan.ao_samples;
+        effects.light_samples = plan.light_samples;
     }
     let mapped = match &lighting.color_map {
         Some(map) => {
@@ -222,13 +197,10 @@ pub fn frame(
         background_bottom: v4(lighting.background_bottom),
         ambient: v4(lighting.ambient),
         mapped_albedo: v4(mapped),
-        kernel: [c[0] as f32, c[1] as f32, c[2] as f32, c[3] as f32],
         floor_color0: v4(floor.map_or(Vec3::ZERO, |f| f.colors[0])),
         floor_color1: v4(floor.map_or(Vec3::ZERO, |f| f.colors[1])),
-        kernel_c4: c[4] as f32,
-        kernel_degree: metaballs.scene().kernel.w_degree() as u32,
+        floor_origin: v4(scene.frame().origin.as_vec3()),
         isovalue: view.isovalue,
-        tolerance: metaballs.options().tolerance,
         width: view.width,
         height: view.height,
         flags: bits,
@@ -236,10 +208,12 @@ pub fn frame(
         light_count: lighting.lights.len() as u32,
         group_count: lighting.groups.len() as u32,
         material_count: lighting.materials.len() as u32 + 1,
-        node_count: node_count as u32,
         floor_height: floor.map_or(0.0, |f| f.height),
         floor_checker: floor.map_or(0.0, |f| f.checker),
         floor_material: floor.map_or(0, |f| f.material as u32),
-        _pad: 0,
+        pass_index: pass,
+        occlusion_distance: lighting.occlusion_distance,
+        isosurface_count: lighting.isosurfaces.len() as u32,
+        ..effects
     }
 }

@@ -274,18 +274,11 @@ impl PreparedMetaballs {
         Some(t)
     }
 
-    /// `∫ F dt` over `[t_min, t_max]` of `ray`: the summed field integrated exactly.
-    pub fn optical_depth(&self, ray: &Ray, t_min: f32, t_max: f32) -> f32 {
-        if !(t_min < t_max) || self.balls.is_empty() {
-            return 0.0;
-        }
-        let kernel = self.scene.kernel.w_coefficients();
-        let degree = self.scene.kernel.w_degree();
-        // Only a Fitted BVH has a tree to walk here (one built for a higher isovalue is
-        // swapped for its relaxed twin); every other mode integrates over all balls.
-        let tree = if let (AccelKind::Tree(opts), Accel::Tree(tree)) =
-            (&self.options.accel, &self.accel)
-        {
+    /// The tree [`PreparedMetaballs::optical_depth`] walks: only a Fitted BVH has one here (one
+    /// built for a higher isovalue is swapped for its relaxed twin, whose leaves hold every
+    /// ball's whole support); `None`: every other mode integrates over all balls.
+    pub fn optical_depth_tree(&self) -> Option<&Tree> {
+        if let (AccelKind::Tree(opts), Accel::Tree(tree)) = (&self.options.accel, &self.accel) {
             if opts.kind != TreeKind::Fitted {
                 None
             } else if opts.depends_on_isovalue() {
@@ -298,7 +291,17 @@ impl PreparedMetaballs {
             }
         } else {
             None
-        };
+        }
+    }
+
+    /// `∫ F dt` over `[t_min, t_max]` of `ray`: the summed field integrated exactly.
+    pub fn optical_depth(&self, ray: &Ray, t_min: f32, t_max: f32) -> f32 {
+        if !(t_min < t_max) || self.balls.is_empty() {
+            return 0.0;
+        }
+        let kernel = self.scene.kernel.w_coefficients();
+        let degree = self.scene.kernel.w_degree();
+        let tree = self.optical_depth_tree();
         let t_max = t_max.min(1.0e30);
         SCRATCH.with(|cell| {
             let mut guard = cell.borrow_mut();

@@ -1,0 +1,736 @@
+// The kind-independent part of the trace kernel: one invocation per pixel, the camera ray,
+// and the integrator of render/src/integrator.rs (ray casting, or one refinement pass of the
+// Whitted-style tracer with every effect of the plan), with the random streams of
+// geom/rng.rs PixelRng bit for bit. The kind's part (metaballs.wgsl, tets.wgsl,
+// surfels.wgsl) is appended and answers four queries: kind_first_hit, kind_exit_hit,
+// kind_any_hit, kind_optical_depth. The structs mirror backend/gpu/layout.rs field by field.
+//
+// WGSL has no recursion: the tracer's tree of rays (transparency layers, refraction's
+// reflected and bent rays, mirror reflections) is walked depth first with an explicit stack
+// of weighted rays. Every colour the CPU composes is linear in what the rays behind it bring,
+// so each ray carries the weight its radiance has in the pixel; children are pushed in
+// reverse so that rays are traced, and random numbers drawn, in the CPU's order.
+
+struct Frame {
+    eye: vec4<f32>,
+    top_left: vec4<f32>,
+    right_step: vec4<f32>,
+    down_step: vec4<f32>,
+    forward: vec4<f32>,
+    background_top: vec4<f32>,
+    background_bottom: vec4<f32>,
+    ambient: vec4<f32>,
+    mapped_albedo: vec4<f32>,
+    floor_color0: vec4<f32>,
+    floor_color1: vec4<f32>,
+    floor_origin: vec4<f32>,
+    volume: vec4<f32>,
+    clip_min: vec4<f32>,
+    clip_max: vec4<f32>,
+    isovalue: f32,
+    width: u32,
+    height: u32,
+    flags: u32,
+    t_max: f32,
+    light_count: u32,
+    group_count: u32,
+    material_count: u32,
+    floor_height: f32,
+    floor_checker: f32,
+    floor_material: u32,
+    pass_index: u32,
+    reflection_depth: u32,
+    refraction_depth: u32,
+    layers: u32,
+    ao_samples: u32,
+    light_samples: u32,
+    occlusion_distance: f32,
+    isosurface_count: u32,
+    _pad: u32,
+}
+
+struct Light {
+    position: vec4<f32>,
+    color: vec4<f32>,
+}
+
+struct Material {
+    diffuse: vec4<f32>,
+    emission: vec4<f32>,
+    extra: vec4<f32>,
+}
+
+struct Group {
+    first: u32,
+    count: u32,
+    material: u32,
+    _pad: u32,
+}
+
+struct IsoSurface {
+    color: vec4<f32>,
+    isovalue: f32,
+    material: u32,
+    _pad0: u32,
+    _pad1: u32,
+}
+
+@group(0) @binding(0) var<uniform> frame: Frame;
+@group(0) @binding(1) var<storage, read> lights: array<Light>;
+@group(0) @binding(2) var<storage, read> materials: array<Material>;
+@group(0) @binding(3) var<storage, read> groups: array<Group>;
+@group(0) @binding(4) var<storage, read> isosurfaces: array<IsoSurface>;
+// Per pixel: linear colour, and the hit distance along the view axis (negative: a miss).
+@group(0) @binding(5) var<storage, read_write> pixels: array<vec4<f32>>;
+
+const FLAG_PASS: u32 = 1u;
+const FLAG_SHADOWS: u32 = 2u;
+const FLAG_FLOOR: u32 = 4u;
+const FLAG_COLOR_MAP: u32 = 8u;
+const FLAG_SOFT_SHADOWS: u32 = 16u;
+const FLAG_VOLUME: u32 = 32u;
+const FLAG_CLIP: u32 = 64u;
+const FLAG_ISOSURFACES: u32 = 128u;
+
+// integrator.rs INSIDE_EPS.
+const INSIDE_EPS: f32 = 2.0e-4;
+const BIG: f32 = 3.0e38;
+const TAU: f32 = 6.28318530717958647692;
+// Rays waiting on the integrator's stack; the upload refuses plans that could need more.
+const RAY_STACK: u32 = 24u;
+
+// What a kind's query found (ray.rs Hit; `found` false: nothing).
+struct KHit {
+    found: bool,
+    t: f32,
+    position: vec3<f32>,
+    normal: vec3<f32>,
+    albedo: vec3<f32>,
+    primitive: u32,
+}
+
+fn no_hit() -> KHit {
+    return KHit(false, 0.0, vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0), 0u);
+}
+
+fn has(flag: u32) -> bool {
+    return (frame.flags & flag) != 0u;
+}
+
+// ---- geom/rng.rs PixelRng: SplitMix64 on (lo, hi) pairs of 32 bits ----
+
+fn mul_wide(a: u32, b: u32) -> vec2<u32> {
+    let a0 = a & 0xffffu;
+    let a1 = a >> 16u;
+    let b0 = b & 0xffffu;
+    let b1 = b >> 16u;
+    let p00 = a0 * b0;
+    let p01 = a0 * b1;
+    let p10 = a1 * b0;
+    let p11 = a1 * b1;
+    let mid = (p00 >> 16u) + (p01 & 0xffffu) + (p10 & 0xffffu);
+    return vec2<u32>((p00 & 0xffffu) | (mid << 16u), p11 + (p01 >> 16u) + (p10 >> 16u) + (mid >> 16u));
+}
+
+fn mul64(a: vec2<u32>, b: vec2<u32>) -> vec2<u32> {
+    let w = mul_wide(a.x, b.x);
+    return vec2<u32>(w.x, w.y + a.x * b.y + a.y * b.x);
+}
+
+fn add64(a: vec2<u32>, b: vec2<u32>) -> vec2<u32> {
+    let lo = a.x + b.x;
+    return vec2<u32>(lo, a.y + b.y + select(0u, 1u, lo < a.x));
+}
+
+// a ^ (a >> n), 0 < n < 32.
+fn xorshift64(a: vec2<u32>, n: u32) -> vec2<u32> {
+    let s = vec2<u32>((a.x >> n) | (a.y << (32u - n)), a.y >> n);
+    return a ^ s;
+}
+
+const GOLDEN: vec2<u32> = vec2<u32>(0x7F4A7C15u, 0x9E3779B9u);
+
+fn mix64(z0: vec2<u32>) -> vec2<u32> {
+    var z = mul64(xorshift64(z0, 30u), vec2<u32>(0x1CE4E5B9u, 0xBF58476Du));
+    z = mul64(xorshift64(z, 27u), vec2<u32>(0x133111EBu, 0x94D049BBu));
+    return xorshift64(z, 31u);
+}
+
+var<private> rng_state: vec2<u32>;
+
+fn rng_seed(x: u32, y: u32, pass_index: u32) {
+    let key = vec2<u32>(x, y) ^ mix64(add64(vec2<u32>(pass_index, 0u), vec2<u32>(0x1503A7E5u, 0u)));
+    rng_state = mix64(mul64(key, GOLDEN));
+}
+
+// Uniform in [0, 1).
+fn rng_next() -> f32 {
+    rng_state = add64(rng_state, GOLDEN);
+    let v = mix64(rng_state);
+    return f32(v.y >> 8u) * (1.0 / 16777216.0);
+}
+
+// ---- sampling.rs ----
+
+fn basis_t(n: vec3<f32>) -> vec3<f32> {
+    let sign = select(-1.0, 1.0, n.z >= 0.0);
+    let a = -1.0 / (sign + n.z);
+    let b = n.x * n.y * a;
+    return vec3<f32>(1.0 + sign * n.x * n.x * a, sign * b, -sign * n.x);
+}
+
+fn basis_b(n: vec3<f32>) -> vec3<f32> {
+    let sign = select(-1.0, 1.0, n.z >= 0.0);
+    let a = -1.0 / (sign + n.z);
+    let b = n.x * n.y * a;
+    return vec3<f32>(b, sign + n.y * n.y * a, -n.y);
+}
+
+fn cosine_hemisphere(n: vec3<f32>, u1: f32, u2: f32) -> vec3<f32> {
+    let r = sqrt(u1);
+    let phi = TAU * u2;
+    let z = sqrt(max(1.0 - u1, 0.0));
+    return normalize(basis_t(n) * (r * cos(phi)) + basis_b(n) * (r * sin(phi)) + n * z);
+}
+
+fn uniform_cone(axis: vec3<f32>, cos_max: f32, u1: f32, u2: f32) -> vec3<f32> {
+    let cos_t = 1.0 - u1 * (1.0 - cos_max);
+    let sin_t = sqrt(max(1.0 - cos_t * cos_t, 0.0));
+    let phi = TAU * u2;
+    return normalize(basis_t(axis) * (sin_t * cos(phi)) + basis_b(axis) * (sin_t * sin(phi)) + axis * cos_t);
+}
+
+// ---- shade.rs ----
+
+fn material(index: u32) -> Material {
+    return materials[min(index, frame.material_count - 1u)];
+}
+
+fn material_of(primitive: u32) -> u32 {
+    for (var g = 0u; g < frame.group_count; g = g + 1u) {
+        if (primitive - groups[g].first < groups[g].count) {
+            return groups[g].material;
+        }
+    }
+    return 0u;
+}
+
+fn receives_light(m: Material) -> bool {
+    return max(max(m.diffuse.x, m.diffuse.y), m.diffuse.z) > 0.0 || m.diffuse.w > 0.0;
+}
+
+fn facing(normal: vec3<f32>, view: vec3<f32>) -> vec3<f32> {
+    if (dot(normal, view) > 0.0) {
+        return -normal;
+    }
+    return normal;
+}
+
+// A light seen from p: the unit direction towards it, its distance (BIG for a directional
+// light) and its irradiance; `ok` false when p sits on a point light.
+struct LightSample {
+    ok: bool,
+    to_light: vec3<f32>,
+    distance: f32,
+    irradiance: vec3<f32>,
+}
+
+fn toward(light: Light, p: vec3<f32>) -> LightSample {
+    if (light.position.w == 0.0) {
+        return LightSample(true, light.position.xyz, BIG, light.color.xyz);
+    }
+    let d = light.position.xyz - p;
+    let d2 = dot(d, d);
+    if (!(d2 > 1.0e-12)) {
+        return LightSample(false, vec3<f32>(0.0), 0.0, vec3<f32>(0.0));
+    }
+    let distance = sqrt(d2);
+    return LightSample(true, d / distance, distance, light.color.xyz / d2);
+}
+
+// shade.rs direct.
+fn direct(m: Material, albedo: vec3<f32>, normal: vec3<f32>, view: vec3<f32>, l: LightSample, visibility: f32) -> vec3<f32> {
+    let n_dot_l = dot(normal, l.to_light);
+    if (n_dot_l <= 0.0 || visibility <= 0.0) {
+        return vec3<f32>(0.0);
+    }
+    let h = l.to_light - view;
+    let h2 = dot(h, h);
+    var half = vec3<f32>(0.0);
+    if (h2 > 0.0) {
+        half = h * inverseSqrt(h2);
+    }
+    var spec = 0.0;
+    let specular = m.diffuse.w;
+    if (specular > 0.0) {
+        let x = max(dot(normal, half), 0.0);
+        if (x > 0.0) {
+            spec = pow(x, m.emission.w) * specular;
+        }
+    }
+    return l.irradiance * (albedo * n_dot_l + vec3<f32>(spec)) * visibility;
+}
+
+fn background(dir_y: f32) -> vec3<f32> {
+    let a = 0.5 * (clamp(dir_y, -1.0, 1.0) + 1.0);
+    return frame.background_bottom.xyz + (frame.background_top.xyz - frame.background_bottom.xyz) * a;
+}
+
+fn fresnel(cos_i: f32, n1: f32, n2: f32) -> f32 {
+    let eta = n1 / n2;
+    let sin_t2 = eta * eta * max(1.0 - cos_i * cos_i, 0.0);
+    if (sin_t2 >= 1.0) {
+        return 1.0;
+    }
+    let cos_t = sqrt(1.0 - sin_t2);
+    let rs = (n1 * cos_i - n2 * cos_t) / (n1 * cos_i + n2 * cos_t);
+    let rp = (n1 * cos_t - n2 * cos_i) / (n1 * cos_t + n2 * cos_i);
+    return 0.5 * (rs * rs + rp * rp);
+}
+
+fn reflect_dir(dir: vec3<f32>, normal: vec3<f32>) -> vec3<f32> {
+    return normalize(dir - 2.0 * dot(dir, normal) * normal);
+}
+
+// integrator.rs refract_dir; w = 0 under total internal reflection.
+fn refract_dir(dir: vec3<f32>, normal: vec3<f32>, eta: f32) -> vec4<f32> {
+    let cos_i = -dot(dir, normal);
+    let k = 1.0 - eta * eta * (1.0 - cos_i * cos_i);
+    if (k < 0.0) {
+        return vec4<f32>(0.0);
+    }
+    return vec4<f32>(normalize(eta * dir + (eta * cos_i - sqrt(k)) * normal), 1.0);
+}
+
+// shade.rs Lighting::shade: every light, no shadows (ray casting).
+fn shade_cast(h: KHit, view: vec3<f32>) -> vec3<f32> {
+    let m = material(material_of(h.primitive));
+    var albedo = h.albedo;
+    if (has(FLAG_COLOR_MAP)) {
+        albedo = frame.mapped_albedo.xyz;
+    }
+    albedo = albedo * m.diffuse.xyz;
+    let normal = facing(h.normal, view);
+    var color = m.emission.xyz + frame.ambient.xyz * albedo;
+    for (var k = 0u; k < frame.light_count; k = k + 1u) {
+        let l = toward(lights[k], h.position);
+        if (l.ok) {
+            color = color + direct(m, albedo, normal, view, l, 1.0);
+        }
+    }
+    return color;
+}
+
+// integrator.rs offset: how far a secondary ray starts off its surface.
+fn offset(p: vec3<f32>) -> f32 {
+    let ap = abs(p);
+    return 1.0e-3 + 2.0e-5 * max(max(ap.x, ap.y), ap.z);
+}
+
+// ---- integrator.rs ----
+
+// The stretches of [a, b] outside the clip box, in order: (lo, hi) pairs in xy and zw, and
+// how many (Tracer::segments).
+struct Segments {
+    s: array<vec2<f32>, 2>,
+    n: u32,
+}
+
+fn segments(o: vec3<f32>, d: vec3<f32>, a: f32, b: f32) -> Segments {
+    var out: Segments;
+    out.s[0] = vec2<f32>(a, b);
+    out.s[1] = vec2<f32>(0.0, 0.0);
+    out.n = 1u;
+    if (!has(FLAG_CLIP)) {
+        return out;
+    }
+    let inv = 1.0 / d;
+    let t0 = (frame.clip_min.xyz - o) * inv;
+    let t1 = (frame.clip_max.xyz - o) * inv;
+    let lo = min(t0, t1);
+    let hi = max(t0, t1);
+    let near = max(max(lo.x, lo.y), lo.z);
+    let far = min(min(hi.x, hi.y), hi.z);
+    if (!(near <= far) || far <= a || near >= b) {
+        return out;
+    }
+    var n = 0u;
+    if (near > a) {
+        out.s[n] = vec2<f32>(a, near);
+        n = n + 1u;
+    }
+    if (far < b) {
+        out.s[n] = vec2<f32>(far, b);
+        n = n + 1u;
+    }
+    out.n = n;
+    return out;
+}
+
+// Tracer::crossing_from: the first crossing of `iso` on [a, b] outside the clip box,
+// entering the solid or, when the ray starts inside it (or `inside`), leaving it.
+fn crossing_from(o: vec3<f32>, d: vec3<f32>, a: f32, b: f32, iso: f32, inside: bool) -> KHit {
+    let segs = segments(o, d, a, b);
+    for (var k = 0u; k < segs.n; k = k + 1u) {
+        let lo = segs.s[k].x;
+        let hi = segs.s[k].y;
+        if (inside && k == 0u && lo == a) {
+            let exit = kind_exit_hit(o, d, lo, hi, iso);
+            if (exit.found) {
+                return exit;
+            }
+            continue;
+        }
+        let h = kind_first_hit(o, d, lo, hi, iso);
+        if (!h.found) {
+            continue;
+        }
+        if (h.t > lo + INSIDE_EPS) {
+            return h;
+        }
+        let exit = kind_exit_hit(o, d, lo, hi, iso);
+        if (exit.found) {
+            return exit;
+        }
+    }
+    return no_hit();
+}
+
+// A surface a ray reached: of the geometry or of the floor.
+struct SurfaceHit {
+    found: bool,
+    t: f32,
+    position: vec3<f32>,
+    normal: vec3<f32>,
+    albedo: vec3<f32>,
+    material: u32,
+}
+
+fn floor_t(o: vec3<f32>, d: vec3<f32>) -> f32 {
+    return (frame.floor_height - o.y) / d.y;
+}
+
+// shade.rs Floor::color_at, the checker counted in world coordinates.
+fn floor_albedo(p: vec3<f32>) -> vec3<f32> {
+    if (!(frame.floor_checker > 0.0)) {
+        return frame.floor_color0.xyz;
+    }
+    let w = p + frame.floor_origin.xyz;
+    let ix = i32(floor(w.x / frame.floor_checker));
+    let iz = i32(floor(w.z / frame.floor_checker));
+    if (((ix + iz) & 1) != 0) {
+        return frame.floor_color1.xyz;
+    }
+    return frame.floor_color0.xyz;
+}
+
+// Tracer::closest: the nearest surface on [t0, t1], every drawn isosurface and the floor.
+fn closest(o: vec3<f32>, d: vec3<f32>, t0: f32, t1: f32) -> SurfaceHit {
+    var best = SurfaceHit(false, 0.0, vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0), 0u);
+    var limit = t1;
+    if (!has(FLAG_VOLUME)) {
+        let h = crossing_from(o, d, t0, limit, frame.isovalue, false);
+        if (h.found) {
+            limit = h.t;
+            var albedo = h.albedo;
+            if (has(FLAG_COLOR_MAP)) {
+                albedo = frame.mapped_albedo.xyz;
+            }
+            best = SurfaceHit(true, h.t, h.position, h.normal, albedo, material_of(h.primitive));
+        }
+        if (has(FLAG_ISOSURFACES)) {
+            for (var k = 0u; k < frame.isosurface_count; k = k + 1u) {
+                let s = isosurfaces[k];
+                let h = crossing_from(o, d, t0, limit, s.isovalue, false);
+                if (h.found) {
+                    limit = h.t;
+                    var albedo = h.albedo;
+                    if (s.color.w > 0.0) {
+                        albedo = s.color.xyz;
+                    }
+                    best = SurfaceHit(true, h.t, h.position, h.normal, albedo, s.material);
+                }
+            }
+        }
+    }
+    if (has(FLAG_FLOOR)) {
+        let t = floor_t(o, d);
+        if (t > t0 && t < limit) {
+            let p = o + t * d;
+            best = SurfaceHit(true, t, p, vec3<f32>(0.0, 1.0, 0.0), floor_albedo(p), frame.floor_material);
+        }
+    }
+    return best;
+}
+
+// Tracer::blocked: whether `iso` crosses [a, b] outside the clip box (any hit).
+fn blocked(o: vec3<f32>, d: vec3<f32>, a: f32, b: f32, iso: f32) -> bool {
+    let segs = segments(o, d, a, b);
+    for (var k = 0u; k < segs.n; k = k + 1u) {
+        let lo = segs.s[k].x;
+        let hi = segs.s[k].y;
+        let t = kind_any_hit(o, d, lo, hi, iso);
+        if (t < 0.0) {
+            continue;
+        }
+        if (t > lo + INSIDE_EPS) {
+            return true;
+        }
+        // Starting inside the solid: its boundary blocks if the ray leaves it here.
+        if (kind_exit_hit(o, d, lo, hi, iso).found) {
+            return true;
+        }
+    }
+    return false;
+}
+
+fn optical_depth(o: vec3<f32>, d: vec3<f32>, a: f32, b: f32) -> f32 {
+    let segs = segments(o, d, a, b);
+    var sum = 0.0;
+    for (var k = 0u; k < segs.n; k = k + 1u) {
+        sum = sum + kind_optical_depth(o, d, segs.s[k].x, segs.s[k].y);
+    }
+    return sum;
+}
+
+// Tracer::transmittance: the share of light that passes along the ray over [0, t_max].
+fn transmittance(o: vec3<f32>, d: vec3<f32>, t_max: f32) -> f32 {
+    if (has(FLAG_FLOOR)) {
+        let t = floor_t(o, d);
+        if (t > 0.0 && t < t_max && material(frame.floor_material).extra.x >= 1.0) {
+            return 0.0;
+        }
+    }
+    if (has(FLAG_VOLUME)) {
+        return exp(-frame.volume.w * optical_depth(o, d, 0.0, t_max));
+    }
+    var transmitted = 1.0;
+    var surfaces = 1u;
+    if (has(FLAG_ISOSURFACES)) {
+        surfaces = surfaces + frame.isosurface_count;
+    }
+    for (var k = 0u; k < surfaces; k = k + 1u) {
+        var iso = frame.isovalue;
+        var fixed = false;
+        var fixed_material = 0u;
+        if (k > 0u) {
+            iso = isosurfaces[k - 1u].isovalue;
+            fixed = true;
+            fixed_material = isosurfaces[k - 1u].material;
+        }
+        if (frame.layers == 0u) {
+            if (blocked(o, d, 0.0, t_max, iso)) {
+                return 0.0;
+            }
+            continue;
+        }
+        // Walk the crossings, each letting 1 - α through.
+        var t = 0.0;
+        var crossings = 0u;
+        var inside = false;
+        loop {
+            let h = crossing_from(o, d, t, t_max, iso, inside);
+            if (!h.found) {
+                break;
+            }
+            inside = dot(h.normal, d) < 0.0;
+            var m = fixed_material;
+            if (!fixed) {
+                m = material_of(h.primitive);
+            }
+            transmitted = transmitted * (1.0 - clamp(material(m).extra.x, 0.0, 1.0));
+            crossings = crossings + 1u;
+            if (transmitted <= 1.0e-3 || crossings > frame.layers) {
+                return 0.0;
+            }
+            t = h.t + offset(h.position);
+        }
+    }
+    return transmitted;
+}
+
+// Tracer::visibility: the share of `light` that reaches `origin`.
+fn visibility(light: Light, to_light: vec3<f32>, distance: f32, origin: vec3<f32>) -> f32 {
+    if (light.position.w == 2.0) {
+        let center = light.position.xyz;
+        let radius = light.color.w;
+        if (has(FLAG_SOFT_SHADOWS)) {
+            if (distance <= radius) {
+                return 1.0;
+            }
+            let q = radius / distance;
+            let cos_max = sqrt(max(1.0 - q * q, 0.0));
+            let n = max(frame.light_samples, 1u);
+            var seen = 0.0;
+            for (var k = 0u; k < n; k = k + 1u) {
+                let u1 = rng_next();
+                let u2 = rng_next();
+                let dir = uniform_cone(to_light, cos_max, u1, u2);
+                let oc = origin - center;
+                let b = dot(oc, dir);
+                let c = dot(oc, oc) - radius * radius;
+                let t = -b - sqrt(max(b * b - c, 0.0));
+                seen = seen + transmittance(origin, dir, max(t, 0.0));
+            }
+            return seen / f32(n);
+        }
+        return transmittance(origin, to_light, max(distance - radius, 0.0));
+    }
+    return transmittance(origin, to_light, min(distance, frame.t_max));
+}
+
+// Tracer::local: ambient (with occlusion) and every light (with shadows).
+fn local(m: Material, h: SurfaceHit, normal: vec3<f32>, view: vec3<f32>, above: vec3<f32>) -> vec3<f32> {
+    let albedo = h.albedo * m.diffuse.xyz;
+    var ambient = frame.ambient.xyz * albedo;
+    let ao = frame.ao_samples;
+    if (ao > 0u && max(max(ambient.x, ambient.y), ambient.z) > 0.0) {
+        var open = 0.0;
+        for (var k = 0u; k < ao; k = k + 1u) {
+            let u1 = rng_next();
+            let u2 = rng_next();
+            let dir = cosine_hemisphere(normal, u1, u2);
+            open = open + transmittance(above, dir, frame.occlusion_distance);
+        }
+        ambient = ambient * (open / f32(ao));
+    }
+    var color = ambient;
+    for (var k = 0u; k < frame.light_count; k = k + 1u) {
+        let light = lights[k];
+        let l = toward(light, h.position);
+        if (!l.ok || dot(normal, l.to_light) <= 0.0) {
+            continue;
+        }
+        var vis = 1.0;
+        if (has(FLAG_SHADOWS)) {
+            vis = visibility(light, l.to_light, l.distance, above);
+        }
+        color = color + direct(m, albedo, normal, view, l, vis);
+    }
+    return color;
+}
+
+// A ray waiting to be traced: its radiance adds `weight` times itself to the pixel.
+struct Task {
+    origin: vec3<f32>,
+    t0: f32,
+    dir: vec3<f32>,
+    depth: u32,
+    weight: vec3<f32>,
+    layers: u32,
+}
+
+var<private> tasks: array<Task, RAY_STACK>;
+var<private> task_count: u32;
+
+fn push(origin: vec3<f32>, dir: vec3<f32>, t0: f32, depth: u32, layers: u32, weight: vec3<f32>) {
+    if (task_count < RAY_STACK && max(max(weight.x, weight.y), weight.z) > 0.0) {
+        tasks[task_count] = Task(origin, t0, dir, depth, weight, layers);
+        task_count = task_count + 1u;
+    }
+}
+
+// Tracer::radiance + shade_hit for one ray: what it adds to the pixel now, and the rays it
+// spawns (pushed, in reverse of the CPU's order). Returns the hit distance (BIG: a miss).
+fn radiance(task: Task, color: ptr<function, vec3<f32>>) -> f32 {
+    let o = task.origin;
+    let d = task.dir;
+    let h = closest(o, d, task.t0, frame.t_max);
+    var far = frame.t_max;
+    if (h.found) {
+        far = h.t;
+    }
+    var w = task.weight;
+    if (has(FLAG_VOLUME)) {
+        let tr = exp(-(frame.volume.w * optical_depth(o, d, task.t0, far)));
+        *color = *color + w * frame.volume.xyz * (1.0 - tr);
+        w = w * tr;
+    }
+    if (!h.found) {
+        *color = *color + w * background(d.y);
+        return BIG;
+    }
+    let m = material(h.material);
+    let view = d;
+    let normal = facing(h.normal, view);
+    let entering = dot(h.normal, view) < 0.0;
+    let eps = offset(h.position);
+    let above = h.position + normal * eps;
+    var own = m.emission.xyz;
+    if (receives_light(m)) {
+        own = own + local(m, h, normal, view, above);
+    }
+    let opacity = m.extra.x;
+    let reflectivity = m.extra.y;
+    let ior = m.extra.z;
+    // The mirror's share (shade_hit's last step), then what lies behind.
+    var keep = w;
+    if (reflectivity > 0.0 && task.depth < frame.reflection_depth) {
+        push(above, reflect_dir(view, normal), 0.0, task.depth + 1u, task.layers, w * reflectivity);
+        keep = w * (1.0 - reflectivity);
+    }
+    let transparent = opacity < 1.0;
+    let transmits = transparent && (frame.layers > 0u || frame.refraction_depth > 0u);
+    if (transmits && ior != 1.0 && task.depth < frame.refraction_depth) {
+        let behind = keep * (1.0 - opacity);
+        var n1 = 1.0;
+        var n2 = ior;
+        if (!entering) {
+            n1 = ior;
+            n2 = 1.0;
+        }
+        let cos_i = clamp(-dot(view, normal), 0.0, 1.0);
+        let reflectance = fresnel(cos_i, n1, n2);
+        if (reflectance < 1.0) {
+            let bent = refract_dir(view, normal, n1 / n2);
+            if (bent.w > 0.0) {
+                push(h.position - normal * eps, bent.xyz, 0.0, task.depth + 1u, task.layers, behind * (1.0 - reflectance));
+            }
+        }
+        if (reflectance > 0.0) {
+            push(h.position + normal * eps, reflect_dir(view, normal), 0.0, task.depth + 1u, task.layers, behind * reflectance);
+        }
+        *color = *color + keep * opacity * own;
+    } else if (transmits && task.layers > 0u) {
+        push(o, d, h.t + eps, task.depth, task.layers - 1u, keep * (1.0 - opacity));
+        *color = *color + keep * opacity * own;
+    } else {
+        *color = *color + keep * own;
+    }
+    return h.t;
+}
+
+@compute @workgroup_size(8, 8, 1)
+fn trace(@builtin(global_invocation_id) id: vec3<u32>) {
+    if (id.x >= frame.width || id.y >= frame.height) {
+        return;
+    }
+    let raw = frame.top_left.xyz + frame.right_step.xyz * (f32(id.x) + 0.5)
+        + frame.down_step.xyz * (f32(id.y) + 0.5);
+    let d = normalize(raw);
+    let o = frame.eye.xyz;
+    var color = vec3<f32>(0.0);
+    var t = -1.0;
+    if (has(FLAG_PASS)) {
+        rng_seed(id.x, id.y, frame.pass_index);
+        task_count = 0u;
+        let first = radiance(Task(o, 0.0, d, 0u, vec3<f32>(1.0), frame.layers), &color);
+        if (first < BIG) {
+            t = first * dot(d, frame.forward.xyz);
+        }
+        while (task_count > 0u) {
+            task_count = task_count - 1u;
+            let next = tasks[task_count];
+            radiance(next, &color);
+        }
+    } else {
+        let h = kind_first_hit(o, d, 0.0, frame.t_max, frame.isovalue);
+        if (h.found) {
+            color = shade_cast(h, d);
+            t = h.t * dot(d, frame.forward.xyz);
+        } else {
+            color = background(d.y);
+        }
+    }
+    pixels[id.y * frame.width + id.x] = vec4<f32>(color, t);
+}

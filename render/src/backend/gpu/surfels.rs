@@ -1,0 +1,18 @@
+//! The surfel kind on the GPU: not yet traced there (the upload says so and the frame goes
+//! to the CPU).
+
+use crate::backend::gpu::kind::KindUpload;
+use crate::kinds::surfels::prepared::PreparedSurfels;
+use crate::view::View;
+use std::sync::Arc;
+
+/// Storage arrays of the surfel kind's bind group.
+pub const ARRAYS: usize = 0;
+
+/// What the GPU needs of `prepared`, or why it cannot trace it.
+pub fn upload<'a>(
+    _prepared: &'a Arc<PreparedSurfels>,
+    _view: &View,
+) -> Result<KindUpload<'a>, String> {
+    Err("surfels are traced on the CPU".into())
+}
