@@ -56,7 +56,7 @@ fn on_gpu(geometry: &Geometry) -> bool {
     match geometry {
         Geometry::Metaballs(_) => true,
         Geometry::Tets(_) => false,
-        Geometry::Surfels(_) => false,
+        Geometry::Surfels(_) => true,
     }
 }
 
