@@ -142,7 +142,7 @@ pub fn arrays(p: &PreparedSurfels) -> Vec<Vec<u8>> {
 }
 
 /// `f` of every item, written in parallel straight into one byte array (no intermediate
-/// array of structs: at 150k surfels the second copy cost as much as the packing).
+/// array of structs to copy again).
 fn packed<I: Sync, T: Pod>(items: &[I], f: impl Fn(&I) -> T + Sync) -> Vec<u8> {
     let size = size_of::<T>();
     let mut out = vec![0u8; items.len().max(1) * size];

@@ -53,6 +53,12 @@ const SURFEL_LEAF: u32 = 0xffffffffu;
 // Traversal stack entries; a median-split tree of n surfels needs ceil(log2 n) + 1.
 const SURFEL_STACK: u32 = 64u;
 
+// The traversal stacks, shared by every inlined copy of the traversals (the driver inlines
+// each query at each of its call sites; one set of arrays, not one per copy, keeps the
+// kernel small). No traversal runs inside another, so sharing is safe.
+var<private> surfel_stack_node: array<u32, SURFEL_STACK>;
+var<private> surfel_stack_entry: array<f32, SURFEL_STACK>;
+
 // Eq. 2: 1 − 6r² + 8r³ − 3r⁴ for r < 1, else 0.
 fn surfel_weight(r: f32) -> f32 {
     if (r >= 1.0) {
@@ -206,24 +212,22 @@ fn surfel_nearest(o: vec3<f32>, d: vec3<f32>, lo: f32, hi: f32) -> KHit {
     if (surfel_params.node_count == 0u) {
         return best;
     }
-    var stack_node: array<u32, SURFEL_STACK>;
-    var stack_entry: array<f32, SURFEL_STACK>;
     var top = 0u;
     let root = surfel_nodes[0];
     let re = surfel_sphere_entry(o, d, root.centre, root.radius, lo, hi);
     if (re.x > 0.0) {
-        stack_node[0] = 0u;
-        stack_entry[0] = re.y;
+        surfel_stack_node[0] = 0u;
+        surfel_stack_entry[0] = re.y;
         top = 1u;
     }
     while (top > 0u) {
         top -= 1u;
-        let n = stack_node[top];
+        let n = surfel_stack_node[top];
         var limit = hi;
         if (best.found) {
             limit = best.t;
         }
-        if (stack_entry[top] > limit) {
+        if (surfel_stack_entry[top] > limit) {
             continue;
         }
         let kids = surfel_nodes[n].kids;
@@ -254,8 +258,8 @@ fn surfel_nearest(o: vec3<f32>, d: vec3<f32>, lo: f32, hi: f32) -> KHit {
         }
         for (var i = 0u; i < count; i++) {
             if (top < SURFEL_STACK) {
-                stack_node[top] = kid[i];
-                stack_entry[top] = entry[i];
+                surfel_stack_node[top] = kid[i];
+                surfel_stack_entry[top] = entry[i];
                 top += 1u;
             }
         }
@@ -277,12 +281,11 @@ fn kind_any_hit(o: vec3<f32>, d: vec3<f32>, lo: f32, hi: f32, iso: f32) -> f32 {
     if (surfel_params.node_count == 0u) {
         return -1.0;
     }
-    var stack: array<u32, SURFEL_STACK>;
-    stack[0] = 0u;
+    surfel_stack_node[0] = 0u;
     var top = 1u;
     while (top > 0u) {
         top -= 1u;
-        let node = surfel_nodes[stack[top]];
+        let node = surfel_nodes[surfel_stack_node[top]];
         let e = surfel_sphere_entry(o, d, node.centre, node.radius, lo, hi);
         if (e.x == 0.0) {
             continue;
@@ -295,8 +298,8 @@ fn kind_any_hit(o: vec3<f32>, d: vec3<f32>, lo: f32, hi: f32, iso: f32) -> f32 {
             continue;
         }
         if (top + 2u <= SURFEL_STACK) {
-            stack[top] = node.kids.y;
-            stack[top + 1u] = node.kids.x;
+            surfel_stack_node[top] = node.kids.y;
+            surfel_stack_node[top + 1u] = node.kids.x;
             top += 2u;
         }
     }
