@@ -57,7 +57,7 @@ fn on_gpu(geometry: &Geometry) -> bool {
     match geometry {
         Geometry::Metaballs(_) => true,
         Geometry::Tets(_) => true,
-        Geometry::Surfels(_) => false,
+        Geometry::Surfels(_) => true,
     }
 }
 

@@ -4,7 +4,8 @@
 //!
 //! On the GPU: ray casting and every effect of the plan (common.wgsl) for each kind whose
 //! upload accepts the state (metaball states with a Fitted BVH and the marching finder; see
-//! `kind_upload`); anything else goes to the CPU with the reason logged.
+//! `kind_upload`: metaballs, tets and surfels) and plan (`check_plan`); anything else goes to
+//! the CPU with the reason logged.
 
 use crate::backend::accumulator::{FrameRays, Pass, TracePasses};
 use crate::backend::cpu::CpuBackend;

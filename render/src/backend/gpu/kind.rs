@@ -35,8 +35,8 @@ impl GpuKind {
         match self {
             GpuKind::Metaballs => 3,
             GpuKind::Tets => crate::backend::gpu::tets_layout::ARRAYS,
-            // Not traced on the GPU yet (the upload refuses surfel states).
-            GpuKind::Surfels => 0,
+            // surfels.rs ARRAYS (a test checks they agree; kind.rs imports no kind module).
+            GpuKind::Surfels => 4,
         }
     }
 

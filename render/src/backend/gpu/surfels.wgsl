@@ -1,28 +1,312 @@
-// The surfels part of the trace kernel (appended to common.wgsl). Not traced on the GPU yet:
-// the upload refuses surfels states, so these queries never run; they only let the kernel
-// compile until the kind's traversal lands.
+// The surfel kind's part of the kernel (deforming-point-sampled-surfaces.txt §4.2–§4.3),
+// after common.wgsl. The GPU does no lazy updates: the CPU brings every sphere of the
+// hierarchy and every deformed surfel up to date before upload (the eager refit of
+// kinds/surfels/prepared.rs), so a traversal only reads. A leaf runs the iterative MLS
+// ray–surface intersection of kinds/surfels/intersect.rs with the surfel's fixed
+// neighbourhood, then the clipping relations; the nearest hit wins, ties to the lower
+// surfel, as on the CPU, so the per-pixel cache of §4.2.2 (a first guess only) changes
+// nothing and is not needed here.
 
-struct SurfelsParams {
-    unused: vec4<f32>,
+struct SurfelParams {
+    node_count: u32,
+    surfel_count: u32,
+    mls_iterations: u32,
+    mls_epsilon: f32,
 }
 
-@group(1) @binding(0) var<uniform> surfel_params: SurfelsParams;
+// One sphere of the updated hierarchy (preorder, root 0); a leaf has kids = (LEAF, surfel).
+struct SurfelNode {
+    centre: vec3<f32>,
+    radius: f32,
+    kids: vec2<u32>,
+    _pad: vec2<u32>,
+}
+
+// One surfel after the step's deformation (eq. 1), with what its MLS intersection reads:
+// its rest radius, its support h (grown by the step's stretch) and 1/h², its rest colour,
+// and its rows in the neighbour and clip-pair arrays.
+struct SurfelData {
+    centre: vec3<f32>,
+    leaf_radius: f32,
+    t1: vec3<f32>,
+    radius: f32,
+    t2: vec3<f32>,
+    support: f32,
+    normal: vec3<f32>,
+    neighbours_first: u32,
+    colour: vec3<f32>,
+    clips_first: u32,
+    neighbours_count: u32,
+    clips_count: u32,
+    inv_support2: f32,
+    _pad: u32,
+}
+
+@group(1) @binding(0) var<uniform> surfel_params: SurfelParams;
+@group(1) @binding(1) var<storage, read> surfel_nodes: array<SurfelNode>;
+@group(1) @binding(2) var<storage, read> surfel_data: array<SurfelData>;
+@group(1) @binding(3) var<storage, read> surfel_neighbours: array<u32>;
+@group(1) @binding(4) var<storage, read> surfel_clips: array<vec2<u32>>;
+
+// `kids.x` of a leaf.
+const SURFEL_LEAF: u32 = 0xffffffffu;
+// Traversal stack entries; a median-split tree of n surfels needs ceil(log2 n) + 1.
+const SURFEL_STACK: u32 = 64u;
+
+// The traversal stacks, shared by every inlined copy of the traversals (the driver inlines
+// each query at each of its call sites; one set of arrays, not one per copy, keeps the
+// kernel small). No traversal runs inside another, so sharing is safe.
+var<private> surfel_stack_node: array<u32, SURFEL_STACK>;
+var<private> surfel_stack_entry: array<f32, SURFEL_STACK>;
+
+// Eq. 2: 1 − 6r² + 8r³ − 3r⁴ for r < 1, else 0.
+fn surfel_weight(r: f32) -> f32 {
+    if (r >= 1.0) {
+        return 0.0;
+    }
+    let r2 = r * r;
+    return 1.0 - 6.0 * r2 + 8.0 * r2 * r - 3.0 * r2 * r2;
+}
+
+// Where the ray enters the sphere within [lo, hi]: (1, t) if it meets it there, else (0, 0).
+fn surfel_sphere_entry(o: vec3<f32>, d: vec3<f32>, c: vec3<f32>, r: f32, lo: f32, hi: f32) -> vec2<f32> {
+    let oc = o - c;
+    let b = dot(d, oc);
+    let cc = dot(oc, oc) - r * r;
+    let disc = b * b - cc;
+    if (disc < 0.0) {
+        return vec2<f32>(0.0, 0.0);
+    }
+    let sq = sqrt(disc);
+    let t0 = -b - sq;
+    let t1 = -b + sq;
+    if (t1 < lo || t0 > hi) {
+        return vec2<f32>(0.0, 0.0);
+    }
+    return vec2<f32>(1.0, max(t0, lo));
+}
+
+// Whether x on surfel s's surface lies outside a surface that clips it (§4.3): per clipping
+// surface, the nearer of its two stored surfels decides by the side of its tangent plane.
+fn surfel_clipped(s: u32, x: vec3<f32>) -> bool {
+    let first = surfel_data[s].clips_first;
+    let end = first + surfel_data[s].clips_count;
+    for (var k = first; k < end; k++) {
+        let pair = surfel_clips[k];
+        let ca = surfel_data[pair.x].centre;
+        let cb = surfel_data[pair.y].centre;
+        let da = x - ca;
+        let db = x - cb;
+        var near = pair.y;
+        if (dot(da, da) <= dot(db, db)) {
+            near = pair.x;
+        }
+        if (dot(surfel_data[near].normal, x - surfel_data[near].centre) > 0.0) {
+            return true;
+        }
+    }
+    return false;
+}
+
+// The weighted average rest colour of s's neighbourhood at x (eq. 12's weights).
+fn surfel_colour_at(s: u32, x: vec3<f32>, inv_h2: f32) -> vec3<f32> {
+    let first = surfel_data[s].neighbours_first;
+    let end = first + surfel_data[s].neighbours_count;
+    var sw = 0.0;
+    var sc = vec3<f32>(0.0);
+    for (var k = first; k < end; k++) {
+        let nb = surfel_neighbours[k];
+        let e = x - surfel_data[nb].centre;
+        let r2 = dot(e, e) * inv_h2;
+        if (r2 >= 1.0) {
+            continue;
+        }
+        let w = surfel_weight(sqrt(r2));
+        sw += w;
+        sc += w * surfel_data[nb].colour;
+    }
+    return sc / sw;
+}
+
+// The ray's MLS intersection with leaf surfel s within [lo, hi] (§4.2.1): start on the
+// deformed ellipse, then project onto the plane of the neighbourhood's weighted average
+// position and normal until |n·(x − a)| < ε h; leaving the leaf's sphere rejects.
+fn surfel_intersect(o: vec3<f32>, d: vec3<f32>, s: u32, lo: f32, hi: f32) -> KHit {
+    let miss = no_hit();
+    let leaf = surfel_data[s];
+    let denom = dot(leaf.normal, d);
+    if (abs(denom) < 1e-7) {
+        return miss;
+    }
+    let t0 = dot(leaf.normal, leaf.centre - o) / denom;
+    let q = (o + t0 * d) - leaf.centre;
+    let g11 = dot(leaf.t1, leaf.t1);
+    let g12 = dot(leaf.t1, leaf.t2);
+    let g22 = dot(leaf.t2, leaf.t2);
+    let det = g11 * g22 - g12 * g12;
+    if (!(det > 0.0)) {
+        return miss;
+    }
+    let r1 = dot(leaf.t1, q);
+    let r2 = dot(leaf.t2, q);
+    let a = (g22 * r1 - g12 * r2) / det;
+    let b = (g11 * r2 - g12 * r1) / det;
+    if (a * a + b * b > leaf.radius * leaf.radius) {
+        return miss;
+    }
+    let h = leaf.support;
+    let inv_h2 = leaf.inv_support2;
+    let first = leaf.neighbours_first;
+    let end = first + leaf.neighbours_count;
+    var x = o + t0 * d;
+    for (var it = 0u; it < surfel_params.mls_iterations; it++) {
+        var sw = 0.0;
+        var sp = vec3<f32>(0.0);
+        var sn = vec3<f32>(0.0);
+        for (var k = first; k < end; k++) {
+            let nb = surfel_neighbours[k];
+            let c = surfel_data[nb].centre;
+            let e = x - c;
+            let r2 = dot(e, e) * inv_h2;
+            if (r2 >= 1.0) {
+                continue;
+            }
+            let w = surfel_weight(sqrt(r2));
+            sw += w;
+            sp += w * c;
+            sn += w * surfel_data[nb].normal;
+        }
+        if (!(sw > 0.0)) {
+            return miss;
+        }
+        let avg = sp / sw;
+        let len = length(sn);
+        if (!(len > 0.0)) {
+            return miss;
+        }
+        let n = sn * (1.0 / len);
+        if (abs(dot(n, x - avg)) < surfel_params.mls_epsilon * h) {
+            let t = dot(x - o, d);
+            if (!(t >= lo && t <= hi) || surfel_clipped(s, x)) {
+                return miss;
+            }
+            return KHit(true, t, x, n, surfel_colour_at(s, x, inv_h2), s);
+        }
+        let dn = dot(n, d);
+        if (abs(dn) < 1e-7) {
+            return miss;
+        }
+        x = o + (dot(n, avg - o) / dn) * d;
+        let e = x - leaf.centre;
+        if (dot(e, e) > leaf.leaf_radius * leaf.leaf_radius) {
+            return miss;
+        }
+    }
+    return miss;
+}
+
+// The nearest hit in [lo, hi]: near child first, a subtree skipped once it starts beyond
+// the best hit so far; ties to the lower surfel.
+fn surfel_nearest(o: vec3<f32>, d: vec3<f32>, lo: f32, hi: f32) -> KHit {
+    var best = no_hit();
+    if (surfel_params.node_count == 0u) {
+        return best;
+    }
+    var top = 0u;
+    let root = surfel_nodes[0];
+    let re = surfel_sphere_entry(o, d, root.centre, root.radius, lo, hi);
+    if (re.x > 0.0) {
+        surfel_stack_node[0] = 0u;
+        surfel_stack_entry[0] = re.y;
+        top = 1u;
+    }
+    while (top > 0u) {
+        top -= 1u;
+        let n = surfel_stack_node[top];
+        var limit = hi;
+        if (best.found) {
+            limit = best.t;
+        }
+        if (surfel_stack_entry[top] > limit) {
+            continue;
+        }
+        let kids = surfel_nodes[n].kids;
+        if (kids.x == SURFEL_LEAF) {
+            let h = surfel_intersect(o, d, kids.y, lo, limit);
+            if (h.found && (!best.found || h.t < best.t || (h.t == best.t && h.primitive < best.primitive))) {
+                best = h;
+            }
+            continue;
+        }
+        // Far first on the stack, so the near child is popped first (the CPU's order).
+        var kid = array<u32, 2>(0u, 0u);
+        var entry = array<f32, 2>(0.0, 0.0);
+        var count = 0u;
+        for (var i = 0u; i < 2u; i++) {
+            let k = kids[i];
+            let node = surfel_nodes[k];
+            let e = surfel_sphere_entry(o, d, node.centre, node.radius, lo, limit);
+            if (e.x > 0.0) {
+                kid[count] = k;
+                entry[count] = e.y;
+                count += 1u;
+            }
+        }
+        if (count == 2u && entry[1] > entry[0]) {
+            kid = array<u32, 2>(kid[1], kid[0]);
+            entry = array<f32, 2>(entry[1], entry[0]);
+        }
+        for (var i = 0u; i < count; i++) {
+            if (top < SURFEL_STACK) {
+                surfel_stack_node[top] = kid[i];
+                surfel_stack_entry[top] = entry[i];
+                top += 1u;
+            }
+        }
+    }
+    return best;
+}
 
 fn kind_first_hit(o: vec3<f32>, d: vec3<f32>, lo: f32, hi: f32, iso: f32) -> KHit {
-    if (surfel_params.unused.x > 0.0) {
-        return no_hit();
-    }
-    return no_hit();
+    return surfel_nearest(o, d, lo, hi);
 }
 
+// A surfel surface is a sheet: the way out of a closed object is its next crossing.
 fn kind_exit_hit(o: vec3<f32>, d: vec3<f32>, lo: f32, hi: f32, iso: f32) -> KHit {
-    return no_hit();
+    return surfel_nearest(o, d, lo, hi);
 }
 
+// Some hit in [lo, hi], the first found (first child first, as the CPU's updated tree).
 fn kind_any_hit(o: vec3<f32>, d: vec3<f32>, lo: f32, hi: f32, iso: f32) -> f32 {
+    if (surfel_params.node_count == 0u) {
+        return -1.0;
+    }
+    surfel_stack_node[0] = 0u;
+    var top = 1u;
+    while (top > 0u) {
+        top -= 1u;
+        let node = surfel_nodes[surfel_stack_node[top]];
+        let e = surfel_sphere_entry(o, d, node.centre, node.radius, lo, hi);
+        if (e.x == 0.0) {
+            continue;
+        }
+        if (node.kids.x == SURFEL_LEAF) {
+            let h = surfel_intersect(o, d, node.kids.y, lo, hi);
+            if (h.found) {
+                return h.t;
+            }
+            continue;
+        }
+        if (top + 2u <= SURFEL_STACK) {
+            surfel_stack_node[top] = node.kids.y;
+            surfel_stack_node[top + 1u] = node.kids.x;
+            top += 2u;
+        }
+    }
     return -1.0;
 }
 
+// Surfels have no density.
 fn kind_optical_depth(o: vec3<f32>, d: vec3<f32>, lo: f32, hi: f32) -> f32 {
     return 0.0;
 }

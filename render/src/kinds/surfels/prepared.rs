@@ -20,7 +20,8 @@ use crate::kinds::surfels::scene::{SurfelOptions, SurfelRuntime, SurfelScene, Up
 use crate::kinds::surfels::tree::{SphereTree, TreeNode};
 use glam::{Mat3, Vec3};
 use rayon::prelude::*;
-use std::sync::atomic::{AtomicU32, Ordering};
+use std::borrow::Cow;
+use std::sync::atomic::{AtomicU32, AtomicU64, Ordering};
 use std::sync::{Arc, OnceLock};
 use std::time::Instant;
 
@@ -34,6 +35,8 @@ pub const LOOSE_MOVE: f32 = 2.0;
 pub const EAGER_SHARE: f32 = 0.6;
 /// A [`LazyNode`]'s radius before the node is updated (above every positive `f32`'s bits).
 const EMPTY: u32 = u32::MAX;
+/// The next [`PreparedSurfels::id`].
+static NEXT_ID: AtomicU64 = AtomicU64::new(1);
 
 /// One sphere of a lazy step, with the node's children alongside so that a traversal reads
 /// one 24-byte record per node: empty until a ray first touches it, then its eq. 4 centre
@@ -114,6 +117,7 @@ pub struct PreparedSurfels {
     /// The root's eq. 9 bound over its rest radius.
     pub root_growth: f32,
     build_ms: f64,
+    id: u64,
 }
 
 impl std::fmt::Debug for PreparedSurfels {
@@ -165,6 +169,7 @@ impl PreparedSurfels {
             used,
             root_growth,
             build_ms: 0.0,
+            id: NEXT_ID.fetch_add(1, Ordering::Relaxed),
         };
         p.accel = match used {
             UpdateMode::Lazy | UpdateMode::Auto => Accel::Lazy(
@@ -181,6 +186,25 @@ impl PreparedSurfels {
 
     pub fn build_ms(&self) -> f64 {
         self.build_ms
+    }
+
+    /// A number no other prepared step of this process has (what the GPU backend keys its
+    /// uploaded arrays by: an address can be reused once a step is dropped, this cannot).
+    pub fn id(&self) -> u64 {
+        self.id
+    }
+
+    /// Every sphere of this step up to date, leaves carrying their deformed surfels' spheres:
+    /// the tree an eager or rebuilt step traces, or for a lazy step the eager refit of the
+    /// model's tree (eqs. 1, 4, 9, then 11 bottom-up), which deforms every surfel on the way.
+    /// The GPU backend uploads this (it does no lazy updates); every radius is the bound the
+    /// lazy path would use or tighter, so a lazy trace and a trace of these spheres find the
+    /// same hits.
+    pub fn eager_spheres(&self) -> Cow<'_, [TreeNode]> {
+        match &self.accel {
+            Accel::Fixed(nodes) => Cow::Borrowed(nodes),
+            Accel::Lazy(_) => Cow::Owned(self.eager_refit()),
+        }
     }
 
     /// Surfel `s` deformed (eq. 1), computed on first use; `fresh` is set if this call

@@ -170,6 +170,46 @@ mod containment {
     }
 }
 
+#[test]
+fn a_lazy_steps_eager_spheres_are_an_eager_steps_tree_and_hold_every_surfel() {
+    let model = Arc::new(ball_model(300, 17));
+    let (u, g) = random_step(&mut SplitMix64(3), &model, 0.2);
+    let (u, g): (Arc<[Vec3]>, Arc<[Mat3]>) = (u.into(), g.into());
+    let make = |mode| {
+        let options = SurfelOptions::new(mode, false);
+        let rt = Arc::new(SurfelRuntime::default());
+        let scene = SurfelScene::new(model.clone(), u.clone(), g.clone(), options, rt);
+        PreparedSurfels::new(scene.expect("valid"))
+    };
+    let (lazy, eager) = (make(UpdateMode::Lazy), make(UpdateMode::Eager));
+    assert_eq!(
+        (lazy.used, eager.used),
+        (UpdateMode::Lazy, UpdateMode::Eager)
+    );
+    assert_ne!(lazy.id(), eager.id());
+    assert!(matches!(
+        eager.eager_spheres(),
+        std::borrow::Cow::Borrowed(_)
+    ));
+    assert_eq!(lazy.touched_surfels(), 0);
+    let spheres = lazy.eager_spheres();
+    assert_eq!(lazy.touched_surfels(), model.len(), "every surfel deformed");
+    assert_eq!(&spheres[..], &eager.eager_spheres()[..]);
+    for (i, node) in spheres.iter().enumerate() {
+        let mut stack = vec![i];
+        while let Some(n) = stack.pop() {
+            let below = spheres[n];
+            if !below.is_leaf() {
+                stack.extend(below.kids.map(|k| k as usize));
+                continue;
+            }
+            let d = deform_surfel(&model, &u, &g, below.kids[1] as usize);
+            let reach = (d.centre - node.centre).length() + d.leaf_radius;
+            assert!(reach <= node.radius * (1.0 + 1e-5) + 1e-5, "node {i}");
+        }
+    }
+}
+
 fn prepare(
     demo: &demo::SurfelDemo,
     step: usize,
