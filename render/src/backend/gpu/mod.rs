@@ -10,6 +10,8 @@ pub mod device;
 pub mod kind;
 pub mod layout;
 pub mod metaballs;
+#[cfg(test)]
+mod naga_checks;
 pub mod shader;
 pub mod surfels;
 pub mod tets;

@@ -19,14 +19,9 @@ mod tests {
         GpuBall, GpuFrame, GpuGroup, GpuIsoSurface, GpuLight, GpuMaterial, GpuMetaballParams,
         GpuNode,
     };
+    use crate::backend::gpu::naga_checks::{constant, module_of, same_layout};
     use std::mem::{offset_of, size_of};
     use wgpu::naga;
-
-    fn module_of(kind: GpuKind) -> naga::Module {
-        let source = kind.kernel();
-        naga::front::wgsl::parse_str(&source)
-            .unwrap_or_else(|e| panic!("{}: {}", kind.name(), e.emit_to_string(&source)))
-    }
 
     fn module() -> naga::Module {
         module_of(GpuKind::Metaballs)
@@ -53,20 +48,6 @@ mod tests {
         }
     }
 
-    /// The value of the shader's `u32` constant `name`.
-    fn constant(module: &naga::Module, name: &str) -> u32 {
-        let c = module
-            .constants
-            .iter()
-            .find(|(_, c)| c.name.as_deref() == Some(name))
-            .unwrap_or_else(|| panic!("constant {name} in the shader"))
-            .1;
-        match module.global_expressions[c.init] {
-            naga::Expression::Literal(naga::Literal::U32(v)) => v,
-            ref other => panic!("{name} = {other:?}"),
-        }
-    }
-
     #[test]
     fn shader_limits_are_the_ones_the_upload_checks() {
         use crate::backend::gpu::upload::{MAX_DEPTH, MAX_GATHER, RAY_STACK};
@@ -76,40 +57,6 @@ mod tests {
         assert_eq!(constant(&m, "STACK_SIZE") as usize, MAX_DEPTH + 1);
         assert_eq!(constant(&m, "ITERATION_CAP"), ITERATION_CAP);
         assert_eq!(constant(&m, "RAY_STACK") as usize, RAY_STACK);
-    }
-
-    /// The struct `name` of the shader: its size and its members' (name, offset).
-    fn layout(module: &naga::Module, name: &str) -> (u32, Vec<(String, u32)>) {
-        let ty = module
-            .types
-            .iter()
-            .find(|(_, t)| t.name.as_deref() == Some(name))
-            .unwrap_or_else(|| panic!("struct {name} in the shader"))
-            .1;
-        match &ty.inner {
-            naga::TypeInner::Struct { members, span } => (
-                *span,
-                members
-                    .iter()
-                    .map(|m| (m.name.clone().unwrap_or_default(), m.offset))
-                    .collect(),
-            ),
-            other => panic!("{name} is not a struct: {other:?}"),
-        }
-    }
-
-    /// Asserts that the shader's struct `name` has `size` bytes and `offsets` (Rust's).
-    fn same_layout(module: &naga::Module, name: &str, size: usize, offsets: &[(&str, usize)]) {
-        let (span, members) = layout(module, name);
-        assert_eq!(span as usize, size, "{name}: WGSL size vs Rust size");
-        assert_eq!(members.len(), offsets.len(), "{name}: member count");
-        for ((wgsl_name, wgsl_offset), (rust_name, rust_offset)) in members.iter().zip(offsets) {
-            assert_eq!(wgsl_name, rust_name, "{name}: member order");
-            assert_eq!(
-                *wgsl_offset as usize, *rust_offset,
-                "{name}.{rust_name}: WGSL offset vs Rust offset"
-            );
-        }
     }
 
     #[test]

@@ -197,6 +197,7 @@ mod tests {
     fn the_seam_binds_as_many_arrays_as_the_upload_makes() {
         assert_eq!(GpuKind::Surfels.arrays(), ARRAYS);
     }
+    use crate::backend::gpu::naga_checks::{constant, module_of, same_layout};
     use crate::kinds::surfels::deform::deform_surfel;
     use crate::kinds::surfels::demo::{self, SurfelDemoKind};
     use crate::kinds::surfels::prepared::Accel;
@@ -206,39 +207,7 @@ mod tests {
     use wgpu::naga;
 
     fn module() -> naga::Module {
-        let source = GpuKind::Surfels.kernel();
-        naga::front::wgsl::parse_str(&source)
-            .unwrap_or_else(|e| panic!("{}", e.emit_to_string(&source)))
-    }
-
-    /// Asserts that the shader's struct `name` has `size` bytes and the members `offsets`.
-    fn same_layout(m: &naga::Module, name: &str, size: usize, offsets: &[(&str, usize)]) {
-        let ty = m
-            .types
-            .iter()
-            .find(|(_, t)| t.name.as_deref() == Some(name));
-        let Some((_, ty)) = ty else {
-            panic!("struct {name} in the shader")
-        };
-        let naga::TypeInner::Struct { members, span } = &ty.inner else {
-            panic!("{name} is not a struct")
-        };
-        assert_eq!(*span as usize, size, "{name}: WGSL size vs Rust size");
-        let wgsl: Vec<(&str, usize)> = members
-            .iter()
-            .map(|m| (m.name.as_deref().unwrap_or(""), m.offset as usize))
-            .collect();
-        assert_eq!(wgsl, offsets, "{name}: WGSL members vs Rust members");
-    }
-
-    fn constant(m: &naga::Module, name: &str) -> u32 {
-        let (_, c) = (m.constants.iter())
-            .find(|(_, c)| c.name.as_deref() == Some(name))
-            .unwrap_or_else(|| panic!("constant {name}"));
-        match m.global_expressions[c.init] {
-            naga::Expression::Literal(naga::Literal::U32(v)) => v,
-            ref other => panic!("{name} = {other:?}"),
-        }
+        module_of(GpuKind::Surfels)
     }
 
     #[test]

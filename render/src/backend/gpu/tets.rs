@@ -110,6 +110,7 @@ fn fingerprint(prepared: &PreparedTets) -> u64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::backend::gpu::naga_checks::{constant, module_of, same_layout};
     use crate::backend::gpu::tets_layout::ARRAYS;
     use crate::kinds::tets::generate;
     use crate::kinds::tets::march::{CASES, EDGES};
@@ -120,29 +121,7 @@ mod tests {
     use wgpu::naga;
 
     fn module() -> naga::Module {
-        let source = GpuKind::Tets.kernel();
-        naga::front::wgsl::parse_str(&source)
-            .unwrap_or_else(|e| panic!("{}", e.emit_to_string(&source)))
-    }
-
-    /// The struct `name` of the shader: its size and its members' (name, offset).
-    fn layout(module: &naga::Module, name: &str) -> (usize, Vec<(String, usize)>) {
-        let ty = module
-            .types
-            .iter()
-            .find(|(_, t)| t.name.as_deref() == Some(name))
-            .unwrap_or_else(|| panic!("struct {name} in the shader"))
-            .1;
-        match &ty.inner {
-            naga::TypeInner::Struct { members, span } => (
-                *span as usize,
-                members
-                    .iter()
-                    .map(|m| (m.name.clone().unwrap_or_default(), m.offset as usize))
-                    .collect(),
-            ),
-            other => panic!("{name} is not a struct: {other:?}"),
-        }
+        module_of(GpuKind::Tets)
     }
 
     fn u32_of(module: &naga::Module, e: naga::Handle<naga::Expression>) -> u32 {
@@ -152,48 +131,25 @@ mod tests {
         }
     }
 
-    /// The value of the shader's `u32` constant `name`.
-    fn constant(module: &naga::Module, name: &str) -> u32 {
-        let c = module
-            .constants
-            .iter()
-            .find(|(_, c)| c.name.as_deref() == Some(name))
-            .unwrap_or_else(|| panic!("constant {name} in the shader"))
-            .1;
-        u32_of(module, c.init)
-    }
-
     #[test]
     fn shader_structs_match_the_rust_structs_byte_for_byte() {
         let m = module();
-        assert_eq!(
-            layout(&m, "TetParams"),
-            (
-                size_of::<GpuTetParams>(),
-                vec![
-                    ("node_count".into(), offset_of!(GpuTetParams, node_count)),
-                    (
-                        "smooth_normals".into(),
-                        offset_of!(GpuTetParams, smooth_normals)
-                    ),
-                    ("color_lo".into(), offset_of!(GpuTetParams, color_lo)),
-                    ("color_hi".into(), offset_of!(GpuTetParams, color_hi)),
-                ]
-            )
+        macro_rules! offsets {
+            ($t:ty; $($f:ident),*) => {
+                &[$((stringify!($f), offset_of!($t, $f))),*]
+            };
+        }
+        same_layout(
+            &m,
+            "TetParams",
+            size_of::<GpuTetParams>(),
+            offsets!(GpuTetParams; node_count, smooth_normals, color_lo, color_hi),
         );
-        assert_eq!(
-            layout(&m, "TetNode"),
-            (
-                size_of::<GpuTetNode>(),
-                vec![
-                    ("lo".into(), offset_of!(GpuTetNode, lo)),
-                    ("hi".into(), offset_of!(GpuTetNode, hi)),
-                    ("first".into(), offset_of!(GpuTetNode, first)),
-                    ("count".into(), offset_of!(GpuTetNode, count)),
-                    ("_pad0".into(), offset_of!(GpuTetNode, _pad0)),
-                    ("_pad1".into(), offset_of!(GpuTetNode, _pad1)),
-                ]
-            )
+        same_layout(
+            &m,
+            "TetNode",
+            size_of::<GpuTetNode>(),
+            offsets!(GpuTetNode; lo, hi, first, count, _pad0, _pad1),
         );
         assert_eq!(size_of::<GpuTetNode>(), 48, "the CPU node's size");
         assert_eq!(

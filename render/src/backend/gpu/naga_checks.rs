@@ -1,0 +1,45 @@
+//! What the GPU tests read of a kernel through naga (no device needed): the parsed module of
+//! a kind's kernel, its `u32` constants, and a struct's size and member offsets against the
+//! Rust twin's.
+
+use crate::backend::gpu::kind::GpuKind;
+use wgpu::naga;
+
+/// The parsed kernel of `kind` (common.wgsl + the kind's part).
+pub fn module_of(kind: GpuKind) -> naga::Module {
+    let source = kind.kernel();
+    naga::front::wgsl::parse_str(&source)
+        .unwrap_or_else(|e| panic!("{}: {}", kind.name(), e.emit_to_string(&source)))
+}
+
+/// The value of the shader's `u32` constant `name`.
+pub fn constant(module: &naga::Module, name: &str) -> u32 {
+    let (_, c) = module
+        .constants
+        .iter()
+        .find(|(_, c)| c.name.as_deref() == Some(name))
+        .unwrap_or_else(|| panic!("constant {name} in the shader"));
+    match module.global_expressions[c.init] {
+        naga::Expression::Literal(naga::Literal::U32(v)) => v,
+        ref other => panic!("{name} = {other:?}"),
+    }
+}
+
+/// Asserts that the shader's struct `name` has `size` bytes and exactly the members
+/// `offsets` (name, byte offset), in order: Rust's `size_of` and `offset_of!`.
+pub fn same_layout(module: &naga::Module, name: &str, size: usize, offsets: &[(&str, usize)]) {
+    let (_, ty) = module
+        .types
+        .iter()
+        .find(|(_, t)| t.name.as_deref() == Some(name))
+        .unwrap_or_else(|| panic!("struct {name} in the shader"));
+    let naga::TypeInner::Struct { members, span } = &ty.inner else {
+        panic!("{name} is not a struct: {:?}", ty.inner)
+    };
+    assert_eq!(*span as usize, size, "{name}: WGSL size vs Rust size");
+    let wgsl: Vec<(&str, usize)> = members
+        .iter()
+        .map(|m| (m.name.as_deref().unwrap_or(""), m.offset as usize))
+        .collect();
+    assert_eq!(wgsl, offsets, "{name}: WGSL members vs Rust members");
+}
