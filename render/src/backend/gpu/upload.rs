@@ -42,9 +42,9 @@ pub fn kind_upload<'a>(
 /// one shadow ray fewer per affected pixel than the CPU casts), the clip box (Shells: 1–4%
 /// of channels against the CPU's Bézier clipping; against a CPU state prepared for marching
 /// no pixel differs by more than 0.02, so this one is the finders' difference where a
-/// segment starts inside the solid at the box's face), and occlusion with further isosurfaces through
-/// layers (the tet gyroid: 3% of channels, darker on the GPU). Such frames are traced on the
-/// CPU, with the reason logged.
+/// segment starts inside the solid at the box's face), and occlusion with further
+/// isosurfaces through layers (the tet gyroid: 3% of channels, darker on the GPU). Such
+/// frames are traced on the CPU, with the reason logged.
 pub fn check_plan(plan: &EffectsPlan) -> Result<(), String> {
     let disagrees = |what: &str| {
         Err(format!(
