@@ -43,3 +43,17 @@ pub fn same_layout(module: &naga::Module, name: &str, size: usize, offsets: &[(&
         .collect();
     assert_eq!(wgsl, offsets, "{name}: WGSL members vs Rust members");
 }
+
+/// `assert_layout!(module, "Name", RustType; field, ...)`: [`same_layout`] with the Rust
+/// struct's size and each named field's offset.
+macro_rules! assert_layout {
+    ($m:expr, $name:expr, $t:ty; $($f:ident),* $(,)?) => {
+        $crate::backend::gpu::naga_checks::same_layout(
+            $m,
+            $name,
+            ::std::mem::size_of::<$t>(),
+            &[$((stringify!($f), ::std::mem::offset_of!($t, $f))),*],
+        )
+    };
+}
+pub(crate) use assert_layout;

@@ -19,8 +19,7 @@ mod tests {
         GpuBall, GpuFrame, GpuGroup, GpuIsoSurface, GpuLight, GpuMaterial, GpuMetaballParams,
         GpuNode,
     };
-    use crate::backend::gpu::naga_checks::{constant, module_of, same_layout};
-    use std::mem::{offset_of, size_of};
+    use crate::backend::gpu::naga_checks::{assert_layout, constant, module_of};
     use wgpu::naga;
 
     fn module() -> naga::Module {
@@ -62,64 +61,13 @@ mod tests {
     #[test]
     fn shader_structs_match_the_rust_structs_byte_for_byte() {
         let m = module();
-        macro_rules! offsets {
-            ($t:ty; $($f:ident),*) => {
-                &[$((stringify!($f), offset_of!($t, $f))),*]
-            };
-        }
-        same_layout(
-            &m,
-            "Frame",
-            size_of::<GpuFrame>(),
-            offsets!(GpuFrame; eye, top_left, right_step, down_step, forward, background_top,
-                background_bottom, ambient, mapped_albedo, floor_color0, floor_color1,
-                floor_origin, volume, clip_min, clip_max, isovalue, width, height, flags, t_max,
-                light_count, group_count, material_count, floor_height, floor_checker,
-                floor_material, pass_index, reflection_depth, refraction_depth, layers,
-                ao_samples, light_samples, occlusion_distance, isosurface_count, _pad),
-        );
-        same_layout(
-            &m,
-            "Light",
-            size_of::<GpuLight>(),
-            offsets!(GpuLight; position, color),
-        );
-        same_layout(
-            &m,
-            "Material",
-            size_of::<GpuMaterial>(),
-            offsets!(GpuMaterial; diffuse, emission, extra),
-        );
-        same_layout(
-            &m,
-            "Group",
-            size_of::<GpuGroup>(),
-            offsets!(GpuGroup; first, count, material, _pad),
-        );
-        same_layout(
-            &m,
-            "Node",
-            size_of::<GpuNode>(),
-            offsets!(GpuNode; min, first, max, count),
-        );
-        same_layout(
-            &m,
-            "Ball",
-            size_of::<GpuBall>(),
-            offsets!(GpuBall; center, strength, m0, m1, m2, color),
-        );
-        same_layout(
-            &m,
-            "IsoSurface",
-            size_of::<GpuIsoSurface>(),
-            offsets!(GpuIsoSurface; color, isovalue, material, _pad0, _pad1),
-        );
-        same_layout(
-            &m,
-            "MbParams",
-            size_of::<GpuMetaballParams>(),
-            offsets!(GpuMetaballParams; kernel, kernel_c4, kernel_degree, tolerance, step,
-                node_count, _pad0, _pad1, _pad2),
-        );
+        assert_layout!(&m, "Frame", GpuFrame; eye, top_left, right_step, down_step, forward, background_top, background_bottom, ambient, mapped_albedo, floor_color0, floor_color1, floor_origin, volume, clip_min, clip_max, isovalue, width, height, flags, t_max, light_count, group_count, material_count, floor_height, floor_checker, floor_material, pass_index, reflection_depth, refraction_depth, layers, ao_samples, light_samples, occlusion_distance, isosurface_count, _pad);
+        assert_layout!(&m, "Light", GpuLight; position, color);
+        assert_layout!(&m, "Material", GpuMaterial; diffuse, emission, extra);
+        assert_layout!(&m, "Group", GpuGroup; first, count, material, _pad);
+        assert_layout!(&m, "Node", GpuNode; min, first, max, count);
+        assert_layout!(&m, "Ball", GpuBall; center, strength, m0, m1, m2, color);
+        assert_layout!(&m, "IsoSurface", GpuIsoSurface; color, isovalue, material, _pad0, _pad1);
+        assert_layout!(&m, "MbParams", GpuMetaballParams; kernel, kernel_c4, kernel_degree, tolerance, step, node_count, _pad0, _pad1, _pad2);
     }
 }

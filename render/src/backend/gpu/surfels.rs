@@ -197,13 +197,12 @@ mod tests {
     fn the_seam_binds_as_many_arrays_as_the_upload_makes() {
         assert_eq!(GpuKind::Surfels.arrays(), ARRAYS);
     }
-    use crate::backend::gpu::naga_checks::{constant, module_of, same_layout};
+    use crate::backend::gpu::naga_checks::{assert_layout, constant, module_of};
     use crate::kinds::surfels::deform::deform_surfel;
     use crate::kinds::surfels::demo::{self, SurfelDemoKind};
     use crate::kinds::surfels::prepared::Accel;
     use crate::kinds::surfels::scene::{SurfelOptions, SurfelRuntime, UpdateMode};
     use crate::kinds::surfels::tree::LEAF;
-    use std::mem::offset_of;
     use wgpu::naga;
 
     fn module() -> naga::Module {
@@ -213,31 +212,9 @@ mod tests {
     #[test]
     fn surfel_structs_and_limits_match_the_shader() {
         let m = module();
-        macro_rules! offsets {
-            ($t:ty; $($f:ident),*) => {
-                &[$((stringify!($f), offset_of!($t, $f))),*]
-            };
-        }
-        same_layout(
-            &m,
-            "SurfelParams",
-            size_of::<GpuSurfelParams>(),
-            offsets!(GpuSurfelParams; node_count, surfel_count, mls_iterations, mls_epsilon),
-        );
-        same_layout(
-            &m,
-            "SurfelNode",
-            size_of::<GpuSurfelNode>(),
-            offsets!(GpuSurfelNode; centre, radius, kids, _pad),
-        );
-        same_layout(
-            &m,
-            "SurfelData",
-            size_of::<GpuSurfel>(),
-            offsets!(GpuSurfel; centre, leaf_radius, t1, radius, t2, support, normal,
-                neighbours_first, colour, clips_first, neighbours_count, clips_count,
-                inv_support2, _pad),
-        );
+        assert_layout!(&m, "SurfelParams", GpuSurfelParams; node_count, surfel_count, mls_iterations, mls_epsilon);
+        assert_layout!(&m, "SurfelNode", GpuSurfelNode; centre, radius, kids, _pad);
+        assert_layout!(&m, "SurfelData", GpuSurfel; centre, leaf_radius, t1, radius, t2, support, normal, neighbours_first, colour, clips_first, neighbours_count, clips_count, inv_support2, _pad);
         assert_eq!(constant(&m, "SURFEL_STACK") as usize, STACK);
         assert_eq!(constant(&m, "SURFEL_LEAF"), LEAF);
         assert_eq!(GpuKind::Surfels.arrays(), ARRAYS);

@@ -110,14 +110,14 @@ fn fingerprint(prepared: &PreparedTets) -> u64 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::backend::gpu::naga_checks::{constant, module_of, same_layout};
+    use crate::backend::gpu::naga_checks::{assert_layout, constant, module_of};
     use crate::backend::gpu::tets_layout::ARRAYS;
     use crate::kinds::tets::generate;
     use crate::kinds::tets::march::{CASES, EDGES};
     use crate::kinds::tets::mesh::{signed_volume6, TetMesh, TetScene};
     use crate::kinds::tets::prepared::{Normals, TetOptions};
     use glam::Vec3;
-    use std::mem::{offset_of, size_of};
+    use std::mem::size_of;
     use wgpu::naga;
 
     fn module() -> naga::Module {
@@ -134,23 +134,8 @@ mod tests {
     #[test]
     fn shader_structs_match_the_rust_structs_byte_for_byte() {
         let m = module();
-        macro_rules! offsets {
-            ($t:ty; $($f:ident),*) => {
-                &[$((stringify!($f), offset_of!($t, $f))),*]
-            };
-        }
-        same_layout(
-            &m,
-            "TetParams",
-            size_of::<GpuTetParams>(),
-            offsets!(GpuTetParams; node_count, smooth_normals, color_lo, color_hi),
-        );
-        same_layout(
-            &m,
-            "TetNode",
-            size_of::<GpuTetNode>(),
-            offsets!(GpuTetNode; lo, hi, first, count, _pad0, _pad1),
-        );
+        assert_layout!(&m, "TetParams", GpuTetParams; node_count, smooth_normals, color_lo, color_hi);
+        assert_layout!(&m, "TetNode", GpuTetNode; lo, hi, first, count, _pad0, _pad1);
         assert_eq!(size_of::<GpuTetNode>(), 48, "the CPU node's size");
         assert_eq!(
             size_of::<GpuTetParams>() % 16,
