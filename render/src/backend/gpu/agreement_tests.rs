@@ -13,7 +13,7 @@
 use crate::backend::accumulator::{self, TracePasses};
 use crate::backend::cpu::CpuBackend;
 use crate::backend::dispatch::Backend;
-use crate::backend::gpu::backend::GpuBackend;
+use crate::backend::gpu::backend::{GpuBackend, DEFAULT_MEMORY_BUDGET};
 use crate::backend::gpu::device::AdapterChoice;
 use crate::backend::gpu::upload;
 use crate::effects::toggles::Effects;
@@ -27,8 +27,8 @@ use std::sync::Arc;
 const WIDTH: u32 = 160;
 const HEIGHT: u32 = 120;
 
-fn gpu() -> GpuBackend {
-    let gpu = GpuBackend::new(2, AdapterChoice::Any)
+pub(super) fn gpu() -> GpuBackend {
+    let gpu = GpuBackend::new(2, AdapterChoice::Any, DEFAULT_MEMORY_BUDGET)
         .unwrap_or_else(|e| panic!("a Vulkan adapter (lavapipe in CI): {e}"));
     assert!(
         gpu.adapter().contains("Vulkan"),
@@ -39,7 +39,7 @@ fn gpu() -> GpuBackend {
 }
 
 /// `demo` at 160×120, prepared as the server does.
-fn setup(demo: DemoScene) -> (PreparedScene, View) {
+pub(super) fn setup(demo: DemoScene) -> (PreparedScene, View) {
     let state = Arc::new(demo.state_at(1.0));
     let scene = state.prepare();
     let view = View {
@@ -251,7 +251,7 @@ fn a_lost_device_moves_the_backend_to_the_cpu() {
 
 #[test]
 fn auto_takes_a_hardware_gpu_only() {
-    let (backend, why) = Backend::auto(1).expect("pool");
+    let (backend, why) = Backend::auto(1, DEFAULT_MEMORY_BUDGET).expect("pool");
     match &backend {
         Backend::Cpu(_) => {
             let why = why.expect("a reason");
