@@ -252,6 +252,7 @@ fn step_of(d: &Dataset, mesh: &Arc<TetMesh>, step: usize) -> TetScene {
 
 /// Data set `id`'s stand-in at `scale` × the paper's tet count, for other studies (`gpu`):
 /// its shown step, camera, isovalue, and the paper's 2-core laptop fps (Table 2).
+#[cfg(feature = "gpu")]
 pub(crate) fn stand_in(id: &str, scale: f64) -> Option<(TetScene, Camera, f32, f64)> {
     let d = DATASETS.iter().find(|d| d.id == id)?;
     let mesh = Arc::new(mesh_for(d, (d.paper_tets as f64 * scale) as usize));
