@@ -20,6 +20,8 @@ pub mod upload;
 
 #[cfg(test)]
 mod agreement_tests;
+#[cfg(test)]
+mod finder_tests;
 
 pub use backend::GpuBackend;
 pub use device::{AdapterChoice, GpuError};
