@@ -128,23 +128,6 @@ fn kernel_coefficient(k: u32) -> f32 {
     return mb.kernel_c4;
 }
 
-// C(n, k) at n (n + 1) / 2 + k for n ≤ 8: Pascal's triangle row by row (bezier.rs BINOMIAL).
-const BINOMIAL: array<f32, 45> = array<f32, 45>(
-    1.0,
-    1.0, 1.0,
-    1.0, 2.0, 1.0,
-    1.0, 3.0, 3.0, 1.0,
-    1.0, 4.0, 6.0, 4.0, 1.0,
-    1.0, 5.0, 10.0, 10.0, 5.0, 1.0,
-    1.0, 6.0, 15.0, 20.0, 15.0, 6.0, 1.0,
-    1.0, 7.0, 21.0, 35.0, 35.0, 21.0, 7.0, 1.0,
-    1.0, 8.0, 28.0, 56.0, 70.0, 56.0, 28.0, 8.0, 1.0,
-);
-
-fn binomial(n: u32, k: u32) -> f32 {
-    return BINOMIAL[n * (n + 1u) / 2u + k];
-}
-
 struct Split {
     left: array<f32, CONTROL_POINTS>,
     right: array<f32, CONTROL_POINTS>,
@@ -217,20 +200,29 @@ fn bezier_first_root(b: array<f32, CONTROL_POINTS>, n: u32, tol_v: f32, iters: p
             // Clipping stalls (several roots or a flat stretch): split in half, the right
             // half pending; otherwise keep [xl, xr]: cut at xr, then the left part at xl / xr.
             let split = xr - xl > 0.8 && top < MAX_PENDING_HALVES;
-            let first = de_casteljau(c, n, select(xr, 0.5, split));
-            if (split) {
-                let mid = lo + width * 0.5;
-                halves_c[top] = first.right;
-                halves_r[top] = vec2<f32>(mid, hi);
-                top = top + 1u;
-                c = first.left;
-                hi = mid;
-            } else {
-                let inner = select(0.0, xl / xr, xr > 0.0);
-                c = de_casteljau(first.left, n, inner).right;
-                let new_lo = lo + width * xl;
-                hi = lo + width * xr;
-                lo = new_lo;
+            var cut = select(xr, 0.5, split);
+            // A trip count lavapipe cannot unroll, so that de Casteljau is inlined once.
+            let passes = select(2u, 1u, split);
+            for (var cuts = 0u; cuts < passes; cuts = cuts + 1u) {
+                let parts = de_casteljau(c, n, cut);
+                if (split) {
+                    let mid = lo + width * 0.5;
+                    halves_c[top] = parts.right;
+                    halves_r[top] = vec2<f32>(mid, hi);
+                    top = top + 1u;
+                    c = parts.left;
+                    hi = mid;
+                    break;
+                }
+                if (cuts == 0u) {
+                    c = parts.left;
+                    cut = select(0.0, xl / xr, xr > 0.0);
+                } else {
+                    c = parts.right;
+                    let new_lo = lo + width * xl;
+                    hi = lo + width * xr;
+                    lo = new_lo;
+                }
             }
             continue;
         }
@@ -303,14 +295,18 @@ fn bezier_section(a: f32, b: f32, lo: f32, hi: f32, sign: f32, iters: ptr<functi
         }
     }
     poly[0] = poly[0] - sign * mb_iso;
-    // bezier.rs power_to_bernstein: b_j = Σ_{i ≤ j} C(j, i) / C(n, i) · p_i.
+    // bezier.rs power_to_bernstein: b_j = Σ_{i ≤ j} C(j, i) / C(n, i) · p_i, the binomials
+    // built up exactly along i (loops over the degree, not the array: lavapipe unrolls
+    // constant trip counts, and the whole conversion with them).
     var bern: array<f32, CONTROL_POINTS>;
-    for (var j = 0u; j < CONTROL_POINTS; j = j + 1u) {
+    for (var j = 0u; j <= degree; j = j + 1u) {
         var acc = 0.0;
-        if (j <= degree) {
-            for (var i = 0u; i <= j; i = i + 1u) {
-                acc = acc + binomial(j, i) / binomial(degree, i) * poly[i];
-            }
+        var cj = 1.0;
+        var cn = 1.0;
+        for (var i = 0u; i <= j; i = i + 1u) {
+            acc = acc + cj / cn * poly[i];
+            cj = cj * f32(j - i) / f32(i + 1u);
+            cn = cn * f32(degree - i) / f32(i + 1u);
         }
         bern[j] = acc;
     }
