@@ -3,8 +3,8 @@
 //! and every test asserts that each frame it compares really was traced on the GPU.
 //!
 //! Agreement (issue 12, Must show 1): every demo scene at 160×120, prepared as the server
-//! prepares it (the CPU's default finder: Bézier clipping for metaballs, whose GPU kernel
-//! marches at 1/64 of the smallest radius), with four effect sets — ray casting, hard
+//! prepares it (the CPU's default finder: Bézier clipping for metaballs, which the GPU kernel
+//! uses too; finder_tests.rs checks the others), with four effect sets — ray casting, hard
 //! shadows, the scene's own defaults, and every effect on — the first refinement pass of
 //! each (the same random streams on both sides). Stated tolerance: the same hit or miss on at
 //! least 99.9% of pixels; over pixels that agree on it, at least 99% of channels within 3
