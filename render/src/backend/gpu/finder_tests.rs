@@ -9,8 +9,7 @@
 
 use crate::backend::accumulator;
 use crate::backend::cpu::CpuBackend;
-use crate::backend::gpu::backend::GpuBackend;
-use crate::backend::gpu::device::AdapterChoice;
+use crate::backend::gpu::agreement_tests::gpu;
 use crate::effects::toggles::Effects;
 use crate::framebuffer::Framebuffer;
 use crate::kinds::metaballs::engine::PrepareOptions;
@@ -48,8 +47,7 @@ fn depth_difference(cpu: &Framebuffer, gpu: &Framebuffer) -> (usize, usize, f32)
 
 #[test]
 fn each_gpu_finder_finds_the_cpu_finders_depths() {
-    let gpu = GpuBackend::new(2, AdapterChoice::Any)
-        .unwrap_or_else(|e| panic!("a Vulkan adapter (lavapipe in CI): {e}"));
+    let gpu = gpu();
     let cpu = CpuBackend::new(2).expect("pool");
     let clipped = Effects {
         clip_box: true,
