@@ -12,6 +12,7 @@ pub mod layout;
 pub mod metaballs;
 #[cfg(test)]
 mod naga_checks;
+pub mod retrace;
 pub mod shader;
 pub mod surfels;
 pub mod tets;
