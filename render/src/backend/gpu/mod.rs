@@ -8,6 +8,8 @@ pub mod backend;
 pub mod buffers;
 pub mod device;
 pub mod kind;
+#[cfg(test)]
+mod lavapipe_tests;
 pub mod layout;
 pub mod metaballs;
 #[cfg(test)]
