@@ -5,6 +5,8 @@
 mod accuracy;
 mod common;
 mod effects;
+#[cfg(feature = "gpu")]
+mod gpu;
 mod ingest;
 mod load;
 mod load_cluster;
@@ -49,6 +51,11 @@ enum Command {
     /// The deforming-surfels paper (§5, Fig. 3, Fig. 5): ms per frame for rebuild, eager
     /// refit, lazy and lazy + cache; tests per ray; radius tightness per level.
     Surfels(surfels::SurfelsArgs),
+    /// The GPU backend beside the CPU backend (feature `gpu`): the paper scenes, a million
+    /// balls, the tet data sets and the surfel demos at 640×480 and 1920×1080, with upload,
+    /// trace and readback apart.
+    #[cfg(feature = "gpu")]
+    Gpu(gpu::GpuArgs),
 }
 
 fn main() {
@@ -63,6 +70,8 @@ fn main() {
         Command::Stream(args) => stream::run(args),
         Command::Load(args) => load::run(args),
         Command::Surfels(args) => surfels::run(args),
+        #[cfg(feature = "gpu")]
+        Command::Gpu(args) => gpu::run(args),
     };
     if let Err(e) = result {
         eprintln!("isoray-bench: {e}");

@@ -378,7 +378,7 @@ fn measure(
 
 /// Fitted BVH paper, Table 1: (BVH build ms, BVH avg fps, FBVH build ms, FBVH avg fps), an
 /// Intel Core 2 E6600 building and an Nvidia GTX 280 rendering.
-fn paper_table1(scene: &str) -> Option<(f64, f64, f64, f64)> {
+pub(crate) fn paper_table1(scene: &str) -> Option<(f64, f64, f64, f64)> {
     match scene {
         "scattered-30k" => Some((101.0, 7.4, 79.0, 9.4)),
         "scattered-100k" => Some((160.0, 3.3, 150.0, 4.3)),

@@ -250,6 +250,20 @@ fn step_of(d: &Dataset, mesh: &Arc<TetMesh>, step: usize) -> TetScene {
     TetScene::new(mesh.clone(), scalars).expect("generated fields are finite")
 }
 
+/// Data set `id`'s stand-in at `scale` × the paper's tet count, for other studies (`gpu`):
+/// its shown step, camera, isovalue, and the paper's 2-core laptop fps (Table 2).
+#[cfg(feature = "gpu")]
+pub(crate) fn stand_in(id: &str, scale: f64) -> Option<(TetScene, Camera, f32, f64)> {
+    let d = DATASETS.iter().find(|d| d.id == id)?;
+    let mesh = Arc::new(mesh_for(d, (d.paper_tets as f64 * scale) as usize));
+    Some((
+        step_of(d, &mesh, d.step),
+        camera_of(d),
+        d.isovalue,
+        paper_table2(id).0,
+    ))
+}
+
 fn camera_of(d: &Dataset) -> Camera {
     Camera {
         eye: d.eye,

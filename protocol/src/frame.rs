@@ -78,12 +78,18 @@ impl Codec {
     }
 }
 
-/// Time spent in each stage of producing a frame, microseconds.
+/// Time spent in each stage of producing a frame, microseconds. On a GPU-traced frame the
+/// device's stages go in the same fields: its upload (frame uniform, lighting, and the state's
+/// arrays when the state changed) is added to `build_us`, `trace_us` is the rest of the
+/// trace (the kernel), and its readback is added to `encode_us`.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct StageTimings {
+    /// Bringing the scene's state to the frame's time (simulation state update).
     pub update_us: u32,
+    /// Building or refitting the acceleration structure (plus a GPU frame's upload).
     pub build_us: u32,
     pub trace_us: u32,
+    /// Encoding the image and depth block (plus a GPU frame's readback).
     pub encode_us: u32,
 }
 

@@ -37,7 +37,7 @@ pub mod scenes;
 pub mod shade;
 pub mod view;
 
-pub use backend::{Accumulator, Backend, CpuBackend, FrameRays};
+pub use backend::{Accumulator, Backend, CpuBackend, DeviceTimes, FrameRays};
 pub use camera::Camera;
 pub use effects::{EffectKind, Effects, EffectsPlan, RayCounts, RayKind};
 pub use framebuffer::{Framebuffer, SurfaceBuffer};

@@ -396,6 +396,19 @@ fn scattered_side(count: usize) -> f32 {
     (count as f32 * neighbour_volume / 3.0).cbrt()
 }
 
+/// The Scattered generator at any ball count (benchmarks: a million balls), with the camera
+/// the Scattered demos frame it with at that count.
+pub fn scattered_at(count: usize, time: f64) -> (MetaballScene, Camera) {
+    let half = 0.5 * scattered_side(count);
+    let camera = Camera {
+        eye: Vec3::new(0.4, 0.5, 2.6) * half * 1.25,
+        target: Vec3::ZERO,
+        up: Vec3::Y,
+        fov_y_deg: 45.0,
+    };
+    (scattered(count, time), camera)
+}
+
 fn scattered(count: usize, time: f64) -> MetaballScene {
     let mut rng = SplitMix64(0x5CA7_7E2D ^ count as u64);
     let half = 0.5 * scattered_side(count);

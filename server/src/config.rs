@@ -201,6 +201,12 @@ pub struct Config {
     /// a warning.
     #[arg(long, env = "ISORAY_BACKEND", value_enum, default_value_t = BackendChoice::Auto)]
     pub backend: BackendChoice,
+
+    /// GPU memory, in MiB, the GPU backend may fill with scene arrays and frame buffers (both
+    /// of its double-buffered sets together). A scene or frame that needs more is traced on
+    /// the CPU, with the reason logged.
+    #[arg(long, env = "ISORAY_GPU_MEMORY_MIB", default_value_t = 2048)]
+    pub gpu_memory_mib: u64,
 }
 
 /// `--backend`.
@@ -287,6 +293,12 @@ impl Config {
                 "--max-push-bytes, --max-json-bytes and --push-timeout-secs must be positive"
                     .into(),
             );
+        }
+        if !(1..=1 << 20).contains(&self.gpu_memory_mib) {
+            return Err(format!(
+                "--gpu-memory-mib {} must be in 1..=1048576 (1 TiB)",
+                self.gpu_memory_mib
+            ));
         }
         if self.max_ray_depth > isoray_render::effects::MAX_DEPTH {
             return Err(format!(

@@ -16,7 +16,7 @@ use isoray_protocol::{
     Codec, FrameHeader, InputId, StageTimings, FLAG_DEPTH, FLAG_KEYFRAME, FLAG_STILL,
     PROTOCOL_VERSION,
 };
-use isoray_render::{Backend, Effects, Framebuffer, SurfaceBuffer, View};
+use isoray_render::{Backend, DeviceTimes, Effects, Framebuffer, SurfaceBuffer, View};
 use std::time::Instant;
 
 /// The H.264 stream of a session, moved into each H.264 frame and back.
@@ -93,9 +93,13 @@ pub struct Frame {
     pub video: VideoState,
     pub keyframe: bool,
     pub depth: Option<Vec<u8>>,
+    /// Tracing, less the device's upload and readback when a device traced it.
     pub trace_us: u32,
-    /// From the end of the trace to the end of encoding (image and depth).
+    /// From the end of the trace to the end of encoding (image and depth), plus the device's
+    /// readback.
     pub encode_us: u32,
+    /// What the device spent on the frame (zero on the CPU).
+    pub device: DeviceTimes,
 }
 
 /// Traces `state` as `request` asks and encodes the image (and depth block).
@@ -114,16 +118,17 @@ pub fn render(
     let prepared = styled.as_ref().unwrap_or(&state.prepared);
     // Effects hook: a single pass traces one pass of the effects; a still frame adds a
     // refinement pass.
-    let fb = match request.pass {
+    let (fb, device) = match request.pass {
         Pass::Single => {
             let (fb, rays) = backend.render_effects(prepared, &request.view, request.effects);
             m::capped_searches(rays.kinds.metaballs.capped, rays.kinds.surfels.capped);
-            fb
+            (fb, rays.device)
         }
         Pass::Refine(refinement, key) => {
             refinement.next_pass(backend, prepared, &request.view, request.effects, key)
         }
     };
+    m::traced(&device);
     let t1 = Instant::now();
     let (payload, video, keyframe) = encode_image(&fb, request, video)?;
     let depth = match request.depth_factor {
@@ -137,9 +142,15 @@ pub fn render(
         video,
         keyframe,
         depth,
-        trace_us: micros(t1 - t0),
-        encode_us: micros(t1.elapsed()),
+        // The device's upload is reported with the build, its readback with the encoding.
+        trace_us: micros(t1 - t0).saturating_sub(us32(device.upload_us + device.readback_us)),
+        encode_us: micros(t1.elapsed()).saturating_add(us32(device.readback_us)),
+        device,
     })
+}
+
+fn us32(us: u64) -> u32 {
+    u32::try_from(us).unwrap_or(u32::MAX)
 }
 
 /// The primary hits of `view` as a `.npy` file: an `(H, W, 4)` `f32` array of the hit
@@ -201,7 +212,8 @@ pub fn stream_message(
         payload_len,
         timings: StageTimings {
             update_us: state.update_us,
-            build_us: state.build_us,
+            // A GPU frame's build includes getting the state onto the device.
+            build_us: state.build_us.saturating_add(us32(frame.device.upload_us)),
             trace_us: frame.trace_us,
             encode_us: frame.encode_us,
         },

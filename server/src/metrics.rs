@@ -33,6 +33,14 @@ pub const INPUTS_REJECTED: &str = "isoray_inputs_rejected_total";
 /// Ray searches that stopped at their root finder's iteration cap, by kind (issue 13: a capped
 /// search is a possible wrong pixel, counted rather than silent). Single-pass frames only.
 pub const CAPPED_SEARCHES: &str = "isoray_root_finder_capped_total";
+/// Frames traced, by where: `on="gpu"` (the device traced every pass of the frame) or
+/// `on="cpu"` (the CPU backend, or a GPU backend's fallback for what the device does not trace).
+pub const FRAMES_TRACED: &str = "isoray_frames_traced_total";
+/// The device's share of a GPU frame, by stage: `upload` (frame uniform, lighting and, when
+/// the state changed, the kind's arrays), `trace` (dispatch to the kernel's end) and
+/// `readback` (the image back into host memory). The frame header carries the same times in
+/// its build, trace and encode fields.
+pub const GPU_STAGE_SECONDS: &str = "isoray_gpu_stage_seconds";
 /// Always 1, labelled with the version and the cargo features the binary was built with
 /// (Prometheus' `*_build_info` convention): which encoders a process has, and for the tests,
 /// that the binary they spawn is the one they were built with.
@@ -92,6 +100,9 @@ fn register_zeroes() {
     metrics::gauge!(RENDER_QUEUE).set(0.0);
     metrics::gauge!(RENDER_RUNNING).set(0.0);
     metrics::counter!(DEPTH_BYTES).absolute(0);
+    for on in ["gpu", "cpu"] {
+        metrics::counter!(FRAMES_TRACED, "on" => on).absolute(0);
+    }
     for kind in ["metaballs", "surfels"] {
         metrics::counter!(CAPPED_SEARCHES, "kind" => kind).absolute(0);
     }
@@ -116,6 +127,22 @@ pub fn render() -> String {
 
 pub fn stage(stage: &'static str, micros: u32) {
     metrics::histogram!(STAGE_SECONDS, "stage" => stage).record(micros as f64 * 1e-6);
+}
+
+/// Counts a traced frame, and the device's stage times when a device traced it.
+pub fn traced(device: &isoray_render::DeviceTimes) {
+    if device.passes == 0 {
+        metrics::counter!(FRAMES_TRACED, "on" => "cpu").increment(1);
+        return;
+    }
+    metrics::counter!(FRAMES_TRACED, "on" => "gpu").increment(1);
+    for (stage, us) in [
+        ("upload", device.upload_us),
+        ("trace", device.trace_us),
+        ("readback", device.readback_us),
+    ] {
+        metrics::histogram!(GPU_STAGE_SECONDS, "stage" => stage).record(us as f64 * 1e-6);
+    }
 }
 
 pub fn queue_wait(wait: Duration) {

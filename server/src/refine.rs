@@ -10,7 +10,7 @@
 //! decide whether a still view wants another frame, and to render that frame (on the render
 //! pool; the lock is never held on the async runtime across an await).
 
-use isoray_render::{Accumulator, Backend, Effects, Framebuffer, PreparedScene, View};
+use isoray_render::{Accumulator, Backend, DeviceTimes, Effects, Framebuffer, PreparedScene, View};
 use std::sync::Mutex;
 
 /// What a refinement accumulates: settings version, scene time (bits), width, height.
@@ -46,7 +46,8 @@ impl Refinement {
     }
 
     /// Adds the next pass for view `key` (starting over if the view changed) and returns the
-    /// image of the mean. Blocking: call it on the render pool.
+    /// image of the mean, with what a device spent on the pass. Blocking: call it on the
+    /// render pool.
     pub fn next_pass(
         &self,
         backend: &Backend,
@@ -54,12 +55,13 @@ impl Refinement {
         view: &View,
         effects: &Effects,
         key: RefineKey,
-    ) -> Framebuffer {
+    ) -> (Framebuffer, DeviceTimes) {
         let mut state = self.lock();
         if state.0 != Some(key) {
             state.0 = Some(key);
             state.1.reset(view.width, view.height);
         }
-        backend.refine(scene, view, effects, &mut state.1)
+        let fb = backend.refine(scene, view, effects, &mut state.1);
+        (fb, state.1.last_device())
     }
 }

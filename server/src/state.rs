@@ -158,17 +158,19 @@ impl SessionTable {
 /// warning (`gpu`) or an info line (`auto`, where no hardware GPU is the common case).
 pub fn backend_for(config: &Config) -> Result<Backend, String> {
     let cpu = || Backend::cpu(config.threads).map_err(|e| e.to_string());
+    let gpu_memory = config.gpu_memory_mib << 20;
     match config.backend {
         BackendChoice::Cpu => cpu(),
         BackendChoice::Auto => {
-            let (backend, why) = Backend::auto(config.threads).map_err(|e| e.to_string())?;
+            let (backend, why) =
+                Backend::auto(config.threads, gpu_memory).map_err(|e| e.to_string())?;
             if let Some(why) = why {
                 tracing::info!(reason = %why, "tracing on the CPU");
             }
             Ok(backend)
         }
         #[cfg(feature = "gpu")]
-        BackendChoice::Gpu => match Backend::gpu(config.threads) {
+        BackendChoice::Gpu => match Backend::gpu(config.threads, gpu_memory) {
             Ok(backend) => Ok(backend),
             Err(e) => {
                 tracing::warn!(error = %e, "--backend gpu: no usable GPU; tracing on the CPU");

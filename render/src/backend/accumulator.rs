@@ -13,13 +13,37 @@ use crate::shade::linear_to_srgb8;
 use crate::view::View;
 use glam::Vec3;
 
+/// Time a device (the GPU) spent on passes, by stage, in microseconds; all zero for passes
+/// traced on the CPU. `passes` counts the passes the device traced.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct DeviceTimes {
+    pub passes: u32,
+    /// Writing the frame's uniform, the lighting arrays and (when the state changed) the
+    /// kind's arrays into the device's buffers.
+    pub upload_us: u64,
+    /// From the dispatch to the kernel's end (the copy into the readback buffer included).
+    pub trace_us: u64,
+    /// Mapping the readback buffer and copying the pixels out.
+    pub readback_us: u64,
+}
+
+impl DeviceTimes {
+    pub fn add(&mut self, o: &DeviceTimes) {
+        self.passes += o.passes;
+        self.upload_us += o.upload_us;
+        self.trace_us += o.trace_us;
+        self.readback_us += o.readback_us;
+    }
+}
+
 /// One frame's rays, per ray kind, and the counters of their queries: the summary over
-/// every primitive kind, and each kind's own.
+/// every primitive kind, and each kind's own; and what a device spent on them.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct FrameRays {
     pub rays: RayCounts,
     pub counters: RayTotals,
     pub kinds: SceneCounters,
+    pub device: DeviceTimes,
 }
 
 impl FrameRays {
@@ -27,6 +51,7 @@ impl FrameRays {
         self.rays.add(&o.rays);
         self.counters.add(&o.counters);
         self.kinds.add(&o.kinds);
+        self.device.add(&o.device);
     }
 }
 
@@ -40,8 +65,9 @@ pub struct Pass {
 /// What a backend does: the pass-level seam. Everything above it (effects frames,
 /// refinement) is written once, in this file.
 pub trait TracePasses {
-    /// One frame of primary rays only (ray casting), blocking.
-    fn render_primary(&self, scene: &PreparedScene, view: &View) -> Framebuffer;
+    /// One frame of primary rays only (ray casting), blocking; with the device's stage times
+    /// when a device traced it.
+    fn render_primary(&self, scene: &PreparedScene, view: &View) -> (Framebuffer, DeviceTimes);
     /// One pass of `plan` (pass `pass` seeds the per-pixel random streams), blocking.
     fn trace_pass(&self, scene: &PreparedScene, view: &View, plan: &EffectsPlan, pass: u32)
         -> Pass;
@@ -63,8 +89,11 @@ pub fn render_effects(
 ) -> (Framebuffer, FrameRays) {
     let plan = plan_for(scene, effects);
     if plan.is_primary_only() {
-        let fb = backend.render_primary(scene, view);
-        let mut rays = FrameRays::default();
+        let (fb, device) = backend.render_primary(scene, view);
+        let mut rays = FrameRays {
+            device,
+            ..FrameRays::default()
+        };
         rays.rays
             .add_n(RayKind::Primary, view.width as u64 * view.height as u64);
         return (fb, rays);
@@ -80,7 +109,7 @@ pub fn render_effects(
 
 /// Adds one refinement pass to `accumulator` (reset first if the frame it holds differs)
 /// and returns the image of the mean so far. Once converged it renders nothing and returns
-/// the same image again.
+/// the same image again. [`Accumulator::last_device`] says what a device spent on the pass.
 pub fn refine(
     backend: &impl TracePasses,
     scene: &PreparedScene,
@@ -91,11 +120,13 @@ pub fn refine(
     if accumulator.width != view.width || accumulator.height != view.height {
         accumulator.reset(view.width, view.height);
     }
+    accumulator.last_device = DeviceTimes::default();
     if !accumulator.converged {
         let plan = plan_for(scene, effects);
         if plan.is_primary_only() {
             // Ray casting has nothing to refine: one frame by the fast path is final.
-            let fb = backend.render_primary(scene, view);
+            let (fb, device) = backend.render_primary(scene, view);
+            accumulator.last_device = device;
             accumulator.passes = 1;
             accumulator.converged = true;
             accumulator.last_delta = f32::INFINITY;
@@ -105,6 +136,7 @@ pub fn refine(
         }
         let pass_index = accumulator.passes;
         let pass = backend.trace_pass(scene, view, &plan, pass_index);
+        accumulator.last_device = pass.rays.device;
         accumulator.add(pass, plan.is_stochastic());
     }
     accumulator.image()
@@ -129,6 +161,9 @@ pub struct Accumulator {
     converged: bool,
     /// Mean absolute change of the linear mean from the previous pass (`INFINITY` before 2).
     last_delta: f32,
+    /// What a device spent on the last call of [`refine`] (zero when the CPU traced it or
+    /// nothing was traced).
+    last_device: DeviceTimes,
     /// Convergence: mean per-channel change of the linear mean below this.
     pub threshold: f32,
     pub max_passes: u32,
@@ -156,6 +191,7 @@ impl Accumulator {
             passes: 0,
             converged: false,
             last_delta: f32::INFINITY,
+            last_device: DeviceTimes::default(),
             threshold: DEFAULT_THRESHOLD,
             max_passes: max_passes.max(1),
         }
@@ -184,6 +220,11 @@ impl Accumulator {
     /// Mean absolute per-channel change of the mean image made by the last pass.
     pub fn last_delta(&self) -> f32 {
         self.last_delta
+    }
+
+    /// What a device spent on the last call of [`refine`].
+    pub fn last_device(&self) -> DeviceTimes {
+        self.last_device
     }
 
     fn add(&mut self, pass: Pass, stochastic: bool) {

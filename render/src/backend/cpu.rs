@@ -5,7 +5,7 @@
 //! frame (ray casting, and a pass of an effects plan) go through the one tile loop,
 //! [`trace_tiles`].
 
-use crate::backend::accumulator::{self, Accumulator, FrameRays, Pass, TracePasses};
+use crate::backend::accumulator::{self, Accumulator, DeviceTimes, FrameRays, Pass, TracePasses};
 use crate::effects::plan::EffectsPlan;
 use crate::effects::toggles::Effects;
 use crate::framebuffer::{Framebuffer, SurfaceBuffer};
@@ -52,7 +52,7 @@ impl CpuBackend {
 
     /// Renders one frame with primary rays only, blocking the caller until it is done.
     pub fn render(&self, scene: &PreparedScene, view: &View) -> Framebuffer {
-        self.render_primary(scene, view)
+        self.render_primary(scene, view).0
     }
 
     /// The primary hits' distances and normals, blocking: the same hits
@@ -86,8 +86,11 @@ impl CpuBackend {
 }
 
 impl TracePasses for CpuBackend {
-    fn render_primary(&self, scene: &PreparedScene, view: &View) -> Framebuffer {
-        self.pool.install(|| render_tiles(scene, view))
+    fn render_primary(&self, scene: &PreparedScene, view: &View) -> (Framebuffer, DeviceTimes) {
+        (
+            self.pool.install(|| render_tiles(scene, view)),
+            DeviceTimes::default(),
+        )
     }
 
     fn trace_pass(
@@ -242,6 +245,7 @@ fn trace_pass(scene: &PreparedScene, view: &View, plan: &EffectsPlan, pass: u32)
             rays: tracer.counts,
             counters: tracer.counters.totals(),
             kinds: tracer.counters,
+            device: DeviceTimes::default(),
         };
         (color, depth, rays)
     };

@@ -36,21 +36,26 @@ impl Backend {
     }
 
     /// The GPU backend on the adapter wgpu prefers (a software one such as lavapipe
-    /// included), beside a CPU pool of `threads` workers.
+    /// included), beside a CPU pool of `threads` workers, filling at most `memory_budget`
+    /// bytes of the device.
     #[cfg(feature = "gpu")]
-    pub fn gpu(threads: usize) -> Result<Backend, GpuError> {
+    pub fn gpu(threads: usize, memory_budget: u64) -> Result<Backend, GpuError> {
         Ok(Backend::Gpu(Box::new(GpuBackend::new(
             threads,
             AdapterChoice::Any,
+            memory_budget,
         )?)))
     }
 
-    /// A hardware GPU when there is one (`device_type` not `Cpu`), else the CPU; with why the
-    /// GPU was not taken.
-    pub fn auto(threads: usize) -> Result<(Backend, Option<String>), PoolError> {
+    /// A hardware GPU when there is one (`device_type` not `Cpu`; at most `memory_budget`
+    /// bytes of it), else the CPU; with why the GPU was not taken.
+    pub fn auto(
+        threads: usize,
+        #[cfg_attr(not(feature = "gpu"), allow(unused_variables))] memory_budget: u64,
+    ) -> Result<(Backend, Option<String>), PoolError> {
         #[cfg(feature = "gpu")]
         {
-            match GpuBackend::new(threads, AdapterChoice::HardwareOnly) {
+            match GpuBackend::new(threads, AdapterChoice::HardwareOnly, memory_budget) {
                 Ok(gpu) => Ok((Backend::Gpu(Box::new(gpu)), None)),
                 Err(e) => Ok((Backend::cpu(threads)?, Some(e.to_string()))),
             }
@@ -95,9 +100,9 @@ impl Backend {
     /// Renders one frame with primary rays only, blocking the caller until it is done.
     pub fn render(&self, scene: &PreparedScene, view: &View) -> Framebuffer {
         match self {
-            Backend::Cpu(cpu) => cpu.render_primary(scene, view),
+            Backend::Cpu(cpu) => cpu.render_primary(scene, view).0,
             #[cfg(feature = "gpu")]
-            Backend::Gpu(gpu) => gpu.render_primary(scene, view),
+            Backend::Gpu(gpu) => gpu.render_primary(scene, view).0,
         }
     }
 

@@ -7,6 +7,8 @@ pub mod dispatch;
 #[cfg(feature = "gpu")]
 pub mod gpu;
 
-pub use accumulator::{Accumulator, FrameRays, Pass, DEFAULT_MAX_PASSES, DEFAULT_THRESHOLD};
+pub use accumulator::{
+    Accumulator, DeviceTimes, FrameRays, Pass, DEFAULT_MAX_PASSES, DEFAULT_THRESHOLD,
+};
 pub use cpu::{CpuBackend, PoolError};
 pub use dispatch::Backend;

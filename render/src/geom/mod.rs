@@ -1,8 +1,9 @@
 //! Geometry every kind and the integrator share: boxes and the ray–box slab test, the clip
-//! box, the local frame a far scene is traced in, the random generators and the ray counters' common summary.
+//! box, the local frame a far scene is traced in, the random generators, the ray counters' common summary, and a tile's pixel cover for packets.
 
 pub mod aabb;
 pub mod clip;
 pub mod counters;
 pub mod frame;
 pub mod rng;
+pub mod tile;

@@ -2,6 +2,8 @@
 //! Vulkan driver, which `.ci/run` installs). The GPU must really start and really trace the
 //! frames: a server that fell back to the CPU fails the test.
 
+use super::metrics::sample;
+use super::stream::reqwest_like_get;
 use super::support::*;
 use isoray_render::backend::dispatch::Backend;
 use serde_json::json;
@@ -45,6 +47,20 @@ async fn the_server_streams_a_demo_traced_on_the_gpu() {
     );
     let (on_gpu, _) = gpu_frames(&server);
     assert!(on_gpu >= 2, "the GPU traced the streamed frames ({on_gpu})");
+    // The device's stages are reported: in the header's fields (upload within the build,
+    // readback within the encoding) and in /metrics, by stage.
+    for f in [&a, &b] {
+        let t = f.header.timings;
+        assert!(t.trace_us > 0 && t.encode_us > 0, "{t:?}");
+    }
+    let text = reqwest_like_get(server.addr, "/metrics").await;
+    let frames = sample(&text, "isoray_frames_traced_total", &["on=\"gpu\""]);
+    assert!(frames >= Some(2.0), "GPU frames counted: {frames:?}");
+    for stage in ["upload", "trace", "readback"] {
+        let label = format!("stage=\"{stage}\"");
+        let n = sample(&text, "isoray_gpu_stage_seconds_count", &[label.as_str()]);
+        assert!(n >= Some(2.0), "GPU {stage} times recorded: {n:?}\n{text}");
+    }
     drop(ws);
     server.stop().await;
 }

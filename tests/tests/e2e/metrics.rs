@@ -5,7 +5,7 @@ use super::support::*;
 use serde_json::json;
 
 /// The value of the first sample line of `name` with all of `labels`, if any.
-fn sample(text: &str, name: &str, labels: &[&str]) -> Option<f64> {
+pub(super) fn sample(text: &str, name: &str, labels: &[&str]) -> Option<f64> {
     text.lines()
         .filter(|l| !l.starts_with('#'))
         .find(|l| l.starts_with(name) && labels.iter().all(|lab| l.contains(lab)))
@@ -44,6 +44,11 @@ async fn metrics_count_what_a_session_did() {
     let traced =
         sample(&text, "isoray_stage_seconds_count", &["stage=\"trace\""]).expect("trace histogram");
     assert!(traced >= 5.0);
+    let on_cpu = sample(&text, "isoray_frames_traced_total", &["on=\"cpu\""]).expect("cpu frames");
+    assert!(
+        on_cpu >= 5.0,
+        "the CPU backend's frames are counted: {on_cpu}"
+    );
     let latency =
         sample(&text, "isoray_input_to_frame_seconds_count", &[]).expect("latency histogram");
     assert!(latency >= 5.0, "every answered input is timed: {latency}");

@@ -11,11 +11,11 @@
 //! least 99.9% of pixels; over pixels that agree on it, at least 99% of channels within 3
 //! sRGB codes and a mean difference under 0.5 codes. The figures of every pair are printed.
 
-use crate::backend::accumulator::{self, TracePasses};
+use crate::backend::accumulator::{self, DeviceTimes, TracePasses};
 use crate::backend::cpu::CpuBackend;
 use crate::backend::dispatch::Backend;
-use crate::backend::gpu::backend::GpuBackend;
-use crate::backend::gpu::buffers::{FrameBuffers, GpuTimes};
+use crate::backend::gpu::backend::{GpuBackend, DEFAULT_MEMORY_BUDGET};
+use crate::backend::gpu::buffers::{Budget, FrameBuffers};
 use crate::backend::gpu::device::{AdapterChoice, GpuDevice};
 use crate::backend::gpu::retrace::{retrace_cut, CUT_DEPTH};
 use crate::backend::gpu::upload;
@@ -31,8 +31,8 @@ use std::sync::Arc;
 const WIDTH: u32 = 160;
 const HEIGHT: u32 = 120;
 
-fn gpu() -> GpuBackend {
-    let gpu = GpuBackend::new(2, AdapterChoice::Any)
+pub(super) fn gpu() -> GpuBackend {
+    let gpu = GpuBackend::new(2, AdapterChoice::Any, DEFAULT_MEMORY_BUDGET)
         .unwrap_or_else(|e| panic!("a Vulkan adapter (lavapipe in CI): {e}"));
     assert!(
         gpu.adapter().contains("Vulkan"),
@@ -43,7 +43,7 @@ fn gpu() -> GpuBackend {
 }
 
 /// `demo` at 160×120, prepared as the server does.
-fn setup(demo: DemoScene) -> (PreparedScene, View) {
+pub(super) fn setup(demo: DemoScene) -> (PreparedScene, View) {
     let state = Arc::new(demo.state_at(1.0));
     let scene = state.prepare();
     let view = View {
@@ -262,8 +262,19 @@ fn pixels_the_driver_cuts_short_are_marked_and_traced_again_on_the_cpu() {
         let kind = upload::kind_upload(&scene, &view, Some(&plan)).expect("the kernel holds it");
         let frame = upload::frame(&scene, &view, Some(&plan), 0);
         let arrays = upload::lighting(scene.lighting_in_frame());
+        let budget = Budget {
+            bytes: DEFAULT_MEMORY_BUDGET,
+            max_binding: device.device.limits().max_storage_buffer_binding_size,
+        };
         let mut pixels = buffers
-            .run(&device, &frame, kind, &arrays, &mut GpuTimes::default())
+            .run(
+                &device,
+                &frame,
+                kind,
+                &arrays,
+                &budget,
+                &mut DeviceTimes::default(),
+            )
             .expect("traced on the GPU");
         let (c, _) = accumulator::render_effects(&cpu, &scene, &view, &effects);
         let marked: Vec<bool> = pixels.iter().map(|p| p[3] == CUT_DEPTH).collect();
@@ -364,7 +375,7 @@ fn a_lost_device_moves_the_backend_to_the_cpu() {
 
 #[test]
 fn auto_takes_a_hardware_gpu_only() {
-    let (backend, why) = Backend::auto(1).expect("pool");
+    let (backend, why) = Backend::auto(1, DEFAULT_MEMORY_BUDGET).expect("pool");
     match &backend {
         Backend::Cpu(_) => {
             let why = why.expect("a reason");

@@ -1,8 +1,9 @@
-//! The GPU buffers of a backend, reused from frame to frame: each grows (to the next power
-//! of two) only when a frame needs more than it holds, and a kind's arrays are uploaded only
-//! when the traced state changes (its [`KindUpload::key`]). One frame: upload, one dispatch,
-//! readback.
+//! One set of GPU buffers, reused from frame to frame: each grows (to the next power of two)
+//! only when a frame needs more than it holds, and a kind's arrays are uploaded only when the
+//! traced state changes (its [`KindUpload::key`]). One frame: upload, one dispatch, readback.
+//! The backend keeps two sets (double buffering, `backend.rs`).
 
+use crate::backend::accumulator::DeviceTimes;
 use crate::backend::gpu::device::{GpuDevice, GpuError};
 use crate::backend::gpu::kind::{GpuKind, KindUpload};
 use crate::backend::gpu::layout::GpuFrame;
@@ -31,8 +32,22 @@ struct KindBuffers {
     params: Option<Slot>,
     arrays: Vec<Option<Slot>>,
     key: Option<(usize, u64)>,
+    /// Bytes of the arrays `key` names.
+    array_bytes: u64,
     /// The state `key` names, alive while its arrays are here.
     held: Option<Arc<dyn Any + Send + Sync>>,
+    /// A state refused for the memory budget: its key, the frame's pixels, why, and the state
+    /// (held so that its address names it alone), so that its arrays are not built again for
+    /// every frame of that size or larger.
+    refused: Option<Refusal>,
+}
+
+/// A state refused for the memory budget, and the frame size it was refused at.
+struct Refusal {
+    key: (usize, u64),
+    pixels: u64,
+    why: String,
+    _held: Arc<dyn Any + Send + Sync>,
 }
 
 /// Every buffer a frame uses.
@@ -46,12 +61,41 @@ pub struct FrameBuffers {
     pub allocations: u64,
 }
 
-/// Time spent per stage of a frame, microseconds.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub struct GpuTimes {
-    pub upload_us: u64,
-    pub trace_us: u64,
-    pub readback_us: u64,
+/// What one set of buffers may hold on the device: `budget` bytes in all for a frame's
+/// kind arrays, output and readback, and no array over `max_binding` (the device's largest
+/// storage binding).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Budget {
+    pub bytes: u64,
+    pub max_binding: u64,
+}
+
+const MIB: f64 = 1024.0 * 1024.0;
+
+/// Whether a frame with kind `arrays` and `pixels` output pixels fits `budget`, or why not.
+fn check_budget(arrays: &[Vec<u8>], pixels: u64, budget: &Budget) -> Result<(), String> {
+    if let Some(big) = arrays
+        .iter()
+        .map(|a| a.len() as u64)
+        .find(|&n| n > budget.max_binding)
+    {
+        return Err(format!(
+            "one of the scene's GPU arrays is {:.1} MiB, over the device's largest storage \
+             binding of {:.1} MiB; the CPU traces it",
+            big as f64 / MIB,
+            budget.max_binding as f64 / MIB
+        ));
+    }
+    let needed = arrays.iter().map(|a| a.len() as u64).sum::<u64>() + 2 * pixels * 16;
+    if needed > budget.bytes {
+        return Err(format!(
+            "the scene needs {:.1} MiB of GPU memory per frame buffer, over the budget of \
+             {:.1} MiB (--gpu-memory-mib, halved for double buffering); the CPU traces it",
+            needed as f64 / MIB,
+            budget.bytes as f64 / MIB
+        ));
+    }
+    Ok(())
 }
 
 fn index(kind: GpuKind) -> usize {
@@ -113,8 +157,43 @@ impl FrameBuffers {
         frame: &GpuFrame,
         kind: KindUpload<'_>,
         lighting: &LightingArrays,
+        budget: &Budget,
     ) -> Result<(), GpuError> {
         let k = &mut self.kinds[index(kind.kind)];
+        let pixels = frame.width as u64 * frame.height as u64;
+        if let Some(r) = &k.refused {
+            if r.key == kind.key && pixels >= r.pixels {
+                return Err(GpuError::Unsupported(r.why.clone()));
+            }
+        }
+        if k.key != Some(kind.key) {
+            let arrays = (kind.arrays)();
+            if let Err(why) = check_budget(&arrays, pixels, budget) {
+                k.refused = Some(Refusal {
+                    key: kind.key,
+                    pixels,
+                    why: why.clone(),
+                    _held: kind.hold,
+                });
+                return Err(GpuError::Unsupported(why));
+            }
+            k.refused = None;
+            k.arrays.resize_with(arrays.len(), || None);
+            for (slot, data) in k.arrays.iter_mut().zip(&arrays) {
+                put(gpu, slot, &mut self.allocations, STORAGE, data)?;
+            }
+            k.key = Some(kind.key);
+            k.array_bytes = arrays.iter().map(|a| a.len() as u64).sum();
+            k.held = Some(kind.hold);
+        } else if k.array_bytes + 2 * pixels * 16 > budget.bytes {
+            return Err(GpuError::Unsupported(format!(
+                "a {}x{} frame of this scene needs more GPU memory than the budget of \
+                 {:.1} MiB; the CPU traces it",
+                frame.width,
+                frame.height,
+                budget.bytes as f64 / MIB
+            )));
+        }
         put(
             gpu,
             &mut k.params,
@@ -122,15 +201,6 @@ impl FrameBuffers {
             UNIFORM,
             &kind.params,
         )?;
-        if k.key != Some(kind.key) {
-            let arrays = (kind.arrays)();
-            k.arrays.resize_with(arrays.len(), || None);
-            for (slot, data) in k.arrays.iter_mut().zip(&arrays) {
-                put(gpu, slot, &mut self.allocations, STORAGE, data)?;
-            }
-            k.key = Some(kind.key);
-            k.held = Some(kind.hold);
-        }
         let allocations = &mut self.allocations;
         put(
             gpu,
@@ -192,18 +262,21 @@ impl FrameBuffers {
 
     /// Traces one frame described by `frame` through `kind`'s state with `lighting`'s
     /// arrays, returning per pixel linear colour and depth along the view axis (< 0: a miss).
+    /// A state or frame over `budget` is `Unsupported` (the CPU traces it), before anything
+    /// is allocated for it.
     pub fn run(
         &mut self,
         gpu: &GpuDevice,
         frame: &GpuFrame,
         kind: KindUpload<'_>,
         lighting: &LightingArrays,
-        times: &mut GpuTimes,
+        budget: &Budget,
+        times: &mut DeviceTimes,
     ) -> Result<Vec<[f32; 4]>, GpuError> {
         let started = std::time::Instant::now();
         let which = kind.kind;
         let scope = gpu.device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
-        self.upload(gpu, frame, kind, lighting)?;
+        self.upload(gpu, frame, kind, lighting, budget)?;
         if let Some(e) = pollster::block_on(scope.pop()) {
             return Err(GpuError::Failed(format!("allocation: {e}")));
         }
@@ -297,6 +370,7 @@ impl FrameBuffers {
             return Err(GpuError::Failed(failure));
         }
         times.readback_us = started.elapsed().as_micros() as u64;
+        times.passes = 1;
         Ok(result)
     }
 }

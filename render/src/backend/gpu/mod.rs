@@ -23,6 +23,8 @@ pub mod upload;
 
 #[cfg(test)]
 mod agreement_tests;
+#[cfg(test)]
+mod backend_tests;
 
 pub use backend::GpuBackend;
 pub use device::{AdapterChoice, GpuError};

@@ -26,7 +26,7 @@
 //! Every test is conservative and the per-ray arithmetic is the single-ray path's, so a
 //! packet returns, ray for ray, exactly what [`super::traverse`] returns.
 
-use crate::camera::PrimaryRays;
+use crate::geom::tile::{box_corners, Cover, TileGrid};
 use crate::kinds::tets::bvh::{Bvh, Node};
 use crate::kinds::tets::counters::TetCounters;
 use crate::kinds::tets::march::{extract, FrustumTest, PolygonFromOrigin};
@@ -44,82 +44,6 @@ pub struct RayPacket<'a> {
     pub corners: [Vec3; 4],
     /// The pixel grid, when the packet is a tile of one (row-major `dirs`).
     pub grid: Option<TileGrid>,
-}
-
-/// The pixels of a tile: `width × height` from `(x0, y0)` of a camera's image.
-#[derive(Clone, Copy, Debug)]
-pub struct TileGrid {
-    rays: PrimaryRays,
-    x0: u32,
-    y0: u32,
-    width: u32,
-    height: u32,
-}
-
-/// The tile pixels whose rays may meet a convex shape.
-#[derive(Clone, Copy, Debug, PartialEq)]
-enum Cover {
-    /// No bound (a corner is not in front of the eye).
-    Unknown,
-    /// No pixel of the tile.
-    Empty,
-    /// Tile-relative columns `c0..=c1` and rows `r0..=r1`.
-    Rect { c0: u32, c1: u32, r0: u32, r1: u32 },
-}
-
-impl TileGrid {
-    /// The pixels of the projection of the convex hull of `points`, widened by one pixel
-    /// (far beyond rounding) and clipped to the tile.
-    #[inline]
-    fn cover(&self, points: impl Iterator<Item = Vec3>) -> Cover {
-        let (mut lo_x, mut lo_y) = (f32::INFINITY, f32::INFINITY);
-        let (mut hi_x, mut hi_y) = (f32::NEG_INFINITY, f32::NEG_INFINITY);
-        for p in points {
-            let Some((x, y)) = self.rays.pixel_of(p) else {
-                return Cover::Unknown;
-            };
-            lo_x = lo_x.min(x);
-            lo_y = lo_y.min(y);
-            hi_x = hi_x.max(x);
-            hi_y = hi_y.max(y);
-        }
-        let (x0, y0) = (self.x0 as f32, self.y0 as f32);
-        let (x1, y1) = (x0 + self.width as f32 - 1.0, y0 + self.height as f32 - 1.0);
-        let (lo_x, lo_y) = ((lo_x - 1.0).max(x0), (lo_y - 1.0).max(y0));
-        let (hi_x, hi_y) = ((hi_x + 1.0).min(x1), (hi_y + 1.0).min(y1));
-        if !(lo_x <= hi_x && lo_y <= hi_y) {
-            return Cover::Empty;
-        }
-        Cover::Rect {
-            c0: (lo_x.ceil() - x0) as u32,
-            c1: (hi_x.floor() - x0) as u32,
-            r0: (lo_y.ceil() - y0) as u32,
-            r1: (hi_y.floor() - y0) as u32,
-        }
-    }
-}
-
-impl Cover {
-    /// Ray indices (row-major in a tile `width` wide) in the cover, from `from` on; all of
-    /// `from..n` when there is no bound.
-    #[inline]
-    fn rays(self, width: u32, from: usize, n: usize) -> impl Iterator<Item = usize> {
-        let (rect, all) = match self {
-            Cover::Rect { c0, c1, r0, r1 } => (Some((c0, c1, r0, r1)), 0..0),
-            Cover::Empty => (None, 0..0),
-            Cover::Unknown => (None, from..n),
-        };
-        let w = width as usize;
-        let in_rect = rect.into_iter().flat_map(move |(c0, c1, r0, r1)| {
-            let first_row = (from / w).max(r0 as usize);
-            (first_row..=r1 as usize).flat_map(move |r| {
-                (c0 as usize..=c1 as usize)
-                    .map(move |c| r * w + c)
-                    .filter(move |&i| i >= from)
-            })
-        });
-        all.chain(in_rect)
-    }
 }
 
 impl<'a> RayPacket<'a> {
@@ -304,7 +228,7 @@ impl Walker for PacketWalk<'_, '_> {
         let cover = match &self.packet.grid {
             Some(grid) => {
                 self.c.frustum_box_tests += 1;
-                grid.cover(box_corners(node))
+                grid.cover(box_corners(node.lo.xyz(), node.hi.xyz()))
             }
             None => Cover::Unknown,
         };
@@ -404,17 +328,4 @@ impl Walker for PacketWalk<'_, '_> {
             a_first,
         )
     }
-}
-
-/// The eight corners of a node's box.
-#[inline]
-fn box_corners(node: &Node) -> impl Iterator<Item = Vec3> {
-    let (lo, hi) = (node.lo.xyz(), node.hi.xyz());
-    (0..8).map(move |i| {
-        Vec3::new(
-            if i & 1 != 0 { hi.x } else { lo.x },
-            if i & 2 != 0 { hi.y } else { lo.y },
-            if i & 4 != 0 { hi.z } else { lo.z },
-        )
-    })
 }

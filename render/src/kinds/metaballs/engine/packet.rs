@@ -28,94 +28,10 @@
 use super::{Accel, PreparedMetaballs, SCRATCH};
 use crate::camera::PrimaryRays;
 use crate::geom::aabb::Aabb;
+use crate::geom::tile::{aabb_corners, TileGrid};
 use crate::kinds::metaballs::counters::MetaballCounters;
 use crate::ray::{Hit, Ray};
 use glam::Vec3;
-
-/// The pixels of a tile: `width × height` from `(x0, y0)` of a camera's image.
-struct Tile<'a> {
-    rays: &'a PrimaryRays,
-    x0: u32,
-    y0: u32,
-    width: u32,
-    height: u32,
-}
-
-/// The tile's pixels whose rays may meet a box.
-#[derive(Clone, Copy, Debug, PartialEq)]
-enum Cover {
-    /// No bound (a corner is not in front of the eye).
-    Unknown,
-    /// No pixel of the tile.
-    Empty,
-    /// Tile-relative columns `c0..=c1` and rows `r0..=r1`.
-    Rect { c0: u32, c1: u32, r0: u32, r1: u32 },
-}
-
-impl Tile<'_> {
-    /// The pixels of the projection of `b`, widened by one pixel (far beyond rounding) and
-    /// clipped to the tile.
-    #[inline]
-    fn cover(&self, b: &Aabb) -> Cover {
-        let (mut lo_x, mut lo_y) = (f32::INFINITY, f32::INFINITY);
-        let (mut hi_x, mut hi_y) = (f32::NEG_INFINITY, f32::NEG_INFINITY);
-        for k in 0..8 {
-            let p = Vec3::new(
-                if k & 1 == 0 { b.min.x } else { b.max.x },
-                if k & 2 == 0 { b.min.y } else { b.max.y },
-                if k & 4 == 0 { b.min.z } else { b.max.z },
-            );
-            let Some((x, y)) = self.rays.pixel_of(p) else {
-                return Cover::Unknown;
-            };
-            lo_x = lo_x.min(x);
-            lo_y = lo_y.min(y);
-            hi_x = hi_x.max(x);
-            hi_y = hi_y.max(y);
-        }
-        let (x0, y0) = (self.x0 as f32, self.y0 as f32);
-        let (x1, y1) = (x0 + self.width as f32 - 1.0, y0 + self.height as f32 - 1.0);
-        let (lo_x, lo_y) = ((lo_x - 1.0).max(x0), (lo_y - 1.0).max(y0));
-        let (hi_x, hi_y) = ((hi_x + 1.0).min(x1), (hi_y + 1.0).min(y1));
-        if !(lo_x <= hi_x && lo_y <= hi_y) {
-            return Cover::Empty;
-        }
-        Cover::Rect {
-            c0: (lo_x.ceil() - x0) as u32,
-            c1: (hi_x.floor() - x0) as u32,
-            r0: (lo_y.ceil() - y0) as u32,
-            r1: (hi_y.floor() - y0) as u32,
-        }
-    }
-}
-
-impl Cover {
-    /// Calls `f` on the ray indices (row-major in a tile `width` wide) of the cover from
-    /// `from` on (all of `from..n` when there is no bound) until it returns `true`.
-    #[inline]
-    fn visit(self, width: usize, from: usize, n: usize, mut f: impl FnMut(usize) -> bool) {
-        match self {
-            Cover::Empty => {}
-            Cover::Unknown => {
-                for i in from..n {
-                    if f(i) {
-                        return;
-                    }
-                }
-            }
-            Cover::Rect { c0, c1, r0, r1 } => {
-                for r in (from / width).max(r0 as usize)..=r1 as usize {
-                    for c in c0 as usize..=c1 as usize {
-                        let i = r * width + c;
-                        if i >= from && f(i) {
-                            return;
-                        }
-                    }
-                }
-            }
-        }
-    }
-}
 
 /// Whether box `a` comes before box `b` along every ray from `origin` that crosses both: the
 /// side of a separating plane (a Fitted BVH's siblings are split at one) the origin lies on;
@@ -168,8 +84,8 @@ impl PreparedMetaballs {
             Accel::Tree(tree) => tree,
             Accel::BruteForce | Accel::ActiveList => return None,
         };
-        let tile = Tile {
-            rays,
+        let tile = TileGrid {
+            rays: *rays,
             x0,
             y0,
             width: x1 - x0,
@@ -200,7 +116,7 @@ impl PreparedMetaballs {
                     continue;
                 }
                 counters.node_traversals += 1;
-                let cover = tile.cover(&node.bounds);
+                let cover = tile.cover(aabb_corners(&node.bounds));
                 if node.is_leaf() {
                     cover.visit(width, from as usize, n, |r| {
                         if done[r] {
