@@ -3,11 +3,10 @@
 //! and every test asserts that each frame it compares really was traced on the GPU.
 //!
 //! Agreement (issue 12, Must show 1): every demo scene at 160×120, prepared as the server
-//! prepares it (the CPU's default finder: Bézier clipping for metaballs, whose GPU kernel
-//! marches at 1/64 of the smallest radius), with five effect sets — ray casting, hard
-//! shadows, the scene's own defaults, every effect on, and every effect but the clip box
-//! (each distinct plan once) — the first refinement pass of each (the same random streams
-//! on both sides). Stated tolerance: the same hit or miss on at
+//! prepares it (the CPU's default finder: Bézier clipping for metaballs, which the GPU kernel
+//! uses too; finder_tests.rs checks the others), with four effect sets — ray casting, hard
+//! shadows, the scene's own defaults, and every effect on (each distinct plan once) — the
+//! first refinement pass of each (the same random streams on both sides). Stated tolerance: the same hit or miss on at
 //! least 99.9% of pixels; over pixels that agree on it, at least 99% of channels within 3
 //! sRGB codes and a mean difference under 0.5 codes. The figures of every pair are printed.
 
@@ -143,10 +142,8 @@ fn assert_agreement(what: &str, a: Agreement) -> Agreement {
     a
 }
 
-/// The effect sets every demo is rendered with. The last one differs from every effect only
-/// where the scene has a clip box (still traced on the CPU), so that the rest of every effect
-/// (the tet gyroid's occlusion through its further isosurfaces) is traced on the GPU too.
-fn effect_sets(scene: &PreparedScene) -> [(&'static str, Effects); 5] {
+/// The effect sets every demo is rendered with.
+fn effect_sets(scene: &PreparedScene) -> [(&'static str, Effects); 4] {
     [
         ("ray casting", Effects::OFF),
         (
@@ -158,13 +155,6 @@ fn effect_sets(scene: &PreparedScene) -> [(&'static str, Effects); 5] {
         ),
         ("its defaults", scene.lighting().effects),
         ("every effect", Effects::ALL),
-        (
-            "every effect but the clip box",
-            Effects {
-                clip_box: false,
-                ..Effects::ALL
-            },
-        ),
     ]
 }
 
@@ -228,8 +218,8 @@ fn framebuffer(pixels: &[[f32; 4]]) -> Framebuffer {
     fb
 }
 
-/// Issue 12's two disagreements through transparent layers (Glass with its defaults: 4.5% of
-/// channels, the tet gyroid's occlusion through further isosurfaces: 5.6%) were lavapipe
+/// Issue 12's two disagreements through transparent layers (Glass with its defaults, the tet
+/// gyroid's occlusion through further isosurfaces with every effect) were lavapipe
 /// cutting the loops of 8-pixel groups short once their shared budget of 65,535 iterations
 /// was spent (retrace.rs). Traced past check_plan's refusal, on lavapipe the kernel marks
 /// such pixels (on a hardware GPU it has none to mark); every pixel it leaves unmarked agrees
@@ -243,13 +233,7 @@ fn pixels_the_driver_cuts_short_are_marked_and_traced_again_on_the_cpu() {
     let mut buffers = FrameBuffers::default();
     for (demo, effects) in [
         (DemoScene::Glass, None),
-        (
-            DemoScene::TetGyroid,
-            Some(Effects {
-                clip_box: false,
-                ..Effects::ALL
-            }),
-        ),
+        (DemoScene::TetGyroid, Some(Effects::ALL)),
     ] {
         let (scene, view) = setup(demo);
         let effects = effects.unwrap_or(scene.lighting().effects);

@@ -3,9 +3,9 @@
 //! gets its frames.
 //!
 //! On the GPU: ray casting and every effect of the plan (common.wgsl) for each kind whose
-//! upload accepts the state (metaball states with a Fitted BVH and the marching finder; see
-//! `kind_upload`: metaballs, tets and surfels) and plan (`check_plan`); anything else goes to
-//! the CPU with the reason logged.
+//! upload accepts the state (`kind_upload`: metaballs with a Fitted BVH, traced with the
+//! state's own root finder; tets; surfels), whose plan the kernel traces (`check_plan`) and
+//! whose arrays fit the memory budget; anything else goes to the CPU with the reason logged.
 
 use crate::backend::accumulator::{DeviceTimes, FrameRays, Pass, TracePasses};
 use crate::backend::cpu::CpuBackend;

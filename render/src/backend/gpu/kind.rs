@@ -24,7 +24,11 @@ impl GpuKind {
     /// The kind's part of the kernel.
     pub fn source(self) -> &'static str {
         match self {
-            GpuKind::Metaballs => include_str!("metaballs.wgsl"),
+            GpuKind::Metaballs => concat!(
+                include_str!("metaballs.wgsl"),
+                "\n",
+                include_str!("metaball_finders.wgsl")
+            ),
             GpuKind::Tets => include_str!("tets.wgsl"),
             GpuKind::Surfels => include_str!("surfels.wgsl"),
         }

@@ -34,6 +34,14 @@ pub mod light_kind {
     pub const SPHERE: f32 = 2.0;
 }
 
+/// [`GpuMetaballParams::finder`]: the metaball root finders the kernel has
+/// (`FINDER_*` in metaball_finders.wgsl).
+pub mod finder {
+    pub const MARCH: u32 = 0;
+    pub const SECANT: u32 = 1;
+    pub const BEZIER: u32 = 2;
+}
+
 /// What one frame needs besides the arrays: camera, background, floor, the plan's effects and
 /// counts. The uniform of the kind-independent kernel (`Frame` in common.wgsl).
 #[repr(C)]
@@ -97,7 +105,8 @@ pub struct GpuIsoSurface {
 
 /// The metaball kind's uniform (`MbParams` in metaballs.wgsl): the kernel as `Σ c_k w^k`
 /// (`c_0..c_3` in `kernel`, `c_4` in `kernel_c4`), the root finder's tolerance on hit
-/// distances and its marching step (a fraction of the smallest active radius).
+/// distances, its step (marching's, or the secant method's largest gap between samples, a
+/// fraction of the smallest radius; 0: no gap limit) and which finder it is ([`finder`]).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
 pub struct GpuMetaballParams {
@@ -107,7 +116,7 @@ pub struct GpuMetaballParams {
     pub tolerance: f32,
     pub step: f32,
     pub node_count: u32,
-    pub _pad0: u32,
+    pub finder: u32,
     pub _pad1: u32,
     pub _pad2: u32,
 }

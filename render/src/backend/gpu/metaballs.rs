@@ -1,9 +1,10 @@
 //! The metaball kind on the GPU: the Fitted BVH the kernel walks (flattened nodes and
-//! leaf-ball indices), the balls, and the kind's uniform (kernel, tolerance, marching step).
-//! The kernel finds roots by marching and bisection whatever finder the CPU uses.
+//! leaf-ball indices), the balls, and the kind's uniform (kernel, tolerance, step, finder).
+//! The kernel finds roots with the CPU state's finder (Bézier clipping, marching or the
+//! secant method, metaball_finders.wgsl); sphere tracing is marched at the default step.
 
 use crate::backend::gpu::kind::{GpuKind, KindUpload};
-use crate::backend::gpu::layout::{GpuBall, GpuMetaballParams, GpuNode};
+use crate::backend::gpu::layout::{finder, GpuBall, GpuMetaballParams, GpuNode};
 use crate::effects::plan::EffectsPlan;
 use crate::kinds::metaballs::engine::PreparedMetaballs;
 use crate::kinds::metaballs::roots::RootFinder;
@@ -18,7 +19,7 @@ pub const MAX_GATHER: usize = 192;
 pub const MAX_DEPTH: usize = 63;
 
 /// What the GPU needs of `metaballs` for a frame of `view` with `plan`, or why it cannot
-/// trace it: the kernel walks a Fitted BVH with the marching finder.
+/// trace it: the kernel walks a Fitted BVH with the state's root finder.
 pub fn upload<'a>(
     metaballs: &'a Arc<PreparedMetaballs>,
     view: &View,
@@ -29,13 +30,7 @@ pub fn upload<'a>(
         return Err(format!("isovalue {isovalue} has no surface"));
     }
     let options = metaballs.options();
-    // The kernel marches (then bisects to the tolerance) whatever finder the CPU uses: at
-    // the step the accuracy study chose, marching loses no silhouette pixel against Bézier
-    // clipping (docs/accuracy.md); a state prepared for marching keeps its own step.
-    let step = match options.finder {
-        RootFinder::March => options.step,
-        _ => RootFinder::March.default_step(),
-    };
+    let (finder, step) = gpu_finder(options.finder, options.step);
     // A volume integrates the field through the tree whose leaves hold whole supports.
     let volume = plan.is_some_and(|p| p.volume);
     let tree = if volume {
@@ -56,6 +51,7 @@ pub fn upload<'a>(
         tolerance: options.tolerance,
         step,
         node_count: tree.nodes.len() as u32,
+        finder,
         ..GpuMetaballParams::default()
     };
     let key = (
@@ -77,6 +73,21 @@ pub fn upload<'a>(
             ]
         }),
     })
+}
+
+/// The kernel's finder ([`finder`]) and step for a state prepared with `cpu` at `step`: the
+/// same finder, except sphere tracing, which the kernel does not have: it marches (then
+/// bisects to the tolerance) at marching's default step, which loses no silhouette pixel
+/// against Bézier clipping (docs/accuracy.md). The secant method's infinite step (centre
+/// projections only) goes as 0, which the kernel reads as no gap limit.
+pub fn gpu_finder(cpu: RootFinder, step: f32) -> (u32, f32) {
+    match cpu {
+        // Bézier clipping takes no step.
+        RootFinder::BezierClipping => (finder::BEZIER, 0.0),
+        RootFinder::March => (finder::MARCH, step),
+        RootFinder::Secant => (finder::SECANT, if step.is_finite() { step } else { 0.0 }),
+        RootFinder::SphereTracing => (finder::MARCH, RootFinder::March.default_step()),
+    }
 }
 
 fn non_empty<T: Default>(mut v: Vec<T>) -> Vec<T> {

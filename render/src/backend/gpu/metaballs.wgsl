@@ -1,10 +1,10 @@
-// The metaball part of the trace kernel (appended to common.wgsl): the kind's queries
-// `kind_first_hit`, `kind_exit_hit`, `kind_any_hit` and `kind_optical_depth`. It walks the
-// flattened Fitted BVH front to back (render/src/kinds/metaballs/tree/walk.rs), gathers each
-// leaf's balls the ray crosses (engine.rs `gather`), and finds the first root with the CPU's
-// marching finder over the sorted entry/exit sections (roots.rs `walk_sections` +
-// `march_section` + `bisect`), the step a parameter as on the CPU. The structs mirror
-// backend/gpu/layout.rs field by field.
+// The metaball part of the trace kernel (appended to common.wgsl, and followed by
+// metaball_finders.wgsl): the kind's queries `kind_first_hit`, `kind_exit_hit`, `kind_any_hit`
+// and `kind_optical_depth`. It walks the flattened Fitted BVH front to back
+// (render/src/kinds/metaballs/tree/walk.rs), gathers each leaf's balls the ray crosses
+// (engine.rs `gather`), and finds the first root with the CPU state's finder (`finder` of the
+// uniform: Bézier clipping, marching or the secant method; the exit query always clips, as
+// the CPU's does). The structs mirror backend/gpu/layout.rs field by field.
 
 struct MbParams {
     kernel: vec4<f32>,
@@ -13,7 +13,7 @@ struct MbParams {
     tolerance: f32,
     step: f32,
     node_count: u32,
-    _pad0: u32,
+    finder: u32,
     _pad1: u32,
     _pad2: u32,
 }
@@ -147,146 +147,6 @@ fn gather(i: u32, o: vec3<f32>, d: vec3<f32>, lo: f32, hi: f32) -> bool {
     gathered[gathered_count] = RayBall(i, t0, t1, a, tc, s_min, b.strength, b.m0.w);
     gathered_count = gathered_count + 1u;
     return true;
-}
-
-// Whether gathered ball k is active on the section starting at `t` (clamped to [lo, hi]).
-fn is_active(k: u32, t: f32, lo: f32, hi: f32) -> bool {
-    let b = gathered[k];
-    let t0 = max(b.t0, lo);
-    let t1 = min(b.t1, hi);
-    return t0 < t1 && t0 <= t && t1 > t;
-}
-
-fn field(t: f32, a: f32, lo: f32, hi: f32, sign: f32) -> f32 {
-    var f = 0.0;
-    for (var k = 0u; k < gathered_count; k = k + 1u) {
-        if (is_active(k, a, lo, hi)) {
-            f = f + term(gathered[k], t, sign);
-        }
-    }
-    return f;
-}
-
-// roots.rs may_reach: an upper bound of the field on [a, b] reaches the isovalue.
-fn may_reach(a: f32, b: f32, lo: f32, hi: f32, sign: f32) -> bool {
-    let peak = sign * kernel_at_w(1.0);
-    var bound = 0.0;
-    for (var k = 0u; k < gathered_count; k = k + 1u) {
-        if (is_active(k, a, lo, hi)) {
-            let ball = gathered[k];
-            if (ball.q * peak > 0.0) {
-                bound = bound + term(ball, min(max(ball.tc, a), b), sign);
-            }
-        }
-    }
-    return !(bound < sign * mb_iso);
-}
-
-struct Root {
-    found: bool,
-    t: f32,
-}
-
-// roots.rs march_section + bisect on the section [a, b] that starts at `a`.
-fn march_section(a: f32, b: f32, lo: f32, hi: f32, sign: f32, iters: ptr<function, u32>) -> Root {
-    var step = BIG;
-    for (var k = 0u; k < gathered_count; k = k + 1u) {
-        if (is_active(k, a, lo, hi)) {
-            step = min(step, gathered[k].min_radius);
-        }
-    }
-    step = step * mb.step;
-    let iso = sign * mb_iso;
-    var t0 = a;
-    *iters = *iters + 1u;
-    if (field(t0, a, lo, hi, sign) - iso >= 0.0) {
-        return Root(true, t0);
-    }
-    loop {
-        if (!(t0 < b)) {
-            break;
-        }
-        let t1 = min(t0 + step, b);
-        if (!(t1 > t0) || *iters > ITERATION_CAP) {
-            return Root(false, 0.0);
-        }
-        *iters = *iters + 1u;
-        if (field(t1, a, lo, hi, sign) - iso >= 0.0) {
-            // Bisection to the tolerance; the upper end is the root.
-            var l = t0;
-            var h = t1;
-            loop {
-                if (!(h - l > mb.tolerance && *iters < ITERATION_CAP)) {
-                    break;
-                }
-                let mid = 0.5 * (l + h);
-                if (!(l < mid && mid < h)) {
-                    break;
-                }
-                *iters = *iters + 1u;
-                if (field(mid, a, lo, hi, sign) - iso < 0.0) {
-                    l = mid;
-                } else {
-                    h = mid;
-                }
-            }
-            return Root(true, h);
-        }
-        t0 = t1;
-    }
-    return Root(false, 0.0);
-}
-
-// roots.rs walk_sections with the marching finder over the gathered balls on [lo, hi].
-fn find_first(lo: f32, hi: f32, sign: f32) -> Root {
-    if (gathered_count == 0u || !(lo < hi)) {
-        return Root(false, 0.0);
-    }
-    var t = BIG;
-    for (var k = 0u; k < gathered_count; k = k + 1u) {
-        let t0 = max(gathered[k].t0, lo);
-        let t1 = min(gathered[k].t1, hi);
-        if (t0 < t1) {
-            t = min(t, t0);
-        }
-    }
-    var total = 0u;
-    loop {
-        // The next event strictly after t.
-        var next = BIG;
-        var any_active = false;
-        for (var k = 0u; k < gathered_count; k = k + 1u) {
-            let t0 = max(gathered[k].t0, lo);
-            let t1 = min(gathered[k].t1, hi);
-            if (t0 < t1) {
-                if (t0 > t) {
-                    next = min(next, t0);
-                }
-                if (t1 > t) {
-                    next = min(next, t1);
-                }
-                if (t0 <= t && t1 > t) {
-                    any_active = true;
-                }
-            }
-        }
-        if (next >= BIG) {
-            break;
-        }
-        if (any_active && may_reach(t, next, lo, hi, sign)) {
-            var iters = 0u;
-            let r = march_section(t, next, lo, hi, sign, &iters);
-            total = total + iters;
-            if (r.found) {
-                return r;
-            }
-            if (total > ITERATION_CAP) {
-                break;
-            }
-        }
-        t = next;
-    }
-    return Root(false, 0.0);
 }
 
 // geom/aabb.rs slab: the range of the ray inside the node's box within [t_min, t_max].
@@ -432,6 +292,7 @@ fn surface_at(t: f32, p: vec3<f32>) -> KHit {
 
 fn kind_first_hit(o: vec3<f32>, d: vec3<f32>, lo: f32, hi: f32, iso: f32) -> KHit {
     mb_iso = iso;
+    mb_finder = mb.finder;
     let r = first_root(o, d, lo, hi, 1.0);
     if (!r.found) {
         return no_hit();
@@ -439,8 +300,10 @@ fn kind_first_hit(o: vec3<f32>, d: vec3<f32>, lo: f32, hi: f32, iso: f32) -> KHi
     return surface_at(r.t, o + r.t * d);
 }
 
+// queries.rs exit_hit_counted searches -F ≥ -T with Bézier clipping whatever the finder.
 fn kind_exit_hit(o: vec3<f32>, d: vec3<f32>, lo: f32, hi: f32, iso: f32) -> KHit {
     mb_iso = iso;
+    mb_finder = FINDER_BEZIER;
     let r = first_root(o, d, lo, hi, -1.0);
     if (!r.found) {
         return no_hit();
@@ -450,6 +313,7 @@ fn kind_exit_hit(o: vec3<f32>, d: vec3<f32>, lo: f32, hi: f32, iso: f32) -> KHit
 
 fn kind_any_hit(o: vec3<f32>, d: vec3<f32>, lo: f32, hi: f32, iso: f32) -> f32 {
     mb_iso = iso;
+    mb_finder = mb.finder;
     let r = first_root(o, d, lo, hi, 1.0);
     return select(-1.0, r.t, r.found);
 }

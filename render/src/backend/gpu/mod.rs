@@ -25,6 +25,8 @@ pub mod upload;
 mod agreement_tests;
 #[cfg(test)]
 mod backend_tests;
+#[cfg(test)]
+mod finder_tests;
 
 pub use backend::GpuBackend;
 pub use device::{AdapterChoice, GpuError};

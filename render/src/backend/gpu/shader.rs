@@ -56,6 +56,16 @@ mod tests {
         assert_eq!(constant(&m, "STACK_SIZE") as usize, MAX_DEPTH + 1);
         assert_eq!(constant(&m, "ITERATION_CAP"), ITERATION_CAP);
         assert_eq!(constant(&m, "RAY_STACK") as usize, RAY_STACK);
+        use crate::backend::gpu::layout::finder;
+        assert_eq!(constant(&m, "FINDER_MARCH"), finder::MARCH);
+        assert_eq!(constant(&m, "FINDER_SECANT"), finder::SECANT);
+        assert_eq!(constant(&m, "FINDER_BEZIER"), finder::BEZIER);
+        use crate::kinds::metaballs::bezier::{MAX_DEGREE, MAX_PENDING_HALVES};
+        assert_eq!(constant(&m, "CONTROL_POINTS") as usize, MAX_DEGREE + 1);
+        assert_eq!(
+            constant(&m, "MAX_PENDING_HALVES") as usize,
+            MAX_PENDING_HALVES
+        );
     }
 
     #[test]
@@ -68,6 +78,6 @@ mod tests {
         assert_layout!(&m, "Node", GpuNode; min, first, max, count);
         assert_layout!(&m, "Ball", GpuBall; center, strength, m0, m1, m2, color);
         assert_layout!(&m, "IsoSurface", GpuIsoSurface; color, isovalue, material, _pad0, _pad1);
-        assert_layout!(&m, "MbParams", GpuMetaballParams; kernel, kernel_c4, kernel_degree, tolerance, step, node_count, _pad0, _pad1, _pad2);
+        assert_layout!(&m, "MbParams", GpuMetaballParams; kernel, kernel_c4, kernel_degree, tolerance, step, node_count, finder, _pad1, _pad2);
     }
 }

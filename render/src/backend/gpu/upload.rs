@@ -37,16 +37,14 @@ pub fn kind_upload<'a>(
 /// Whether the kernel traces `plan`: its ray stack must hold every ray the plan can have
 /// waiting (a path of `d` bounces and `l` layers leaves at most two siblings per step on
 /// the stack), and the plan must avoid the combinations where the GPU and the CPU images
-/// still disagree on the demos (issue 12): the clip box (Shells: 1–4% of channels against
-/// the CPU's Bézier clipping; against a CPU state prepared for marching no pixel differs by
-/// more than 0.02, so this one is the finders' difference where a segment starts inside the
-/// solid at the box's face). Refraction with shadows through transparent layers (Glass) and
-/// occlusion with further isosurfaces through layers (the tet gyroid) are refused only until
-/// the backend traces again on the CPU the pixels the kernel marks as cut short
-/// ([`crate::backend::gpu::retrace`]): their disagreements (4.5% and 5.6% of channels) were
-/// lavapipe's shared loop budget ending the loops of heavy 8-pixel groups early, not the
-/// integrator; with those pixels traced again both agree (Glass: 9 of 57,600 channels over 3
-/// codes; the gyroid bit for bit). Such frames are traced on the CPU, with the reason logged.
+/// still disagree on the demos (issue 12). Refraction with shadows through transparent
+/// layers (Glass) and occlusion with further isosurfaces through layers (the tet gyroid) are
+/// refused only until the backend traces again on the CPU the pixels the kernel marks as cut
+/// short ([`crate::backend::gpu::retrace`]): their disagreements were lavapipe's shared loop
+/// budget ending the loops of heavy 8-pixel groups early, not the integrator; with those
+/// pixels traced again both agree. Such frames are traced on the CPU, with the reason logged.
+/// The clip box is traced on the GPU: its disagreement on Shells was the finders' (the
+/// kernel marched where the CPU clips), gone since the kernel uses the CPU state's finder.
 pub fn check_plan(plan: &EffectsPlan) -> Result<(), String> {
     let disagrees = |what: &str| {
         Err(format!(
@@ -55,9 +53,6 @@ pub fn check_plan(plan: &EffectsPlan) -> Result<(), String> {
     };
     if plan.refraction_depth > 0 && plan.shadows && plan.layers > 0 {
         return disagrees("refraction with shadows through transparent layers");
-    }
-    if plan.clip_box.is_some() {
-        return disagrees("the clip box");
     }
     if plan.ao_samples > 0 && plan.isosurfaces && plan.layers > 0 {
         return disagrees("occlusion with further isosurfaces through layers");

@@ -14,7 +14,7 @@ pub const ITERATION_CAP: u32 = 20_000;
 /// Bézier clipping's pending halves: (control points, lo, hi).
 pub type HalfStack<R> = Vec<([R; MAX_DEGREE + 1], R, R)>;
 /// Most halves Bézier clipping keeps pending; past it, it clips instead of splitting.
-const MAX_PENDING_HALVES: usize = 48;
+pub const MAX_PENDING_HALVES: usize = 48;
 
 pub(crate) const BINOMIAL: [[f64; MAX_DEGREE + 1]; MAX_DEGREE + 1] = {
     let mut c = [[0.0; MAX_DEGREE + 1]; MAX_DEGREE + 1];
