@@ -16,6 +16,7 @@ use crate::backend::dispatch::Backend;
 use crate::backend::gpu::backend::{GpuBackend, DEFAULT_MEMORY_BUDGET};
 use crate::backend::gpu::buffers::{Budget, FrameBuffers};
 use crate::backend::gpu::device::{AdapterChoice, GpuDevice};
+use crate::backend::gpu::layout::flags;
 use crate::backend::gpu::retrace::{retrace_cut, CUT_DEPTH};
 use crate::backend::gpu::upload;
 use crate::effects::toggles::Effects;
@@ -221,10 +222,10 @@ fn framebuffer(pixels: &[[f32; 4]]) -> Framebuffer {
 /// Issue 12's two disagreements through transparent layers (Glass with its defaults, the tet
 /// gyroid's occlusion through further isosurfaces with every effect) were lavapipe
 /// cutting the loops of 8-pixel groups short once their shared budget of 65,535 iterations
-/// was spent (retrace.rs). Traced past check_plan's refusal, on lavapipe the kernel marks
-/// such pixels (on a hardware GPU it has none to mark); every pixel it leaves unmarked agrees
-/// with the CPU within the stated tolerance, and with the marked ones traced again on the
-/// CPU the whole frame does.
+/// was spent (retrace.rs). Traced past check_plan's refusal and asked to (MARK_CUT), on
+/// lavapipe the kernel marks such pixels (on a hardware GPU it has none to mark); every
+/// pixel it leaves unmarked agrees with the CPU within the stated tolerance, and with the
+/// marked ones traced again on the CPU the whole frame does.
 #[test]
 fn pixels_the_driver_cuts_short_are_marked_and_traced_again_on_the_cpu() {
     let device = GpuDevice::new(AdapterChoice::Any).expect("a Vulkan adapter");
@@ -244,7 +245,8 @@ fn pixels_the_driver_cuts_short_are_marked_and_traced_again_on_the_cpu() {
             demo.id()
         );
         let kind = upload::kind_upload(&scene, &view, Some(&plan)).expect("the kernel holds it");
-        let frame = upload::frame(&scene, &view, Some(&plan), 0);
+        let mut frame = upload::frame(&scene, &view, Some(&plan), 0);
+        frame.flags |= flags::MARK_CUT;
         let arrays = upload::lighting(scene.lighting_in_frame());
         let budget = Budget {
             bytes: DEFAULT_MEMORY_BUDGET,

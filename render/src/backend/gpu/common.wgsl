@@ -92,6 +92,7 @@ const FLAG_SOFT_SHADOWS: u32 = 16u;
 const FLAG_VOLUME: u32 = 32u;
 const FLAG_CLIP: u32 = 64u;
 const FLAG_ISOSURFACES: u32 = 128u;
+const FLAG_MARK_CUT: u32 = 256u;
 
 // integrator.rs INSIDE_EPS.
 const INSIDE_EPS: f32 = 2.0e-4;
@@ -99,8 +100,8 @@ const BIG: f32 = 3.0e38;
 const TAU: f32 = 6.28318530717958647692;
 // Rays waiting on the integrator's stack; the upload refuses plans that could need more.
 const RAY_STACK: u32 = 24u;
-// The depth written for a pixel whose loops the driver cut short (retrace.rs CUT_DEPTH, for
-// the backend to trace again on the CPU). Mesa's lavapipe (llvmpipe) counts the loop
+// The depth written, with FLAG_MARK_CUT, for a pixel whose loops the driver cut short
+// (retrace.rs CUT_DEPTH, for the backend to trace again on the CPU). Mesa's lavapipe (llvmpipe) counts the loop
 // iterations of each SIMD group of invocations (8 pixels on AVX2) in ONE budget of 65,535,
 // shared by every loop of the kernel, and once it is spent ends every loop after its
 // current iteration, silently: rays waiting on the stack are dropped and a root search
@@ -752,7 +753,7 @@ fn trace(@builtin(global_invocation_id) id: vec3<u32>) {
             }
             primary = false;
         }
-        if (!finished) {
+        if (!finished && has(FLAG_MARK_CUT)) {
             t = CUT;
         }
     } else {

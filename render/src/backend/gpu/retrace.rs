@@ -8,7 +8,8 @@
 //! image depended on its neighbours (issue 12: Glass through its layers, the tet gyroid's
 //! occlusion through further isosurfaces). The kernel notices (`CUT` in common.wgsl: its
 //! integrator loop only ends in an iteration of its own that finds the stack empty, which a
-//! cut anywhere earlier prevents) and writes [`CUT_DEPTH`]; those pixels, a few percent of a
+//! cut anywhere earlier prevents) and, when the frame asks (`flags::MARK_CUT`), writes
+//! [`CUT_DEPTH`]; those pixels, a few percent of a
 //! heavy frame on lavapipe and none on a hardware GPU, are traced here by the CPU's
 //! integrator with the same ray and the same random stream.
 

@@ -39,10 +39,11 @@ pub fn kind_upload<'a>(
 /// the stack), and the plan must avoid the combinations where the GPU and the CPU images
 /// still disagree on the demos (issue 12). Refraction with shadows through transparent
 /// layers (Glass) and occlusion with further isosurfaces through layers (the tet gyroid) are
-/// refused only until the backend traces again on the CPU the pixels the kernel marks as cut
-/// short ([`crate::backend::gpu::retrace`]): their disagreements were lavapipe's shared loop
-/// budget ending the loops of heavy 8-pixel groups early, not the integrator; with those
-/// pixels traced again both agree. Such frames are traced on the CPU, with the reason logged.
+/// refused only until the backend asks the kernel to mark the pixels it cuts short
+/// (`flags::MARK_CUT`) and traces them again on the CPU ([`crate::backend::gpu::retrace`]):
+/// their disagreements were lavapipe's shared loop budget ending the loops of heavy 8-pixel
+/// groups early, not the integrator; with those pixels traced again both agree. Such frames
+/// are traced on the CPU, with the reason logged.
 /// The clip box is traced on the GPU: its disagreement on Shells was the finders' (the
 /// kernel marched where the CPU clips), gone since the kernel uses the CPU state's finder.
 pub fn check_plan(plan: &EffectsPlan) -> Result<(), String> {
