@@ -80,7 +80,8 @@ struct IsoSurface {
 @group(0) @binding(2) var<storage, read> materials: array<Material>;
 @group(0) @binding(3) var<storage, read> groups: array<Group>;
 @group(0) @binding(4) var<storage, read> isosurfaces: array<IsoSurface>;
-// Per pixel: linear colour, and the hit distance along the view axis (negative: a miss).
+// Per pixel: linear colour, and the hit distance along the view axis (negative: a miss; CUT:
+// the driver cut the pixel's loops short).
 @group(0) @binding(5) var<storage, read_write> pixels: array<vec4<f32>>;
 
 const FLAG_PASS: u32 = 1u;
@@ -91,6 +92,7 @@ const FLAG_SOFT_SHADOWS: u32 = 16u;
 const FLAG_VOLUME: u32 = 32u;
 const FLAG_CLIP: u32 = 64u;
 const FLAG_ISOSURFACES: u32 = 128u;
+const FLAG_MARK_CUT: u32 = 256u;
 
 // integrator.rs INSIDE_EPS.
 const INSIDE_EPS: f32 = 2.0e-4;
@@ -98,6 +100,16 @@ const BIG: f32 = 3.0e38;
 const TAU: f32 = 6.28318530717958647692;
 // Rays waiting on the integrator's stack; the upload refuses plans that could need more.
 const RAY_STACK: u32 = 24u;
+// The depth written, with FLAG_MARK_CUT, for a pixel whose loops the driver cut short
+// (retrace.rs CUT_DEPTH, for the backend to trace again on the CPU). Mesa's lavapipe (llvmpipe) counts the loop
+// iterations of each SIMD group of invocations (8 pixels on AVX2) in ONE budget of 65,535,
+// shared by every loop of the kernel, and once it is spent ends every loop after its
+// current iteration, silently: rays waiting on the stack are dropped and a root search
+// stops early, for whichever pixels of the group are still working. The integrator's loop
+// therefore only finishes in an iteration of its own that finds the stack empty; a cut
+// anywhere before it (the budget only shrinks) ends that loop first and marks the pixel.
+// (Ray casting's single query is not guarded: no demo's ray casting differs from the CPU's.)
+const CUT: f32 = -2.0;
 
 // What a kind's query found (ray.rs Hit; `found` false: nothing).
 struct KHit {
@@ -726,7 +738,13 @@ fn trace(@builtin(global_invocation_id) id: vec3<u32>) {
         tasks[0] = Task(o, 0.0, d, 0u, vec3<f32>(1.0), frame.layers);
         task_count = 1u;
         var primary = true;
-        while (task_count > 0u) {
+        // Whether the loop saw the stack empty in an iteration of its own (see CUT).
+        var finished = false;
+        loop {
+            if (task_count == 0u) {
+                finished = true;
+                break;
+            }
             task_count = task_count - 1u;
             let next = tasks[task_count];
             let hit_t = radiance(next, &color);
@@ -734,6 +752,9 @@ fn trace(@builtin(global_invocation_id) id: vec3<u32>) {
                 t = hit_t * dot(d, frame.forward.xyz);
             }
             primary = false;
+        }
+        if (!finished && has(FLAG_MARK_CUT)) {
+            t = CUT;
         }
     } else {
         let h = kind_first_hit(o, d, 0.0, frame.t_max, frame.isovalue);

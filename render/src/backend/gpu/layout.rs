@@ -25,6 +25,9 @@ pub mod flags {
     pub const CLIP: u32 = 64;
     /// The scene's further isosurfaces are drawn.
     pub const ISOSURFACES: u32 = 128;
+    /// A pixel the driver cut short is written with depth `CUT` (retrace.rs `CUT_DEPTH`) for
+    /// the backend to trace again on the CPU; without it such a pixel keeps what it reached.
+    pub const MARK_CUT: u32 = 256;
 }
 
 /// Light kinds of [`GpuLight::position`]'s `w`.

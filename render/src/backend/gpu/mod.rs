@@ -8,10 +8,13 @@ pub mod backend;
 pub mod buffers;
 pub mod device;
 pub mod kind;
+#[cfg(test)]
+mod lavapipe_tests;
 pub mod layout;
 pub mod metaballs;
 #[cfg(test)]
 mod naga_checks;
+pub mod retrace;
 pub mod shader;
 pub mod surfels;
 pub mod tets;

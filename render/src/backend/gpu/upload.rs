@@ -37,13 +37,15 @@ pub fn kind_upload<'a>(
 /// Whether the kernel traces `plan`: its ray stack must hold every ray the plan can have
 /// waiting (a path of `d` bounces and `l` layers leaves at most two siblings per step on
 /// the stack), and the plan must avoid the combinations where the GPU and the CPU images
-/// still disagree on the demos (issue 12, left open): refraction with shadows through
-/// transparent layers (Glass: the GPU shadows about 4% of the channels seen through glass,
-/// one shadow ray fewer per affected pixel than the CPU casts) and occlusion with further
-/// isosurfaces through layers (the tet gyroid: 3% of channels, darker on the GPU). Such
-/// frames are traced on the CPU, with the reason logged. The clip box is traced on the GPU:
-/// its disagreement on Shells was the finders' (the kernel marched where the CPU clips),
-/// gone since the kernel uses the CPU state's finder.
+/// still disagree on the demos (issue 12). Refraction with shadows through transparent
+/// layers (Glass) and occlusion with further isosurfaces through layers (the tet gyroid) are
+/// refused only until the backend asks the kernel to mark the pixels it cuts short
+/// (`flags::MARK_CUT`) and traces them again on the CPU ([`crate::backend::gpu::retrace`]):
+/// their disagreements were lavapipe's shared loop budget ending the loops of heavy 8-pixel
+/// groups early, not the integrator; with those pixels traced again both agree. Such frames
+/// are traced on the CPU, with the reason logged.
+/// The clip box is traced on the GPU: its disagreement on Shells was the finders' (the
+/// kernel marched where the CPU clips), gone since the kernel uses the CPU state's finder.
 pub fn check_plan(plan: &EffectsPlan) -> Result<(), String> {
     let disagrees = |what: &str| {
         Err(format!(
