@@ -11,7 +11,7 @@ use crate::backend::accumulator::{DeviceTimes, FrameRays, Pass, TracePasses};
 use crate::backend::cpu::CpuBackend;
 use crate::backend::gpu::buffers::{Budget, FrameBuffers};
 use crate::backend::gpu::device::{AdapterChoice, GpuDevice, GpuError};
-use crate::backend::gpu::upload;
+use crate::backend::gpu::{retrace, upload};
 use crate::effects::plan::EffectsPlan;
 use crate::effects::rays::RayKind;
 use crate::framebuffer::Framebuffer;
@@ -232,7 +232,9 @@ impl TracePasses for GpuBackend {
         pass: u32,
     ) -> Pass {
         match self.trace(scene, view, Some(plan), pass) {
-            Ok((pixels, device)) => {
+            Ok((mut pixels, device)) => {
+                // The pixels the driver cut short (lavapipe's loop budget), by the CPU.
+                retrace::retrace_cut(&mut pixels, scene, view, plan, pass);
                 self.gpu_frames.fetch_add(1, Ordering::Relaxed);
                 let mut rays = FrameRays {
                     device,

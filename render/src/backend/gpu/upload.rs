@@ -37,27 +37,14 @@ pub fn kind_upload<'a>(
 /// Whether the kernel traces `plan`: its ray stack must hold every ray the plan can have
 /// waiting (a path of `d` bounces and `l` layers leaves at most two siblings per step on
 /// the stack), and the plan must avoid the combinations where the GPU and the CPU images
-/// still disagree on the demos (issue 12). Refraction with shadows through transparent
-/// layers (Glass) and occlusion with further isosurfaces through layers (the tet gyroid) are
-/// refused only until the backend asks the kernel to mark the pixels it cuts short
-/// (`flags::MARK_CUT`) and traces them again on the CPU ([`crate::backend::gpu::retrace`]):
-/// their disagreements were lavapipe's shared loop budget ending the loops of heavy 8-pixel
-/// groups early, not the integrator; with those pixels traced again both agree. Such frames
-/// are traced on the CPU, with the reason logged.
+/// still disagree on the demos (issue 12): none now. Refraction with shadows through
+/// transparent layers (Glass) and occlusion with further isosurfaces through layers (the tet
+/// gyroid) disagreed because lavapipe's shared loop budget ended the loops of heavy 8-pixel
+/// groups early; the kernel marks those pixels (`flags::MARK_CUT`) and the backend traces
+/// them again on the CPU ([`crate::backend::gpu::retrace`]).
 /// The clip box is traced on the GPU: its disagreement on Shells was the finders' (the
 /// kernel marched where the CPU clips), gone since the kernel uses the CPU state's finder.
 pub fn check_plan(plan: &EffectsPlan) -> Result<(), String> {
-    let disagrees = |what: &str| {
-        Err(format!(
-            "{what} is traced on the CPU (the GPU image disagrees)"
-        ))
-    };
-    if plan.refraction_depth > 0 && plan.shadows && plan.layers > 0 {
-        return disagrees("refraction with shadows through transparent layers");
-    }
-    if plan.ao_samples > 0 && plan.isosurfaces && plan.layers > 0 {
-        return disagrees("occlusion with further isosurfaces through layers");
-    }
     let path = plan.reflection_depth.max(plan.refraction_depth) as usize + plan.layers as usize;
     if 2 * path + 1 > RAY_STACK {
         return Err(format!(
@@ -172,7 +159,8 @@ pub fn frame(
     let mut bits = 0;
     let mut effects = GpuFrame::default();
     if let Some(plan) = plan {
-        bits |= flags::PASS;
+        // The backend traces the pixels the driver cut short again (retrace.rs).
+        bits |= flags::PASS | flags::MARK_CUT;
         if plan.shadows {
             bits |= flags::SHADOWS;
         }
