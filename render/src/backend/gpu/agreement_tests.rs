@@ -179,10 +179,9 @@ fn check(gpu: &GpuBackend, cpu: &CpuBackend, demo: DemoScene) {
         let refused = (!plan.is_primary_only())
             .then(|| upload::check_plan(&plan).err())
             .flatten();
-        if let Some(why) = &refused {
-            eprintln!("{what}: on the CPU ({why})");
-        }
-        if traced_by_gpu && refused.is_none() {
+        // Issue 12, Must show 1: every demo with every effect set is the GPU's.
+        assert_eq!(refused, None, "{what}: the GPU refuses the plan");
+        if traced_by_gpu {
             assert_eq!(
                 gpu.frames(),
                 (gpu_before + 1, cpu_before),
