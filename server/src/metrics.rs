@@ -55,6 +55,9 @@ pub fn default_features() -> bool {
 /// The cargo features of this build, sorted, comma-separated.
 pub fn features() -> String {
     let mut on = Vec::new();
+    if cfg!(feature = "gpu") {
+        on.push("gpu");
+    }
     if cfg!(feature = "h264") {
         on.push("h264");
     }
