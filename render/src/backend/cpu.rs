@@ -6,6 +6,7 @@
 //! [`trace_tiles`].
 
 use crate::backend::accumulator::{self, Accumulator, DeviceTimes, FrameRays, Pass, TracePasses};
+use crate::camera::PrimaryRays;
 use crate::effects::plan::EffectsPlan;
 use crate::effects::toggles::Effects;
 use crate::framebuffer::{Framebuffer, SurfaceBuffer};
@@ -215,6 +216,21 @@ fn surface_tiles(scene: &PreparedScene, view: &View) -> SurfaceBuffer {
     }
 }
 
+/// Pixel `(x, y)` of pass `pass`: its primary ray followed by `tracer`, in linear colour, and
+/// the hit's distance along the view axis `forward` (infinite for a miss). The one place a
+/// pixel is traced on the CPU (the GPU backend's retrace of cut pixels calls it too).
+pub(crate) fn trace_pixel(
+    tracer: &mut Tracer,
+    rays: &PrimaryRays,
+    forward: Vec3,
+    (x, y): (u32, u32),
+    pass: u32,
+) -> (Vec3, f32) {
+    let ray = rays.through_pixel(x, y);
+    let (c, t) = tracer.primary(&ray, &mut PixelRng::new(x, y, pass));
+    (c, t * ray.dir.dot(forward))
+}
+
 /// One pass of an effects plan: every pixel's primary ray followed by the integrator, in
 /// linear colour, with its rays counted.
 fn trace_pass(scene: &PreparedScene, view: &View, plan: &EffectsPlan, pass: u32) -> Pass {
@@ -234,11 +250,9 @@ fn trace_pass(scene: &PreparedScene, view: &View, plan: &EffectsPlan, pass: u32)
         let mut tracer = Tracer::new(scene, plan, view.isovalue);
         for y in y0..y1 {
             for x in x0..x1 {
-                let ray = rays.through_pixel(x, y);
-                let mut rng = PixelRng::new(x, y, pass);
-                let (c, t) = tracer.primary(&ray, &mut rng);
+                let (c, d) = trace_pixel(&mut tracer, &rays, forward, (x, y), pass);
                 color.push(c);
-                depth.push(t * ray.dir.dot(forward));
+                depth.push(d);
             }
         }
         let rays = FrameRays {

@@ -13,8 +13,8 @@
 //! heavy frame on lavapipe and none on a hardware GPU, are traced here by the CPU's
 //! integrator with the same ray and the same random stream.
 
+use crate::backend::cpu::trace_pixel;
 use crate::effects::plan::EffectsPlan;
-use crate::geom::rng::PixelRng;
 use crate::integrator::Tracer;
 use crate::scene::PreparedScene;
 use crate::view::View;
@@ -42,13 +42,8 @@ pub fn retrace_cut(
         }
         cut += 1;
         let (x, y) = (i as u32 % view.width, i as u32 / view.width);
-        let ray = rays.through_pixel(x, y);
-        let (c, t) = tracer.primary(&ray, &mut PixelRng::new(x, y, pass));
-        let depth = if t.is_finite() {
-            t * ray.dir.dot(forward)
-        } else {
-            -1.0
-        };
+        let (c, depth) = trace_pixel(&mut tracer, &rays, forward, (x, y), pass);
+        let depth = if depth.is_finite() { depth } else { -1.0 };
         *p = [c.x, c.y, c.z, depth];
     }
     cut
