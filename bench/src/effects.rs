@@ -58,6 +58,10 @@ pub struct EffectsArgs {
     /// Render threads (0: one per core).
     #[arg(long, default_value_t = 0)]
     threads: usize,
+    /// Only these columns of the main table, by name without the "+ " (e.g.
+    /// `transparency,refraction`; default: all); the unused-effect pairs are then skipped.
+    #[arg(long, value_delimiter = ',')]
+    configs: Vec<String>,
 }
 
 const DEFAULT_SCENES: [&str; 6] = [
@@ -81,6 +85,9 @@ struct Row {
     /// root-finder iterations they spent (metaballs).
     queries: u64,
     iterations: u64,
+    /// Metaball leaves searched and balls gathered for those searches (0 for other kinds).
+    leaf_tests: u64,
+    balls_gathered: u64,
 }
 
 #[derive(Serialize, Clone)]
@@ -262,6 +269,14 @@ pub fn run(args: EffectsArgs) -> Result<(), String> {
         let opaque = Arc::new(table_look(demo, &state, false)).prepare();
         let transparent = Arc::new(table_look(demo, &state, true)).prepare();
         for (name, effects) in configs() {
+            if !args.configs.is_empty()
+                && !args
+                    .configs
+                    .iter()
+                    .any(|c| name.trim_start_matches("+ ") == c)
+            {
+                continue;
+            }
             let scene = if name == "+ transparency" || name == "+ refraction" {
                 &transparent
             } else {
@@ -289,15 +304,19 @@ pub fn run(args: EffectsArgs) -> Result<(), String> {
                 rays: counts,
                 queries: frame.counters.rays,
                 iterations: frame.counters.iterations,
+                leaf_tests: frame.kinds.metaballs.leaf_tests,
+                balls_gathered: frame.kinds.metaballs.metaballs_considered,
             });
         }
-        unused.extend(unused_rows(
-            &backend,
-            demo,
-            &state,
-            &view,
-            args.pair_runs.max(1),
-        ));
+        if args.configs.is_empty() {
+            unused.extend(unused_rows(
+                &backend,
+                demo,
+                &state,
+                &view,
+                args.pair_runs.max(1),
+            ));
+        }
     }
     print_tables(&rows, &unused);
     if let Some(path) = &args.json {
@@ -448,20 +467,25 @@ fn print_tables(rows: &[Row], unused: &[Unused]) {
     println!("\n## Rays per frame, by kind\n");
     let kinds: Vec<&str> = RayKind::ALL.iter().map(|k| k.name()).collect();
     println!(
-        "| scene | configuration | {} | total | geometry queries | iterations |",
+        "| scene | configuration | {} | total | geometry queries | iterations | metaball leaves searched | balls gathered |",
         kinds.join(" | ")
     );
-    println!("|---|---|{}---:|---:|---:|", "---:|".repeat(kinds.len()));
+    println!(
+        "|---|---|{}---:|---:|---:|---:|---:|",
+        "---:|".repeat(kinds.len())
+    );
     for r in rows {
         let counts: Vec<String> = r.rays.iter().map(|(_, n)| n.to_string()).collect();
         let total: u64 = r.rays.iter().map(|(_, n)| n).sum();
         println!(
-            "| {} | {} | {} | {total} | {} | {} |",
+            "| {} | {} | {} | {total} | {} | {} | {} | {} |",
             r.scene,
             r.config,
             counts.join(" | "),
             r.queries,
-            r.iterations
+            r.iterations,
+            r.leaf_tests,
+            r.balls_gathered
         );
     }
 

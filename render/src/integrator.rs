@@ -29,7 +29,7 @@ use crate::effects::plan::EffectsPlan;
 use crate::effects::rays::{RayCounts, RayKind};
 use crate::geom::rng::PixelRng;
 use crate::kinds::counters::SceneCounters;
-use crate::ray::{Hit, Ray};
+use crate::ray::{surface_offset, Hit, Ray, INSIDE_EPS};
 use crate::sampling::{cosine_hemisphere, uniform_cone};
 use crate::scene::PreparedScene;
 use crate::shade::{direct, facing, fresnel, Light, Lighting, Material};
@@ -85,16 +85,6 @@ struct SurfaceHit {
     material: u16,
 }
 
-/// Distance a secondary ray starts off its surface, against self-intersection: above the
-/// root finder's tolerance and the `f32` spacing at `p`.
-#[inline]
-fn offset(p: Vec3) -> f32 {
-    1.0e-3 + 2.0e-5 * p.abs().max_element()
-}
-
-/// How close to a segment's start a root must be to mean "the segment starts inside".
-const INSIDE_EPS: f32 = 2.0e-4;
-
 /// The integrator of one frame on one thread: the scene, the plan, and the rays it traced.
 pub struct Tracer<'a> {
     scene: &'a PreparedScene,
@@ -105,6 +95,8 @@ pub struct Tracer<'a> {
     pub counts: RayCounts,
     /// Traversal and root-finder counters of every query.
     pub counters: SceneCounters,
+    /// Scratch for the crossings of a ray through transparent surfaces.
+    hits: Vec<Hit>,
 }
 
 impl<'a> Tracer<'a> {
@@ -116,6 +108,7 @@ impl<'a> Tracer<'a> {
             isovalue,
             counts: RayCounts::default(),
             counters: SceneCounters::default(),
+            hits: Vec::new(),
         }
     }
 
@@ -290,7 +283,7 @@ impl<'a> Tracer<'a> {
         let view = ray.dir;
         let normal = facing(hit.normal, view);
         let entering = hit.normal.dot(view) < 0.0;
-        let eps = offset(hit.position);
+        let eps = surface_offset(hit.position);
         let above = hit.position + normal * eps;
         let mut color = material.emission;
         if material.receives_light() {
@@ -454,21 +447,37 @@ impl<'a> Tracer<'a> {
                 }
                 continue;
             }
-            // Walk the crossings, each letting `1 - α` through.
-            let mut t = 0.0;
-            let mut crossings = 0;
-            let mut inside = false;
-            while let Some(hit) = self.crossing_from(ray, t, t_max, isovalue, inside) {
-                // A crossing against the outward normal enters the solid.
-                inside = hit.normal.dot(ray.dir) < 0.0;
+            // Walk the crossings outside the clip box, each letting `1 - α` through; more than
+            // `layers` of them block. The ray leaves its surface outside the solid, and each
+            // stretch beyond the clip box starts afresh (its cut face is open).
+            let most = self.plan.layers as usize + 1;
+            let mut hits = std::mem::take(&mut self.hits);
+            hits.clear();
+            let (segments, n) = self.segments(ray, 0.0, t_max);
+            for &(lo, hi) in &segments[..n] {
+                self.scene.crossings_counted(
+                    ray,
+                    lo,
+                    hi,
+                    isovalue,
+                    false,
+                    most - hits.len(),
+                    &mut hits,
+                    &mut self.counters,
+                );
+                if hits.len() >= most {
+                    break;
+                }
+            }
+            for hit in &hits {
                 let material =
                     fixed_material.unwrap_or_else(|| self.lighting.material_of(hit.primitive));
                 transmitted *= 1.0 - self.lighting.material(material).opacity.clamp(0.0, 1.0);
-                crossings += 1;
-                if transmitted <= 1e-3 || crossings > self.plan.layers {
-                    return 0.0;
-                }
-                t = hit.t + offset(hit.position);
+            }
+            let blocked = hits.len() >= most || transmitted <= 1e-3;
+            self.hits = hits;
+            if blocked {
+                return 0.0;
             }
         }
         transmitted
@@ -528,7 +537,7 @@ impl<'a> Tracer<'a> {
         };
         let cos_i = (-view.dot(normal)).clamp(0.0, 1.0);
         let reflectance = fresnel(cos_i, n1, n2);
-        let eps = offset(hit.position);
+        let eps = surface_offset(hit.position);
         let mut color = Vec3::ZERO;
         if reflectance > 0.0 {
             self.counts.bump(RayKind::Reflection);

@@ -32,6 +32,17 @@ impl Ray {
     }
 }
 
+/// Distance a secondary ray starts off its surface, against self-intersection: above the
+/// root finder's tolerance and the `f32` spacing at `p`. The integrator's continuing rays and
+/// [`crossings`](crate::kinds::contract::PreparedKind::crossings) step past a crossing by it.
+#[inline]
+pub fn surface_offset(p: Vec3) -> f32 {
+    1.0e-3 + 2.0e-5 * p.abs().max_element()
+}
+
+/// How close to a segment's start a root must be to mean "the segment starts inside".
+pub const INSIDE_EPS: f32 = 2.0e-4;
+
 /// The first intersection of a ray with a surface.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Hit {

@@ -225,6 +225,26 @@ impl PreparedScene {
             .exit_hit(ray, t_min, t_max, isovalue, counters)
     }
 
+    /// The successive crossings of the isosurface along `ray` within `[t_min, t_max]`, at
+    /// most `max`, appended to `out` (see
+    /// [`PreparedKind::crossings`](crate::kinds::contract::PreparedKind::crossings)).
+    #[allow(clippy::too_many_arguments)]
+    #[inline]
+    pub fn crossings_counted(
+        &self,
+        ray: &Ray,
+        t_min: f32,
+        t_max: f32,
+        isovalue: f32,
+        inside: bool,
+        max: usize,
+        out: &mut Vec<Hit>,
+        counters: &mut impl Tally,
+    ) {
+        self.prepared
+            .crossings(ray, t_min, t_max, isovalue, inside, max, out, counters)
+    }
+
     /// `∫ density dt` over `[t_min, t_max]`: the field for metaballs, 0 for tets.
     #[inline]
     pub fn optical_depth(&self, ray: &Ray, t_min: f32, t_max: f32) -> f32 {

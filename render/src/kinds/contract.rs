@@ -8,7 +8,7 @@
 use crate::camera::PrimaryRays;
 use crate::geom::counters::KindCounters;
 use crate::kinds::counters::SceneCounters;
-use crate::ray::{Hit, Ray};
+use crate::ray::{surface_offset, Hit, Ray, INSIDE_EPS};
 
 /// A prepared state of one primitive kind, ready to trace.
 pub trait PreparedKind {
@@ -52,6 +52,33 @@ pub trait PreparedKind {
         counters: &mut Self::Counters,
     ) -> Option<Hit>;
 
+    /// The successive crossings of the isosurface along `ray` within `[t_min, t_max]`, in
+    /// order, at most `max`, appended to `out` (transparency's depth peeling and shadow rays
+    /// through transparent surfaces). `inside`: the ray is known to start inside the solid,
+    /// so its first crossing is the way out; otherwise a root within [`INSIDE_EPS`] of the
+    /// start means the start was inside, and is not a crossing. After each crossing the
+    /// search goes on [`surface_offset`] past it, inside the solid if the crossing's normal
+    /// faces the ray. What this default does with one query per crossing, a kind may do in
+    /// one traversal (metaballs: [`PreparedMetaballs::crossings_counted`]).
+    ///
+    /// [`PreparedMetaballs::crossings_counted`]: crate::kinds::metaballs::engine::PreparedMetaballs::crossings_counted
+    #[allow(clippy::too_many_arguments)]
+    fn crossings(
+        &self,
+        ray: &Ray,
+        t_min: f32,
+        t_max: f32,
+        isovalue: f32,
+        inside: bool,
+        max: usize,
+        out: &mut Vec<Hit>,
+        counters: &mut Self::Counters,
+    ) {
+        crossings_one_by_one(
+            self, ray, t_min, t_max, isovalue, inside, max, out, counters,
+        )
+    }
+
     /// `∫ density dt` over `[t_min, t_max]` (0 for a kind with no density).
     fn optical_depth(&self, ray: &Ray, t_min: f32, t_max: f32) -> f32;
 
@@ -66,4 +93,41 @@ pub trait PreparedKind {
         t_max: f32,
         counters: &mut Self::Counters,
     ) -> Vec<(Ray, Option<Hit>)>;
+}
+
+/// [`PreparedKind::crossings`] with one [`PreparedKind::first_hit`] or
+/// [`PreparedKind::exit_hit`] query per crossing.
+#[allow(clippy::too_many_arguments)]
+pub fn crossings_one_by_one<K: PreparedKind + ?Sized>(
+    kind: &K,
+    ray: &Ray,
+    t_min: f32,
+    t_max: f32,
+    isovalue: f32,
+    mut inside: bool,
+    max: usize,
+    out: &mut Vec<Hit>,
+    counters: &mut K::Counters,
+) {
+    let mut t = t_min;
+    let mut found = 0;
+    while found < max && t < t_max {
+        let hit = if inside {
+            kind.exit_hit(ray, t, t_max, isovalue, counters)
+        } else {
+            match kind.first_hit(ray, t, t_max, isovalue, counters) {
+                Some(h) if h.t > t + INSIDE_EPS => Some(h),
+                Some(_) => kind.exit_hit(ray, t, t_max, isovalue, counters),
+                None => None,
+            }
+        };
+        let Some(hit) = hit else {
+            return;
+        };
+        // A crossing against the outward normal enters the solid.
+        inside = hit.normal.dot(ray.dir) < 0.0;
+        t = hit.t + surface_offset(hit.position);
+        out.push(hit);
+        found += 1;
+    }
 }

@@ -256,6 +256,28 @@ impl PreparedGeometry {
         }
     }
 
+    /// [`PreparedKind::crossings`] of the kind.
+    #[allow(clippy::too_many_arguments)]
+    #[inline]
+    pub fn crossings<C: Tally>(
+        &self,
+        ray: &Ray,
+        t_min: f32,
+        t_max: f32,
+        isovalue: f32,
+        inside: bool,
+        max: usize,
+        out: &mut Vec<Hit>,
+        counters: &mut C,
+    ) {
+        let span = (t_min, t_max, isovalue, inside, max);
+        match self {
+            PreparedGeometry::Metaballs(m) => crossings(m.as_ref(), ray, span, out, counters),
+            PreparedGeometry::Tets(t) => crossings(t.as_ref(), ray, span, out, counters),
+            PreparedGeometry::Surfels(s) => crossings(s.as_ref(), ray, span, out, counters),
+        }
+    }
+
     #[inline]
     pub fn optical_depth(&self, ray: &Ray, t_min: f32, t_max: f32) -> f32 {
         match self {
@@ -342,6 +364,17 @@ fn exit_hit<K: PreparedKind, C: Tally>(
     counters: &mut C,
 ) -> Option<Hit> {
     counters.count::<K, _>(|c| k.exit_hit(ray, t_min, t_max, isovalue, c))
+}
+
+#[inline]
+fn crossings<K: PreparedKind, C: Tally>(
+    k: &K,
+    ray: &Ray,
+    (t_min, t_max, isovalue, inside, max): (f32, f32, f32, bool, usize),
+    out: &mut Vec<Hit>,
+    counters: &mut C,
+) {
+    counters.count::<K, _>(|c| k.crossings(ray, t_min, t_max, isovalue, inside, max, out, c))
 }
 
 fn primary_tile<K: PreparedKind, C: Tally>(

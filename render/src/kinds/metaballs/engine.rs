@@ -29,6 +29,8 @@ mod packet_tests;
 mod shadows;
 // Secondary-ray queries (any hit, exit from the solid, optical depth): the effects layer's.
 mod queries;
+// Successive crossings along a ray in one walk (depth peeling).
+mod peel;
 
 /// The closed set of acceleration modes.
 #[derive(Clone, Debug, PartialEq)]

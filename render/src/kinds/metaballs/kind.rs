@@ -57,6 +57,21 @@ impl PreparedKind for PreparedMetaballs {
     }
 
     #[inline]
+    fn crossings(
+        &self,
+        ray: &Ray,
+        t_min: f32,
+        t_max: f32,
+        isovalue: f32,
+        inside: bool,
+        max: usize,
+        out: &mut Vec<Hit>,
+        counters: &mut MetaballCounters,
+    ) {
+        self.crossings_counted(ray, t_min, t_max, isovalue, inside, max, out, counters)
+    }
+
+    #[inline]
     fn optical_depth(&self, ray: &Ray, t_min: f32, t_max: f32) -> f32 {
         PreparedMetaballs::optical_depth(self, ray, t_min, t_max)
     }

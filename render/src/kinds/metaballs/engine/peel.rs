@@ -1,0 +1,213 @@
+//! Depth peeling in one traversal: the successive crossings of the isosurface along a ray
+//! (transparency's layers, shadow rays through transparent blobs) found by one front-to-back
+//! walk of the Fitted BVH, each leaf's balls gathered once and searched again from each
+//! crossing, instead of one query from the root per crossing.
+//!
+//! The answer is the one-query-per-crossing answer
+//! ([`crossings_one_by_one`]): the Fitted BVH's leaves are disjoint and visited in ray order,
+//! a fresh query from `t` would reach the same leaf with the same stretch `[max(near, t),
+//! far]`, and the balls searched from `t` are the leaf's gathered balls whose support reaches
+//! past `t`, in the leaf's order, exactly the list a fresh gather over that stretch makes. So
+//! the two give the same crossings bit for bit (checked by
+//! `peeling_in_one_walk_finds_the_crossings_of_one_query_each`).
+
+use super::{Accel, PreparedMetaballs};
+use crate::kinds::contract::crossings_one_by_one;
+use crate::kinds::metaballs::counters::MetaballCounters;
+use crate::kinds::metaballs::roots::{self, FindParams, KernelPoly, RayBall, RootFinder, Scratch};
+use crate::kinds::metaballs::tree::TreeKind;
+use crate::ray::{surface_offset, Hit, Ray, INSIDE_EPS};
+use std::cell::RefCell;
+
+/// Per-thread buffers of one peel: a leaf's balls over its whole stretch, the balls of one
+/// search, the finder's scratch and the walk's stack.
+type PeelScratch = (
+    Vec<RayBall<f32>>,
+    Vec<RayBall<f32>>,
+    Scratch<f32>,
+    Vec<(u32, f32, f32)>,
+);
+
+thread_local! {
+    static PEEL: RefCell<PeelScratch> = RefCell::new(Default::default());
+}
+
+impl PreparedMetaballs {
+    /// [`PreparedKind::crossings`](crate::kinds::contract::PreparedKind::crossings) in one
+    /// walk of the Fitted BVH; other structures (and hits refined in `f64`) ask one query per
+    /// crossing.
+    #[allow(clippy::too_many_arguments)]
+    pub fn crossings_counted(
+        &self,
+        ray: &Ray,
+        t_min: f32,
+        t_max: f32,
+        isovalue: f32,
+        inside: bool,
+        max: usize,
+        out: &mut Vec<Hit>,
+        counters: &mut MetaballCounters,
+    ) {
+        let tree = match self.accel_for(isovalue) {
+            Accel::Tree(tree) if tree.kind == TreeKind::Fitted && !self.options.refine_f64 => {
+                Some(tree)
+            }
+            Accel::Tree(_) | Accel::BruteForce | Accel::ActiveList => None,
+        };
+        let Some(tree) = tree else {
+            return crossings_one_by_one(
+                self, ray, t_min, t_max, isovalue, inside, max, out, counters,
+            );
+        };
+        counters.rays += 1;
+        if max == 0 || !(isovalue > 0.0) || !isovalue.is_finite() || !(t_min < t_max) {
+            return;
+        }
+        let entry = self.params(isovalue);
+        let mut negated = KernelPoly::<f32>::new(self.scene.kernel);
+        for c in negated.c.iter_mut() {
+            *c = -*c;
+        }
+        let exit = FindParams {
+            kernel: negated,
+            isovalue: -isovalue,
+            ..entry
+        };
+        let finder = self.options.finder;
+        let mut state = Peel {
+            t: t_min,
+            inside,
+            found: 0,
+        };
+        PEEL.with(|cell| {
+            let mut guard = cell.borrow_mut();
+            let (leaf_balls, gathered, scratch, stack) = &mut *guard;
+            let mut node_traversals = counters.node_traversals;
+            tree.walk(
+                ray.origin,
+                ray.dir.recip(),
+                t_min,
+                t_max,
+                true,
+                stack,
+                &mut node_traversals,
+                |node, near, far, _| {
+                    if state.t >= far {
+                        return None;
+                    }
+                    leaf_balls.clear();
+                    for &b in tree.leaf_balls(node) {
+                        self.gather(ray, b, true, near.max(state.t), far, leaf_balls);
+                    }
+                    while state.found < max {
+                        let lo = near.max(state.t);
+                        if !(lo < far) {
+                            break;
+                        }
+                        // The balls a fresh query from `lo` would gather, in the same order.
+                        gathered.clear();
+                        gathered.extend(leaf_balls.iter().filter(|b| !(b.t1 < lo)));
+                        if gathered.is_empty() {
+                            break;
+                        }
+                        let (params, leaf_finder) = if state.inside {
+                            (&exit, RootFinder::BezierClipping)
+                        } else {
+                            (&entry, finder)
+                        };
+                        let found =
+                            roots::find_first(leaf_finder, params, gathered, lo, far, scratch);
+                        counters.leaf_tests += 1;
+                        counters.metaballs_considered += gathered.len() as u64;
+                        counters.iterations += found.iterations as u64;
+                        counters.capped += found.capped as u64;
+                        let Some(t) = found.t else {
+                            break;
+                        };
+                        counters.hit_iterations += found.hit_iterations as u64;
+                        if !state.inside && !(t > state.t + INSIDE_EPS) {
+                            // The stretch started inside: its way out is the next crossing.
+                            state.inside = true;
+                            continue;
+                        }
+                        let hit = self.hit_at(ray, t, gathered);
+                        counters.hits += 1;
+                        state.inside = hit.normal.dot(ray.dir) < 0.0;
+                        state.t = hit.t + surface_offset(hit.position);
+                        state.found += 1;
+                        out.push(hit);
+                    }
+                    // Stop the walk once enough crossings are found.
+                    (state.found >= max).then_some(state.t)
+                },
+            );
+            counters.node_traversals = node_traversals;
+        });
+    }
+}
+
+/// Where a peel stands: the stretch's start, whether it starts inside the solid, crossings
+/// found so far.
+struct Peel {
+    t: f32,
+    inside: bool,
+    found: usize,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geom::rng::SplitMix64;
+    use crate::kinds::metaballs::{MetaballScene, PrepareOptions};
+    use crate::scene::Geometry;
+    use crate::scenes::DemoScene;
+
+    fn metaballs(demo: DemoScene) -> MetaballScene {
+        match demo.state_at(1.0).geometry {
+            Geometry::Metaballs(m) => m,
+            Geometry::Tets(_) | Geometry::Surfels(_) => panic!("{demo:?} is a metaball scene"),
+        }
+    }
+
+    #[test]
+    fn peeling_in_one_walk_finds_the_crossings_of_one_query_each() {
+        let mut deep = 0;
+        for demo in [DemoScene::Molecule, DemoScene::Blobs, DemoScene::Tornado4k] {
+            let scene = metaballs(demo);
+            let iso = demo.default_isovalue();
+            let p =
+                PreparedMetaballs::new(scene.clone(), PrepareOptions::fitted(scene.min_isovalue));
+            let eye = demo.default_camera().eye;
+            let mut rng = SplitMix64(7);
+            let all: Vec<u32> = (0..scene.balls.len() as u32).collect();
+            let (mut peeled, mut one) = (Vec::new(), Vec::new());
+            for i in 0..400 {
+                let ball = &scene.balls[(rng.next_u64() % scene.balls.len() as u64) as usize];
+                let aim = ball.center + rng.in_unit_ball() * ball.radius;
+                // Camera rays from outside, and rays from a ball's centre that start inside.
+                let (ray, inside) = if i % 4 == 3 {
+                    (
+                        Ray::new(ball.center, rng.in_unit_ball().normalize_or(glam::Vec3::X)),
+                        true,
+                    )
+                } else {
+                    (Ray::new(eye, aim - eye), false)
+                };
+                if inside && !(scene.field_at(&all, ball.center) > iso) {
+                    continue;
+                }
+                for max in [1, 3, 9] {
+                    peeled.clear();
+                    one.clear();
+                    let mut c = MetaballCounters::default();
+                    p.crossings_counted(&ray, 0.0, 1e4, iso, inside, max, &mut peeled, &mut c);
+                    crossings_one_by_one(&p, &ray, 0.0, 1e4, iso, inside, max, &mut one, &mut c);
+                    assert_eq!(peeled, one, "{demo:?} ray {i} ({ray:?}), at most {max}");
+                    assert!(peeled.len() <= max);
+                    deep += (peeled.len() >= 3) as usize;
+                }
+            }
+        }
+        assert!(deep > 100, "only {deep} rays met 3 crossings or more");
+    }
+}
