@@ -299,6 +299,34 @@ fn may_reach<R: Real>(p: &FindParams<R>, balls: &[RayBall<R>], active: &[u32], a
     !(bound < p.isovalue)
 }
 
+/// Whether the field can reach `T` anywhere on `[lo, hi]`: [`may_reach`]'s bound over the
+/// whole stretch, where a negative term counts only if its ball covers the whole stretch (a
+/// ball that does not may add 0). It is at least every section's bound, so when it says no,
+/// every section would have been skipped: the stretch is passed over before its events are
+/// sorted (an exit search through a leaf that lies inside the solid).
+#[inline]
+fn stretch_may_reach<R: Real>(p: &FindParams<R>, balls: &[RayBall<R>], lo: R, hi: R) -> bool {
+    let peak = p.kernel.at_w(R::of(1.0));
+    let mut bound = R::default();
+    for ball in balls {
+        let (a, b) = (ball.t0.max(lo), ball.t1.min(hi));
+        if !(a < b) {
+            continue;
+        }
+        if ball.q * peak > R::default() {
+            bound = bound + ball.term(&p.kernel, ball.tc.max(a).min(b));
+        } else if a <= lo && b >= hi {
+            let far = if (lo - ball.tc).abs() > (hi - ball.tc).abs() {
+                lo
+            } else {
+                hi
+            };
+            bound = bound + ball.term(&p.kernel, far);
+        }
+    }
+    !(bound < p.isovalue)
+}
+
 /// Sorts the entry/exit points in `[lo, hi]` and calls `section` on each stretch between
 /// consecutive ones with the balls active there (the tutorial's active list).
 fn walk_sections<R: Real>(
@@ -309,6 +337,9 @@ fn walk_sections<R: Real>(
     scratch: &mut Scratch<R>,
     section: SectionFn<R>,
 ) -> Found<R> {
+    if !stretch_may_reach(p, balls, lo, hi) {
+        return Found::default();
+    }
     let events = &mut scratch.events;
     events.clear();
     for (i, b) in balls.iter().enumerate() {
