@@ -15,6 +15,13 @@
 //!   frame shows, on the build pool, in its own wall time: for a state built ahead, while the
 //!   previous frame traced), `trace_us` and `encode_us`.
 //!
+//! Each run streams twice. `pipelined`: the live view, the server's normal path for an
+//! animated demo. `serial`: the same viewer pins the scene time and, as each frame arrives,
+//! pins the next one (1/30 s on), so the server builds that state on the frame's own render
+//! thread, then traces it: no overlap, the before row of the same run (the in-process server
+//! never sends still frames, `--still-after-ms` being 10 minutes; with `--url` still frames
+//! are left out).
+//!
 //! The table gives per run the medians of the interval, of each stage, of the per-frame
 //! max(build, trace) and build + trace, and interval / max(build, trace). The header's
 //! stage times are wall times measured while the two overlap on the same cores, so they are
@@ -28,7 +35,7 @@
 use crate::common::{median, write_json, Machine};
 use crate::stream::{demo, parse_size};
 use futures_util::{SinkExt, StreamExt};
-use isoray_protocol::{FrameHeader, ServerMessage};
+use isoray_protocol::{FrameHeader, ServerMessage, FLAG_STILL};
 use isoray_render::{Backend, View};
 use isoray_server::{AppState, Config};
 use serde::Serialize;
@@ -83,6 +90,7 @@ struct Sample {
 #[derive(Clone, Debug, Default, Serialize)]
 struct RunRow {
     run: usize,
+    mode: &'static str,
     frames: usize,
     /// Frames that showed a new state (the others repeat one; their build field is 0).
     fresh_frames: usize,
@@ -139,7 +147,23 @@ struct Report {
     height: u32,
     alone: Option<Alone>,
     runs: Vec<RunRow>,
-    median: RunRow,
+    median: Vec<RunRow>,
+}
+
+/// How the viewer asks for states (see the module's documentation).
+#[derive(Clone, Copy, PartialEq)]
+enum Mode {
+    Pipelined,
+    Serial,
+}
+
+impl Mode {
+    fn name(self) -> &'static str {
+        match self {
+            Mode::Pipelined => "pipelined",
+            Mode::Serial => "serial",
+        }
+    }
 }
 
 fn load_average() -> String {
@@ -211,27 +235,57 @@ pub fn run(args: OverlapArgs) -> Result<(), String> {
         .strip_prefix("http://")
         .map(|rest| format!("ws://{rest}/api/v1/scenes/{}/stream", scene.id()))
         .ok_or_else(|| format!("--url {base:?}: expected http://HOST:PORT"))?;
-    println!("| run | frames | new states | interval ms | build ms | trace ms | encode ms | max(b,t) ms | b+t ms | interval/max | interval/sum | busy cores | load avg |");
-    println!("|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|");
+    println!("| run | mode | frames | new states | interval ms | build ms | trace ms | encode ms | max(b,t) ms | b+t ms | interval/max | interval/sum | busy cores | load avg |");
+    println!("|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|");
     let mut rows = Vec::new();
     for run in 0..args.runs {
-        let (samples, busy_cores) = runtime.block_on(viewer(
-            &ws,
-            (width, height),
-            Duration::from_secs_f64(args.warmup),
-            Duration::from_secs_f64(args.seconds),
-        ))?;
-        let mut row = summarize(run + 1, &samples, load_average());
-        row.busy_cores = busy_cores.filter(|_| args.url.is_none());
-        print_row(&row.run.to_string(), &row);
-        rows.push(row);
+        for mode in [Mode::Pipelined, Mode::Serial] {
+            let (samples, busy_cores) = runtime.block_on(viewer(
+                &ws,
+                (width, height),
+                mode,
+                Duration::from_secs_f64(args.warmup),
+                Duration::from_secs_f64(args.seconds),
+            ))?;
+            let mut row = summarize(run + 1, &samples, load_average());
+            row.mode = mode.name();
+            row.busy_cores = busy_cores.filter(|_| args.url.is_none());
+            print_row(&row.run.to_string(), &row);
+            rows.push(row);
+        }
     }
     if let Some(stop) = stop {
         let _ = stop.send(());
     }
-    let pick = |f: fn(&RunRow) -> f64| median(rows.iter().map(f).collect());
-    let summary = RunRow {
+    let summary: Vec<RunRow> = [Mode::Pipelined, Mode::Serial]
+        .into_iter()
+        .map(|mode| medians(mode.name(), &rows))
+        .collect();
+    for row in &summary {
+        print_row("median", row);
+    }
+    if let Some(path) = &args.json {
+        let report = Report {
+            machine: machine.line(),
+            scene: scene.id().into(),
+            width,
+            height,
+            alone,
+            runs: rows,
+            median: summary,
+        };
+        write_json(path, &report)?;
+    }
+    Ok(())
+}
+
+/// The median of the runs' medians of one mode.
+fn medians(mode: &'static str, all: &[RunRow]) -> RunRow {
+    let rows: Vec<&RunRow> = all.iter().filter(|r| r.mode == mode).collect();
+    let pick = |f: fn(&RunRow) -> f64| median(rows.iter().map(|r| f(r)).collect());
+    RunRow {
         run: 0,
+        mode,
         frames: rows.iter().map(|r| r.frames).sum(),
         fresh_frames: rows.iter().map(|r| r.fresh_frames).sum(),
         interval_ms: pick(|r| r.interval_ms),
@@ -248,26 +302,13 @@ pub fn run(args: OverlapArgs) -> Result<(), String> {
             .collect::<Option<Vec<f64>>>()
             .map(median),
         load_average: load_average(),
-    };
-    print_row("median", &summary);
-    if let Some(path) = &args.json {
-        let report = Report {
-            machine: machine.line(),
-            scene: scene.id().into(),
-            width,
-            height,
-            alone,
-            runs: rows,
-            median: summary,
-        };
-        write_json(path, &report)?;
     }
-    Ok(())
 }
 
 fn print_row(name: &str, r: &RunRow) {
     println!(
-        "| {name} | {} | {} | {:.1} | {:.1} | {:.1} | {:.1} | {:.1} | {:.1} | {:.2} | {:.2} | {} | {} |",
+        "| {name} | {} | {} | {} | {:.1} | {:.1} | {:.1} | {:.1} | {:.1} | {:.1} | {:.2} | {:.2} | {} | {} |",
+        r.mode,
         r.frames,
         r.fresh_frames,
         r.interval_ms,
@@ -292,6 +333,7 @@ fn summarize(run: usize, samples: &[Sample], load_average: String) -> RunRow {
     let sum = of(|s| s.build_ms + s.trace_ms);
     RunRow {
         run,
+        mode: "",
         frames: samples.len(),
         fresh_frames: fresh.len(),
         interval_ms: interval,
@@ -325,6 +367,8 @@ fn start_server(
         "cpu",
         "--min-scale",
         "1",
+        "--still-after-ms",
+        "600000",
     ])
     .map_err(|e| format!("config: {e}"))?;
     let state = AppState::new(config).map_err(|e| format!("server: {e}"))?;
@@ -395,6 +439,7 @@ fn alone(
 async fn viewer(
     url: &str,
     size: (u32, u32),
+    mode: Mode,
     warmup: Duration,
     seconds: Duration,
 ) -> Result<(Vec<Sample>, Option<f64>), String> {
@@ -410,6 +455,11 @@ async fn viewer(
     ws.send(Message::Text(resize.to_string().into()))
         .await
         .map_err(|e| format!("send: {e}"))?;
+    // Serial: the time pinned last (and its input id), far from the live clock's states.
+    let mut pinned = (2, 1000.0f64);
+    if mode == Mode::Serial {
+        pin(&mut ws, pinned).await?;
+    }
     let start = Instant::now();
     let (measure_from, end) = (start + warmup, start + warmup + seconds);
     let mut last: Option<(Instant, f64)> = None;
@@ -439,7 +489,15 @@ async fn viewer(
         ws.send(Message::Text(ack.to_string().into()))
             .await
             .map_err(|e| format!("send: {e}"))?;
-        let sized = (header.width, header.height) == size;
+        let sized = (header.width, header.height) == size && header.flags & FLAG_STILL == 0;
+        // Serial: only the frames of the time pinned last count, and each pins the next.
+        if mode == Mode::Serial {
+            if header.scene_time != pinned.1 || header.input_id < pinned.0 {
+                continue;
+            }
+            pinned = (pinned.0 + 1, pinned.1 + 1.0 / 30.0);
+            pin(&mut ws, pinned).await?;
+        }
         if let Some((previous, previous_time)) = last.filter(|_| now >= measure_from && sized) {
             match (cpu, cpu_seconds()) {
                 (None, Some(c)) => cpu = Some((now, c)),
@@ -464,6 +522,17 @@ async fn viewer(
         return Err(format!("no {}x{} frames after the warm-up", size.0, size.1));
     }
     Ok((samples, busy))
+}
+
+type Socket =
+    tokio_tungstenite::WebSocketStream<tokio_tungstenite::MaybeTlsStream<tokio::net::TcpStream>>;
+
+/// Pins the scene `time` with input `id`.
+async fn pin(ws: &mut Socket, (id, time): (u64, f64)) -> Result<(), String> {
+    let input = serde_json::json!({"type": "time", "input_id": id, "time": time});
+    ws.send(Message::Text(input.to_string().into()))
+        .await
+        .map_err(|e| format!("send: {e}"))
 }
 
 #[cfg(test)]
