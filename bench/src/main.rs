@@ -12,6 +12,7 @@ mod load;
 mod load_cluster;
 mod metaball_packets;
 mod metaballs;
+mod overlap;
 mod stream;
 mod surfels;
 mod tets;
@@ -48,6 +49,9 @@ enum Command {
     /// balancer: per-viewer fps, input-to-frame latency percentiles and the frame size the
     /// server's adaptive controller settled on.
     Load(load::LoadArgs),
+    /// One websocket viewer of an animated demo (default the 100,000-ball Scattered): frame
+    /// interval against the headers' max(build, trace) and build + trace (issue 14, Fig. 7).
+    Overlap(overlap::OverlapArgs),
     /// The deforming-surfels paper (§5, Fig. 3, Fig. 5): ms per frame for rebuild, eager
     /// refit, lazy and lazy + cache; tests per ray; radius tightness per level.
     Surfels(surfels::SurfelsArgs),
@@ -69,6 +73,7 @@ fn main() {
         Command::Accuracy(args) => accuracy::run(args),
         Command::Stream(args) => stream::run(args),
         Command::Load(args) => load::run(args),
+        Command::Overlap(args) => overlap::run(args),
         Command::Surfels(args) => surfels::run(args),
         #[cfg(feature = "gpu")]
         Command::Gpu(args) => gpu::run(args),

@@ -84,9 +84,12 @@ impl Codec {
 /// trace (the kernel), and its readback is added to `encode_us`.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct StageTimings {
-    /// Bringing the scene's state to the frame's time (simulation state update).
+    /// Bringing the scene's state to the frame's time (simulation state update). Reported
+    /// by the first frame that shows the state (0 on later ones); for a live demo's state
+    /// built ahead, the build ran while the previous frame traced (PROTOCOL.md, stage times).
     pub update_us: u32,
-    /// Building or refitting the acceleration structure (plus a GPU frame's upload).
+    /// Building or refitting the acceleration structure (plus a GPU frame's upload); reported
+    /// like `update_us`.
     pub build_us: u32,
     pub trace_us: u32,
     /// Encoding the image and depth block (plus a GPU frame's readback).

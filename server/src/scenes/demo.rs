@@ -357,15 +357,18 @@ fn build_demo(demo: DemoScene, time: f64) -> PreparedState {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use std::sync::atomic::{AtomicBool, Ordering};
     use std::time::Duration;
 
-    /// Waits until the pipeline has no build in flight.
+    /// Waits, on the build's own condition, for the build in flight to finish while nothing
+    /// asks the pipeline for a frame: as it runs while a frame traces (a build that only ran
+    /// inside the next `live` call would never finish here).
     fn settle(p: &DemoPipeline) {
-        let deadline = Instant::now() + Duration::from_secs(60);
-        while p.lock().in_flight.is_some() {
-            assert!(Instant::now() < deadline, "the build finishes");
-            std::thread::sleep(Duration::from_millis(5));
+        let pending = p.lock().in_flight.as_ref().map(|(_, q)| Arc::clone(q));
+        if let Some(pending) = pending {
+            assert!(pending.wait().is_some(), "the build finishes");
         }
+        assert!(p.lock().in_flight.is_none());
     }
 
     #[test]
@@ -417,12 +420,17 @@ mod tests {
             done: Condvar::new(),
         });
         p.lock().in_flight = Some((1.3, Arc::clone(&stuck)));
-        let release = Arc::clone(&stuck);
-        std::thread::spawn(move || {
-            std::thread::sleep(Duration::from_secs(10));
+        // It ends when the test says so; after a minute regardless, so that a viewer waiting
+        // for it fails the test below rather than hanging it.
+        let (release, released_late) = (Arc::clone(&stuck), Arc::new(AtomicBool::new(false)));
+        let (done_tx, done_rx) = std::sync::mpsc::channel::<()>();
+        let late = Arc::clone(&released_late);
+        let releaser = std::thread::spawn(move || {
+            if done_rx.recv_timeout(Duration::from_secs(60)).is_err() {
+                late.store(true, Ordering::SeqCst);
+            }
             release.finish(PendingSlot::Failed);
         });
-        let start = Instant::now();
         // Viewer A shows 1.2 (its first frame of it reports the build) ...
         let near = |t: Option<f64>, want: f64| t.is_some_and(|t| (t - want).abs() < 1e-9);
         let a = p.live(1.2, a.step_time);
@@ -433,11 +441,11 @@ mod tests {
         assert!(near(b.step_time, 1.2), "{:?}", b.step_time);
         assert_eq!(b.build_us, 0);
         assert!(
-            start.elapsed() < Duration::from_secs(5),
-            "no viewer waited for the build in flight: {:?}",
-            start.elapsed()
+            !released_late.load(Ordering::SeqCst),
+            "no viewer waited for the build in flight"
         );
         // A viewer that has shown the newest state waits for the next one.
-        stuck.finish(PendingSlot::Failed);
+        let _ = done_tx.send(());
+        assert!(releaser.join().is_ok());
     }
 }
