@@ -66,3 +66,28 @@ pub fn write_json(path: &Path, report: &impl Serialize) -> Result<(), String> {
     let text = serde_json::to_string_pretty(report).map_err(|e| e.to_string())?;
     std::fs::write(path, text).map_err(|e| format!("could not write {}: {e}", path.display()))
 }
+
+/// A server started in-process on a loopback port: its address, the sender that stops it,
+/// and the task that ends when it has stopped.
+pub struct InProcess {
+    pub addr: std::net::SocketAddr,
+    pub stop: tokio::sync::oneshot::Sender<()>,
+    pub task: tokio::task::JoinHandle<std::io::Result<()>>,
+}
+
+/// Starts the server with `config` on `runtime`, listening on a free loopback port.
+pub fn serve_in_process(
+    runtime: &tokio::runtime::Runtime,
+    config: isoray_server::Config,
+) -> Result<InProcess, String> {
+    let state = isoray_server::AppState::new(config).map_err(|e| format!("server: {e}"))?;
+    let listener = runtime
+        .block_on(tokio::net::TcpListener::bind("127.0.0.1:0"))
+        .map_err(|e| format!("bind: {e}"))?;
+    let addr = listener.local_addr().map_err(|e| format!("addr: {e}"))?;
+    let (stop, stopped) = tokio::sync::oneshot::channel::<()>();
+    let task = runtime.spawn(isoray_server::serve(listener, state, async move {
+        let _ = stopped.await;
+    }));
+    Ok(InProcess { addr, stop, task })
+}

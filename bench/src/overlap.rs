@@ -32,12 +32,12 @@
 //! `nproc`; the "busy cores" column (the process's CPU time over the measured wall time, in
 //! process only) says how much of the machine the pipeline kept busy.
 
-use crate::common::{median, write_json, Machine};
+use crate::common::{median, serve_in_process, write_json, Machine};
 use crate::stream::{demo, parse_size};
 use futures_util::{SinkExt, StreamExt};
 use isoray_protocol::{FrameHeader, ServerMessage, FLAG_STILL};
 use isoray_render::{Backend, View};
-use isoray_server::{AppState, Config};
+use isoray_server::Config;
 use serde::Serialize;
 use std::path::PathBuf;
 use std::sync::Arc;
@@ -371,16 +371,8 @@ fn start_server(
         "600000",
     ])
     .map_err(|e| format!("config: {e}"))?;
-    let state = AppState::new(config).map_err(|e| format!("server: {e}"))?;
-    let listener = runtime
-        .block_on(tokio::net::TcpListener::bind("127.0.0.1:0"))
-        .map_err(|e| format!("bind: {e}"))?;
-    let addr = listener.local_addr().map_err(|e| format!("addr: {e}"))?;
-    let (stop_tx, stop_rx) = tokio::sync::oneshot::channel::<()>();
-    runtime.spawn(isoray_server::serve(listener, state, async move {
-        let _ = stop_rx.await;
-    }));
-    Ok((addr, stop_tx))
+    let server = serve_in_process(runtime, config)?;
+    Ok((server.addr, server.stop))
 }
 
 /// One build and one trace of the state at 1 s with nothing else running: medians of 3.

@@ -280,16 +280,6 @@ impl PreparedMetaballs {
         counters: &mut MetaballCounters,
     ) -> Option<f32> {
         let finder = self.options.finder;
-        let record = |found: roots::Found<f32>, counters: &mut MetaballCounters, n: usize| {
-            counters.leaf_tests += 1;
-            counters.metaballs_considered += n as u64;
-            counters.iterations += found.iterations as u64;
-            counters.capped += found.capped as u64;
-            if found.t.is_some() {
-                counters.hit_iterations += found.hit_iterations as u64;
-            }
-            found.t
-        };
         match accel {
             Accel::BruteForce => {
                 gathered.clear();
@@ -297,7 +287,7 @@ impl PreparedMetaballs {
                     self.gather(ray, i, true, t_min, t_max, gathered);
                 }
                 let found = roots::find_first(finder, params, gathered, t_min, t_max, scratch);
-                record(found, counters, gathered.len())
+                found.counted(counters, gathered.len())
             }
             Accel::ActiveList => {
                 gathered.clear();
@@ -334,7 +324,7 @@ impl PreparedMetaballs {
                     section.extend(active.iter().map(|&k| gathered[k as usize]));
                     let found =
                         roots::find_first(finder, params, &section, t, events[e].0, scratch);
-                    if let Some(t) = record(found, counters, section.len()) {
+                    if let Some(t) = found.counted(counters, section.len()) {
                         *gathered = section;
                         return Some(t);
                     }

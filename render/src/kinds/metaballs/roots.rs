@@ -34,6 +34,7 @@
 // Re-exported for the other crates' paths; the definitions are in `bezier` and `real`.
 use crate::kinds::metaballs::bezier::{bezier_first_root, power_to_bernstein};
 pub use crate::kinds::metaballs::bezier::{HalfStack, ITERATION_CAP, MAX_DEGREE};
+use crate::kinds::metaballs::counters::MetaballCounters;
 use crate::kinds::metaballs::kernel::MAX_W_DEGREE;
 pub use crate::kinds::metaballs::real::Real;
 
@@ -221,6 +222,22 @@ pub struct Found<R> {
     pub capped: bool,
 }
 
+impl Found<f32> {
+    /// Adds this leaf search over `balls` balls to `counters` (a leaf test, its balls, its
+    /// iterations, a capped search, and the hit's iterations when it hit); the hit distance.
+    #[inline]
+    pub fn counted(self, counters: &mut MetaballCounters, balls: usize) -> Option<f32> {
+        counters.leaf_tests += 1;
+        counters.metaballs_considered += balls as u64;
+        counters.iterations += self.iterations as u64;
+        counters.capped += self.capped as u64;
+        if self.t.is_some() {
+            counters.hit_iterations += self.hit_iterations as u64;
+        }
+        self.t
+    }
+}
+
 /// Reusable buffers, one set per thread.
 #[derive(Debug, Default)]
 pub struct Scratch<R> {
@@ -286,17 +303,23 @@ fn may_reach<R: Real>(p: &FindParams<R>, balls: &[RayBall<R>], active: &[u32], a
     let peak = p.kernel.at_w(R::of(1.0));
     let mut bound = R::default();
     for &i in active {
-        let ball = &balls[i as usize];
-        let t = if ball.q * peak > R::default() {
-            ball.tc.max(a).min(b)
-        } else if (a - ball.tc).abs() > (b - ball.tc).abs() {
-            a
-        } else {
-            b
-        };
-        bound = bound + ball.term(&p.kernel, t);
+        bound = bound + term_bound(p, peak, &balls[i as usize], a, b);
     }
     !(bound < p.isovalue)
+}
+
+/// The most `ball`'s term can be on `[a, b]`, which its support covers: a positive term at
+/// the point nearest the ball's `tc`, a negative one at the end farthest from it.
+#[inline]
+fn term_bound<R: Real>(p: &FindParams<R>, peak: R, ball: &RayBall<R>, a: R, b: R) -> R {
+    let t = if ball.q * peak > R::default() {
+        ball.tc.max(a).min(b)
+    } else if (a - ball.tc).abs() > (b - ball.tc).abs() {
+        a
+    } else {
+        b
+    };
+    ball.term(&p.kernel, t)
 }
 
 /// Whether the field can reach `T` anywhere on `[lo, hi]`: [`may_reach`]'s bound over the
@@ -310,19 +333,10 @@ fn stretch_may_reach<R: Real>(p: &FindParams<R>, balls: &[RayBall<R>], lo: R, hi
     let mut bound = R::default();
     for ball in balls {
         let (a, b) = (ball.t0.max(lo), ball.t1.min(hi));
-        if !(a < b) {
+        if !(a < b) || (!(ball.q * peak > R::default()) && (a > lo || b < hi)) {
             continue;
         }
-        if ball.q * peak > R::default() {
-            bound = bound + ball.term(&p.kernel, ball.tc.max(a).min(b));
-        } else if a <= lo && b >= hi {
-            let far = if (lo - ball.tc).abs() > (hi - ball.tc).abs() {
-                lo
-            } else {
-                hi
-            };
-            bound = bound + ball.term(&p.kernel, far);
-        }
+        bound = bound + term_bound(p, peak, ball, a, b);
     }
     !(bound < p.isovalue)
 }

@@ -14,7 +14,7 @@
 use super::{Accel, PreparedMetaballs};
 use crate::kinds::contract::crossings_one_by_one;
 use crate::kinds::metaballs::counters::MetaballCounters;
-use crate::kinds::metaballs::roots::{self, FindParams, KernelPoly, RayBall, RootFinder, Scratch};
+use crate::kinds::metaballs::roots::{self, RayBall, RootFinder, Scratch};
 use crate::kinds::metaballs::tree::TreeKind;
 use crate::ray::{surface_offset, Hit, Ray, INSIDE_EPS};
 use std::cell::RefCell;
@@ -63,22 +63,10 @@ impl PreparedMetaballs {
         if max == 0 || !(isovalue > 0.0) || !isovalue.is_finite() || !(t_min < t_max) {
             return;
         }
-        let entry = self.params(isovalue);
-        let mut negated = KernelPoly::<f32>::new(self.scene.kernel);
-        for c in negated.c.iter_mut() {
-            *c = -*c;
-        }
-        let exit = FindParams {
-            kernel: negated,
-            isovalue: -isovalue,
-            ..entry
-        };
+        let (entry, exit) = (self.params(isovalue), self.exit_params(isovalue));
         let finder = self.options.finder;
-        let mut state = Peel {
-            t: t_min,
-            inside,
-            found: 0,
-        };
+        let enough = out.len() + max;
+        let mut state = Peel { t: t_min, inside };
         PEEL.with(|cell| {
             let mut guard = cell.borrow_mut();
             let (leaf_balls, gathered, scratch, stack) = &mut *guard;
@@ -99,7 +87,7 @@ impl PreparedMetaballs {
                     for &b in tree.leaf_balls(node) {
                         self.gather(ray, b, true, near.max(state.t), far, leaf_balls);
                     }
-                    while state.found < max {
+                    while out.len() < enough {
                         let lo = near.max(state.t);
                         if !(lo < far) {
                             break;
@@ -115,16 +103,12 @@ impl PreparedMetaballs {
                         } else {
                             (&entry, finder)
                         };
-                        let found =
-                            roots::find_first(leaf_finder, params, gathered, lo, far, scratch);
-                        counters.leaf_tests += 1;
-                        counters.metaballs_considered += gathered.len() as u64;
-                        counters.iterations += found.iterations as u64;
-                        counters.capped += found.capped as u64;
-                        let Some(t) = found.t else {
+                        let Some(t) =
+                            roots::find_first(leaf_finder, params, gathered, lo, far, scratch)
+                                .counted(counters, gathered.len())
+                        else {
                             break;
                         };
-                        counters.hit_iterations += found.hit_iterations as u64;
                         if !state.inside && !(t > state.t + INSIDE_EPS) {
                             // The stretch started inside: its way out is the next crossing.
                             state.inside = true;
@@ -134,11 +118,10 @@ impl PreparedMetaballs {
                         counters.hits += 1;
                         state.inside = hit.normal.dot(ray.dir) < 0.0;
                         state.t = hit.t + surface_offset(hit.position);
-                        state.found += 1;
                         out.push(hit);
                     }
                     // Stop the walk once enough crossings are found.
-                    (state.found >= max).then_some(state.t)
+                    (out.len() >= enough).then_some(state.t)
                 },
             );
             counters.node_traversals = node_traversals;
@@ -146,12 +129,10 @@ impl PreparedMetaballs {
     }
 }
 
-/// Where a peel stands: the stretch's start, whether it starts inside the solid, crossings
-/// found so far.
+/// Where a peel stands: the stretch's start, and whether it starts inside the solid.
 struct Peel {
     t: f32,
     inside: bool,
-    found: usize,
 }
 
 #[cfg(test)]

@@ -49,6 +49,16 @@ impl PreparedMetaballs {
             .get_or_init(|| build_fallback(&self.scene, opts))
     }
 
+    /// The search for the way out of the solid: `-F ≥ -T` (the kernel negated).
+    pub(super) fn exit_params(&self, isovalue: f32) -> FindParams<f32> {
+        let mut params = self.params(isovalue);
+        for c in params.kernel.c.iter_mut() {
+            *c = -*c;
+        }
+        params.isovalue = -isovalue;
+        params
+    }
+
     pub(super) fn params(&self, isovalue: f32) -> FindParams<f32> {
         FindParams {
             kernel: KernelPoly::new(self.scene.kernel),
@@ -108,17 +118,7 @@ impl PreparedMetaballs {
             return None;
         }
         let accel = self.accel_for(isovalue);
-        let mut kernel = KernelPoly::<f32>::new(self.scene.kernel);
-        for c in kernel.c.iter_mut() {
-            *c = -*c;
-        }
-        let params = FindParams {
-            kernel,
-            isovalue: -isovalue,
-            tolerance: self.options.tolerance,
-            owners_only: false,
-            step: self.options.step,
-        };
+        let params = self.exit_params(isovalue);
         SCRATCH.with(|cell| {
             let mut guard = cell.borrow_mut();
             let (gathered, scratch, stack) = &mut *guard;
@@ -152,11 +152,7 @@ impl PreparedMetaballs {
                         t_max,
                         scratch,
                     );
-                    counters.leaf_tests += 1;
-                    counters.metaballs_considered += gathered.len() as u64;
-                    counters.iterations += found.iterations as u64;
-                    counters.capped += found.capped as u64;
-                    found.t?
+                    found.counted(counters, gathered.len())?
                 }
             };
             counters.hits += 1;
@@ -264,14 +260,8 @@ impl PreparedMetaballs {
         if gathered.is_empty() {
             return None;
         }
-        let found = roots::find_first(finder, params, gathered, near, far, scratch);
-        counters.leaf_tests += 1;
-        counters.metaballs_considered += gathered.len() as u64;
-        counters.iterations += found.iterations as u64;
-        counters.capped += found.capped as u64;
-        let t = found.t?;
-        counters.hit_iterations += found.hit_iterations as u64;
-        Some(t)
+        roots::find_first(finder, params, gathered, near, far, scratch)
+            .counted(counters, gathered.len())
     }
 
     /// The tree [`PreparedMetaballs::optical_depth`] walks: only a Fitted BVH has one here (one
