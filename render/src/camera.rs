@@ -67,6 +67,18 @@ impl PrimaryRays {
         Ray::new(self.eye, dir)
     }
 
+    /// The unnormalised direction (component 1 along the view axis) of the ray through the
+    /// continuous pixel coordinates (`x`, `y`): pixel (`x`, `y`)'s own ray at `x + 0.5`,
+    /// `y + 0.5`, as in [`PrimaryRays::through_pixel`].
+    pub fn direction_at(&self, x: f32, y: f32) -> Vec3 {
+        self.top_left + self.right_step * x + self.down_step * y
+    }
+
+    /// The eye, every primary ray's origin.
+    pub fn eye(&self) -> Vec3 {
+        self.eye
+    }
+
     /// Where `point` appears in the image: the continuous pixel coordinates `(x, y)` whose
     /// ray passes through it (pixel `(x, y)`'s own ray has exactly those), or `None` unless
     /// the point lies in front of the eye.

@@ -59,6 +59,54 @@ impl TileGrid {
     }
 }
 
+/// The four side planes of the pyramid from the eye that holds every ray of a [`Cover`]'s
+/// pixels, each moved out by one more pixel: unit normals pointing inwards, the eye on every
+/// plane. A sphere farther than its radius outside one of them meets none of those rays, by a
+/// margin of at least a pixel's width at its distance (far beyond the rounding of a ray's own
+/// sphere test).
+#[derive(Clone, Copy, Debug)]
+pub struct Frustum {
+    pub eye: Vec3,
+    pub normals: [Vec3; 4],
+}
+
+impl Frustum {
+    /// Whether the sphere at `centre` of radius `radius` lies wholly outside the pyramid.
+    #[inline]
+    pub fn excludes_sphere(&self, centre: Vec3, radius: f32) -> bool {
+        let v = centre - self.eye;
+        self.normals.iter().any(|n| n.dot(v) < -radius)
+    }
+}
+
+impl TileGrid {
+    /// The pyramid of the rays of `cover`'s pixels, widened by a pixel on every side; `None`
+    /// without a rectangle.
+    pub fn frustum(&self, cover: Cover) -> Option<Frustum> {
+        let Cover::Rect { c0, c1, r0, r1 } = cover else {
+            return None;
+        };
+        // Pixel (x, y)'s ray is at x + 0.5, y + 0.5; one pixel more on each side.
+        let (xl, xr) = ((self.x0 + c0) as f32 - 0.5, (self.x0 + c1) as f32 + 1.5);
+        let (yt, yb) = ((self.y0 + r0) as f32 - 0.5, (self.y0 + r1) as f32 + 1.5);
+        let d = |x: f32, y: f32| self.rays.direction_at(x, y);
+        let corners = [d(xl, yt), d(xr, yt), d(xr, yb), d(xl, yb)];
+        let inside = d(0.5 * (xl + xr), 0.5 * (yt + yb));
+        let mut normals = [Vec3::ZERO; 4];
+        for (k, n) in normals.iter_mut().enumerate() {
+            let m = corners[k].cross(corners[(k + 1) % 4]).normalize_or_zero();
+            *n = if m.dot(inside) < 0.0 { -m } else { m };
+            if *n == Vec3::ZERO {
+                return None;
+            }
+        }
+        Some(Frustum {
+            eye: self.rays.eye(),
+            normals,
+        })
+    }
+}
+
 /// The eight corners of `lo..hi`.
 #[inline]
 pub fn box_corners(lo: Vec3, hi: Vec3) -> impl Iterator<Item = Vec3> {
@@ -192,5 +240,52 @@ mod tests {
             Vec3::new(3.1, 3.1, 0.1),
         ));
         assert_eq!(aside, Cover::Empty);
+    }
+
+    /// A sphere the cover's pyramid excludes meets no ray of the cover's pixels (distance from
+    /// the centre to each ray in `f64`, well over the radius), and the test does exclude
+    /// spheres off to the side.
+    #[test]
+    fn a_sphere_outside_the_frustum_meets_no_ray_of_the_cover() {
+        let g = grid();
+        let cover = g.cover(box_corners(
+            Vec3::new(-0.2, -0.1, -0.3),
+            Vec3::new(0.1, 0.25, 0.2),
+        ));
+        let Cover::Rect { c0, c1, r0, r1 } = cover else {
+            panic!("{cover:?}");
+        };
+        let frustum = g.frustum(cover).expect("a rectangle has a pyramid");
+        let mut rng = crate::geom::rng::SplitMix64(11);
+        let (mut excluded, mut kept) = (0, 0);
+        for _ in 0..4000 {
+            let centre = Vec3::new(
+                rng.range(-1.5, 1.5),
+                rng.range(-1.5, 1.5),
+                rng.range(-2.0, 2.0),
+            );
+            let radius = rng.range(0.01, 0.4);
+            if !frustum.excludes_sphere(centre, radius) {
+                kept += 1;
+                continue;
+            }
+            excluded += 1;
+            for r in r0..=r1 {
+                for c in c0..=c1 {
+                    let ray = g.rays.through_pixel(g.x0 + c, g.y0 + r);
+                    let (o, d) = (ray.origin.as_dvec3(), ray.dir.as_dvec3().normalize());
+                    let v = centre.as_dvec3() - o;
+                    let closest = v - d * v.dot(d).max(0.0);
+                    assert!(
+                        closest.length() > radius as f64,
+                        "pixel {c},{r} meets the excluded sphere at {centre} r {radius}"
+                    );
+                }
+            }
+        }
+        assert!(
+            excluded > 100 && kept > 100,
+            "{excluded} excluded, {kept} kept"
+        );
     }
 }

@@ -264,6 +264,35 @@ impl PreparedMetaballs {
             .counted(counters, gathered.len())
     }
 
+    /// [`PreparedMetaballs::search_leaf`] over `balls`, a Fitted BVH leaf's list (every ball
+    /// an owner) less balls the ray provably misses: the same gathered balls in the same
+    /// order, so the same answer.
+    #[allow(clippy::too_many_arguments)]
+    #[inline]
+    pub(super) fn search_balls(
+        &self,
+        balls: &[u32],
+        ray: &Ray,
+        near: f32,
+        far: f32,
+        params: &FindParams<f32>,
+        finder: RootFinder,
+        gathered: &mut Vec<RayBall<f32>>,
+        scratch: &mut Scratch<f32>,
+        counters: &mut MetaballCounters,
+    ) -> Option<f32> {
+        debug_assert!(!params.owners_only);
+        gathered.clear();
+        for &b in balls {
+            self.gather(ray, b, true, near, far, gathered);
+        }
+        if gathered.is_empty() {
+            return None;
+        }
+        roots::find_first(finder, params, gathered, near, far, scratch)
+            .counted(counters, gathered.len())
+    }
+
     /// The tree [`PreparedMetaballs::optical_depth`] walks: only a Fitted BVH has one here (one
     /// built for a higher isovalue is swapped for its relaxed twin, whose leaves hold every
     /// ball's whole support); `None`: every other mode integrates over all balls.

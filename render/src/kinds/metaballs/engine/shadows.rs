@@ -10,7 +10,10 @@
 //!    slab-tested in turn from the front until one meets the node (and enters it before the
 //!    leaf of its best root), and from the back likewise; the rays outside the two are
 //!    inactive below.
-//! 3. Leaves: each active ray's own slab range and the single-ray leaf search. A ray's answer
+//! 3. Leaves: with at least [`CULL_FROM_RAYS`] rays to search, the leaf's balls whose box
+//!    the packet's cone misses (the test of 1) are dropped once for all of them, since each
+//!    ray would have gathered none of them; then each active ray's own slab range and the
+//!    single-ray leaf search over the remaining balls, in the leaf's order. A ray's answer
 //!    is the root of the leaf it enters first among the leaves with a root — what the
 //!    single-ray walk returns, since a ray crosses disjoint leaves in the order of their
 //!    entries — so a ray stays active after a root, but only for boxes it enters before that leaf.
@@ -21,11 +24,19 @@ use crate::kinds::metaballs::counters::MetaballCounters;
 use crate::ray::Ray;
 use glam::Vec3;
 
+/// Rays of a packet that must search a leaf before its balls are culled against the packet's
+/// cone (fewer pay more for the culling than it saves them).
+const CULL_FROM_RAYS: usize = 4;
+
 /// The per-axis ranges of `A_i − L` of a packet.
 struct Cone {
     light: [f32; 3],
     lo: [f32; 3],
     hi: [f32; 3],
+    /// `1 / lo` and `1 / hi` (a product is within an ulp of the quotient; the slack of
+    /// [`Cone::misses`] is far wider).
+    inv_lo: [f32; 3],
+    inv_hi: [f32; 3],
 }
 
 impl Cone {
@@ -37,12 +48,13 @@ impl Cone {
         for k in 0..3 {
             let (a, c) = (bmin[k] - self.light[k], bmax[k] - self.light[k]);
             let (dlo, dhi) = (self.lo[k], self.hi[k]);
+            let (ilo, ihi) = (self.inv_lo[k], self.inv_hi[k]);
             if dlo > 0.0 {
-                s_lo = s_lo.max((a / dlo).min(a / dhi));
-                s_hi = s_hi.min((c / dlo).max(c / dhi));
+                s_lo = s_lo.max((a * ilo).min(a * ihi));
+                s_hi = s_hi.min((c * ilo).max(c * ihi));
             } else if dhi < 0.0 {
-                s_lo = s_lo.max((c / dlo).min(c / dhi));
-                s_hi = s_hi.min((a / dlo).max(a / dhi));
+                s_lo = s_lo.max((c * ilo).min(c * ihi));
+                s_hi = s_hi.min((a * ilo).max(a * ihi));
             } else if (a > 0.0 && dhi <= 0.0) || (c < 0.0 && dlo >= 0.0) {
                 return true; // the slab lies on the side no direction goes to
             }
@@ -85,6 +97,8 @@ impl PreparedMetaballs {
             light: light.to_array(),
             lo: [f32::INFINITY; 3],
             hi: [f32::NEG_INFINITY; 3],
+            inv_lo: [0.0; 3],
+            inv_hi: [0.0; 3],
         };
         for r in rays {
             let d = (r.at(t_min) - light).to_array();
@@ -95,6 +109,10 @@ impl PreparedMetaballs {
         }
         if !(cone.lo.iter().chain(&cone.hi).all(|v| v.is_finite())) {
             return None;
+        }
+        for k in 0..3 {
+            cone.inv_lo[k] = 1.0 / cone.lo[k];
+            cone.inv_hi[k] = 1.0 / cone.hi[k];
         }
         let inv: Vec<Vec3> = rays.iter().map(|r| r.dir.recip()).collect();
         let params = self.params(isovalue);
@@ -117,6 +135,8 @@ impl PreparedMetaballs {
                 }
             };
             let mut stack: Vec<(u32, u32, u32)> = vec![(0, 0, n as u32)];
+            let mut culled: Vec<u32> = Vec::new();
+            let mut searching: Vec<(usize, (f32, f32))> = Vec::new();
             while let Some((i, from, to)) = stack.pop() {
                 let (from, to) = (from as usize, to as usize);
                 let node = &tree.nodes[i as usize];
@@ -125,12 +145,31 @@ impl PreparedMetaballs {
                 }
                 counters.node_traversals += 1;
                 if node.is_leaf() {
-                    for r in from..to {
-                        let Some((near, far)) = range(&node.bounds, r, &best) else {
-                            continue;
-                        };
-                        let found = self.search_leaf(
-                            tree, node, &rays[r], near, far, &params, finder, gathered, scratch,
+                    searching.clear();
+                    searching.extend(
+                        (from..to).filter_map(|r| Some((r, range(&node.bounds, r, &best)?))),
+                    );
+                    // With several rays to search, the leaf's balls less those whose box no
+                    // segment of the packet meets (the list single rays gather from, less
+                    // balls each of them misses).
+                    let leaf = tree.leaf_balls(node);
+                    let balls = if searching.len() >= CULL_FROM_RAYS {
+                        culled.clear();
+                        culled.extend(leaf.iter().copied().filter(|&b| {
+                            let ball = &self.balls[b as usize];
+                            let r = Vec3::splat(1.0 / ball.inv_r);
+                            !cone.misses(&Aabb {
+                                min: ball.center - r,
+                                max: ball.center + r,
+                            })
+                        }));
+                        &culled[..]
+                    } else {
+                        leaf
+                    };
+                    for &(r, (near, far)) in searching.iter() {
+                        let found = self.search_balls(
+                            balls, &rays[r], near, far, &params, finder, gathered, scratch,
                             counters,
                         );
                         if let Some(t) = found {
