@@ -27,6 +27,8 @@ mod packet;
 mod packet_tests;
 // Shadow rays towards one point light traced as one packet.
 mod shadows;
+
+mod soa;
 // Secondary-ray queries (any hit, exit from the solid, optical depth): the effects layer's.
 mod queries;
 // Successive crossings along a ray in one walk (depth peeling).

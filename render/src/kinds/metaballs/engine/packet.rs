@@ -30,6 +30,8 @@
 //! a Fitted BVH, or the query needs the relaxed fallback tree) the tile falls back to single
 //! rays, as it does with [`super::PrepareOptions::packets`] off.
 
+use super::queries::search_gathered;
+use super::soa::SharedOriginBalls;
 use super::{Accel, PreparedMetaballs, SCRATCH};
 use crate::camera::PrimaryRays;
 use crate::geom::aabb::Aabb;
@@ -116,6 +118,7 @@ impl PreparedMetaballs {
             let (gathered, scratch, _) = &mut *guard;
             let mut stack: Vec<(u32, u32)> = vec![(0, 0)];
             let mut culled: Vec<u32> = Vec::new();
+            let mut soa = SharedOriginBalls::default();
             while let Some((i, from)) = stack.pop() {
                 let node = &tree.nodes[i as usize];
                 if node.is_leaf() && node.count == 0 {
@@ -140,6 +143,7 @@ impl PreparedMetaballs {
                     if balls.is_empty() {
                         continue;
                     }
+                    let shared = soa.load(self, origin, balls);
                     cover.visit(width, from as usize, n, |r| {
                         if done[r] {
                             return false;
@@ -149,9 +153,15 @@ impl PreparedMetaballs {
                         else {
                             return false;
                         };
-                        let found = self.search_balls(
-                            balls, ray, near, far, &params, finder, gathered, scratch, counters,
-                        );
+                        let found = if shared {
+                            gathered.clear();
+                            soa.gather(self, ray.dir, near, far, gathered);
+                            search_gathered(&params, finder, near, far, gathered, scratch, counters)
+                        } else {
+                            self.search_balls(
+                                balls, ray, near, far, &params, finder, gathered, scratch, counters,
+                            )
+                        };
                         if let Some(mut t) = found {
                             if self.options.refine_f64 {
                                 t = self.refine_f64(ray, t, 0.0, t_max, isovalue, gathered);

@@ -286,11 +286,7 @@ impl PreparedMetaballs {
         for &b in balls {
             self.gather(ray, b, true, near, far, gathered);
         }
-        if gathered.is_empty() {
-            return None;
-        }
-        roots::find_first(finder, params, gathered, near, far, scratch)
-            .counted(counters, gathered.len())
+        search_gathered(params, finder, near, far, gathered, scratch, counters)
     }
 
     /// The tree [`PreparedMetaballs::optical_depth`] walks: only a Fitted BVH has one here (one
@@ -553,4 +549,23 @@ mod tests {
         }
         assert!(nonzero >= 10, "{nonzero} rays crossed the blobs");
     }
+}
+
+/// The leaf search over balls already gathered (none: no search, nothing counted, as
+/// [`PreparedMetaballs::search_leaf`] does).
+#[inline]
+pub(super) fn search_gathered(
+    params: &FindParams<f32>,
+    finder: RootFinder,
+    near: f32,
+    far: f32,
+    gathered: &[RayBall<f32>],
+    scratch: &mut Scratch<f32>,
+    counters: &mut MetaballCounters,
+) -> Option<f32> {
+    if gathered.is_empty() {
+        return None;
+    }
+    roots::find_first(finder, params, gathered, near, far, scratch)
+        .counted(counters, gathered.len())
 }
