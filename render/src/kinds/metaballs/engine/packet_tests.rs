@@ -179,3 +179,41 @@ fn shadow_packets_match_single_rays_on_every_demo() {
     }
     assert!(shadowed > 0, "no shadow ray was blocked");
 }
+
+/// The structure-of-arrays gather of a packet leaf gives, for every ray from the shared
+/// origin, the balls the single ray's gather gives, field for field to the bit: every demo's
+/// spheres, rays from its camera through a grid over the image, a range cutting some balls.
+#[test]
+fn the_shared_origin_gather_is_the_single_rays_bit_for_bit() {
+    use super::soa::SharedOriginBalls;
+    let mut compared = 0usize;
+    for (demo, prepared, m) in demos() {
+        let all: Vec<u32> = (0..m.balls.len() as u32).collect();
+        let rays = prepared.primary_rays(&demo.default_camera(), WIDTH, HEIGHT);
+        let origin = rays.through_pixel(0, 0).origin;
+        let mut soa = SharedOriginBalls::default();
+        if !soa.load(m, origin, &all) {
+            continue; // ellipsoids: the packet gathers as single rays do
+        }
+        for y in (0..HEIGHT).step_by(3) {
+            for x in (0..WIDTH).step_by(3) {
+                let ray = rays.through_pixel(x, y);
+                let (lo, hi) = (0.0, 2.0 * (demo.default_camera().target - origin).length());
+                let (mut single, mut shared) = (Vec::new(), Vec::new());
+                for &b in &all {
+                    m.gather(&ray, b, true, lo, hi, &mut single);
+                }
+                soa.gather(m, ray.dir, lo, hi, &mut shared);
+                assert_eq!(single.len(), shared.len(), "{demo:?} pixel {x},{y}");
+                for (s, p) in single.iter().zip(&shared) {
+                    let bits = |b: &crate::kinds::metaballs::roots::RayBall<f32>| {
+                        [b.t0, b.t1, b.a, b.tc, b.s_min, b.q].map(f32::to_bits)
+                    };
+                    assert_eq!((s.ball, bits(s)), (p.ball, bits(p)), "{demo:?} {x},{y}");
+                }
+                compared += single.len();
+            }
+        }
+    }
+    assert!(compared > 1000, "{compared} gathered balls compared");
+}
