@@ -419,6 +419,25 @@ fn ball_integral(
     acc * h
 }
 
+/// The leaf search over balls already gathered (none: no search, nothing counted, as
+/// [`PreparedMetaballs::search_leaf`] does).
+#[inline]
+pub(super) fn search_gathered(
+    params: &FindParams<f32>,
+    finder: RootFinder,
+    near: f32,
+    far: f32,
+    gathered: &[RayBall<f32>],
+    scratch: &mut Scratch<f32>,
+    counters: &mut MetaballCounters,
+) -> Option<f32> {
+    if gathered.is_empty() {
+        return None;
+    }
+    roots::find_first(finder, params, gathered, near, far, scratch)
+        .counted(counters, gathered.len())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -549,23 +568,4 @@ mod tests {
         }
         assert!(nonzero >= 10, "{nonzero} rays crossed the blobs");
     }
-}
-
-/// The leaf search over balls already gathered (none: no search, nothing counted, as
-/// [`PreparedMetaballs::search_leaf`] does).
-#[inline]
-pub(super) fn search_gathered(
-    params: &FindParams<f32>,
-    finder: RootFinder,
-    near: f32,
-    far: f32,
-    gathered: &[RayBall<f32>],
-    scratch: &mut Scratch<f32>,
-    counters: &mut MetaballCounters,
-) -> Option<f32> {
-    if gathered.is_empty() {
-        return None;
-    }
-    roots::find_first(finder, params, gathered, near, far, scratch)
-        .counted(counters, gathered.len())
 }
