@@ -107,6 +107,30 @@ struct Ball {
     frame: u32,
 }
 
+impl Ball {
+    /// This ball (index `i`) as a ray sees it, from what [`RayBall::along`] returns.
+    #[inline]
+    fn seen(
+        &self,
+        i: u32,
+        (t0, t1, a, tc, s_min): (f32, f32, f32, f32, f32),
+        owner: bool,
+    ) -> RayBall<f32> {
+        RayBall {
+            ball: i,
+            t0,
+            t1,
+            a,
+            tc,
+            s_min,
+            q: self.strength,
+            lipschitz: self.lipschitz,
+            min_radius: self.min_radius,
+            owner,
+        }
+    }
+}
+
 /// A metaball state ready to trace.
 #[derive(Debug)]
 pub struct PreparedMetaballs {
@@ -451,18 +475,7 @@ impl PreparedMetaballs {
         if t1 < lo || t0 > hi {
             return;
         }
-        out.push(RayBall {
-            ball: i,
-            t0,
-            t1,
-            a,
-            tc,
-            s_min,
-            q: b.strength,
-            lipschitz: b.lipschitz,
-            min_radius: b.min_radius,
-            owner,
-        });
+        out.push(b.seen(i, (t0, t1, a, tc, s_min), owner));
     }
 }
 

@@ -18,7 +18,7 @@
 //!    (a Fitted BVH leaf of Pool holds 33 balls of which a ray gathers 3). Then each ray of the
 //!    rectangle not yet done, from the first active one on, gets its own slab test and, where
 //!    it crosses the leaf, the single-ray leaf search over the remaining balls
-//!    ([`PreparedMetaballs::search_balls`]) on the same `[near, far]`: the same balls gathered
+//!    ([`PreparedMetaballs::search_leaf`]) on the same `[near, far]`: the same balls gathered
 //!    in the same order. A ray is done at its first root, as a single ray is at the first leaf
 //!    with a root.
 //!
@@ -158,8 +158,17 @@ impl PreparedMetaballs {
                             soa.gather(self, ray.dir, near, far, gathered);
                             search_gathered(&params, finder, near, far, gathered, scratch, counters)
                         } else {
-                            self.search_balls(
-                                balls, ray, near, far, &params, finder, gathered, scratch, counters,
+                            self.search_leaf(
+                                balls,
+                                balls.len(),
+                                ray,
+                                near,
+                                far,
+                                &params,
+                                finder,
+                                gathered,
+                                scratch,
+                                counters,
                             )
                         };
                         if let Some(mut t) = found {

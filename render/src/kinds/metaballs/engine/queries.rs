@@ -19,7 +19,7 @@
 use super::{build_fallback, Accel, AccelKind, PreparedMetaballs, SCRATCH};
 use crate::kinds::metaballs::counters::MetaballCounters;
 use crate::kinds::metaballs::roots::{self, FindParams, KernelPoly, RayBall, RootFinder, Scratch};
-use crate::kinds::metaballs::tree::{BuildOptions, Node, Tree, TreeKind};
+use crate::kinds::metaballs::tree::{BuildOptions, Tree, TreeKind};
 use crate::ray::{Hit, Ray};
 
 impl PreparedMetaballs {
@@ -199,8 +199,8 @@ impl PreparedMetaballs {
             &mut node_traversals,
             |node, near, far, best| {
                 let t = self.search_leaf(
-                    tree,
-                    node,
+                    tree.leaf_balls(node),
+                    node.owned as usize,
                     ray,
                     near,
                     far,
@@ -229,49 +229,18 @@ impl PreparedMetaballs {
         best
     }
 
-    /// One leaf of `tree` searched on `[near, far]` of `ray`: the balls whose support the
-    /// stretch crosses (owners only where `params.owners_only`), then one root search. On
-    /// return `gathered` holds those balls. The single-ray walk and the packet walk both call
-    /// this, so a packet's per-ray arithmetic is the single ray's.
+    /// A leaf searched on `[near, far]` of `ray`: of `balls` (a leaf's list, owned balls
+    /// first, `owned` of them), those whose support the stretch crosses (owners only where
+    /// `params.owners_only`), then one root search. On return `gathered` holds those balls.
+    /// The single-ray walk and the packet walks all call this (a packet with its leaf's list
+    /// less balls no ray of it can gather: the same gathered balls in the same order), so a
+    /// packet's per-ray arithmetic is the single ray's.
     #[allow(clippy::too_many_arguments)]
     #[inline]
     pub(super) fn search_leaf(
         &self,
-        tree: &Tree,
-        node: &Node,
-        ray: &Ray,
-        near: f32,
-        far: f32,
-        params: &FindParams<f32>,
-        finder: RootFinder,
-        gathered: &mut Vec<RayBall<f32>>,
-        scratch: &mut Scratch<f32>,
-        counters: &mut MetaballCounters,
-    ) -> Option<f32> {
-        let leaf = tree.leaf_balls(node);
-        if leaf.is_empty() {
-            return None;
-        }
-        gathered.clear();
-        for (k, &b) in leaf.iter().enumerate() {
-            let owner = !params.owners_only || k < node.owned as usize;
-            self.gather(ray, b, owner, near, far, gathered);
-        }
-        if gathered.is_empty() {
-            return None;
-        }
-        roots::find_first(finder, params, gathered, near, far, scratch)
-            .counted(counters, gathered.len())
-    }
-
-    /// [`PreparedMetaballs::search_leaf`] over `balls`, a Fitted BVH leaf's list (every ball
-    /// an owner) less balls the ray provably misses: the same gathered balls in the same
-    /// order, so the same answer.
-    #[allow(clippy::too_many_arguments)]
-    #[inline]
-    pub(super) fn search_balls(
-        &self,
         balls: &[u32],
+        owned: usize,
         ray: &Ray,
         near: f32,
         far: f32,
@@ -281,10 +250,10 @@ impl PreparedMetaballs {
         scratch: &mut Scratch<f32>,
         counters: &mut MetaballCounters,
     ) -> Option<f32> {
-        debug_assert!(!params.owners_only);
         gathered.clear();
-        for &b in balls {
-            self.gather(ray, b, true, near, far, gathered);
+        for (k, &b) in balls.iter().enumerate() {
+            let owner = !params.owners_only || k < owned;
+            self.gather(ray, b, owner, near, far, gathered);
         }
         search_gathered(params, finder, near, far, gathered, scratch, counters)
     }

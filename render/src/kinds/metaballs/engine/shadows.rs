@@ -168,8 +168,16 @@ impl PreparedMetaballs {
                         leaf
                     };
                     for &(r, (near, far)) in searching.iter() {
-                        let found = self.search_balls(
-                            balls, &rays[r], near, far, &params, finder, gathered, scratch,
+                        let found = self.search_leaf(
+                            balls,
+                            balls.len(),
+                            &rays[r],
+                            near,
+                            far,
+                            &params,
+                            finder,
+                            gathered,
+                            scratch,
                             counters,
                         );
                         if let Some(t) = found {

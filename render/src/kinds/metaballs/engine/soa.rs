@@ -97,19 +97,7 @@ impl SharedOriginBalls {
                 continue;
             }
             let i = self.ids[k];
-            let b = &m.balls[i as usize];
-            out.push(RayBall {
-                ball: i,
-                t0,
-                t1,
-                a,
-                tc,
-                s_min,
-                q: b.strength,
-                lipschitz: b.lipschitz,
-                min_radius: b.min_radius,
-                owner: true,
-            });
+            out.push(m.balls[i as usize].seen(i, (t0, t1, a, tc, s_min), true));
         }
     }
 }
