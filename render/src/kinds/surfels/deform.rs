@@ -212,6 +212,27 @@ pub fn radius_from_children(centre: Vec3, kids: [(Vec3, f32); 2]) -> f32 {
     r * (1.0 + MARGIN)
 }
 
+/// The smallest sphere around two spheres (each given as centre and radius), grown by the
+/// same relative margin as eq. 11's radius: the parent sphere eq. 11 would give if the
+/// parent's centre were free to move (used when it is tighter than eq. 4's centre allows).
+#[inline]
+pub fn sphere_around(a: (Vec3, f32), b: (Vec3, f32)) -> (Vec3, f32) {
+    let d = (b.0 - a.0).length();
+    if d + b.1 <= a.1 {
+        return (a.0, a.1 * (1.0 + MARGIN));
+    }
+    if d + a.1 <= b.1 {
+        return (b.0, b.1 * (1.0 + MARGIN));
+    }
+    let r = 0.5 * (d + a.1 + b.1);
+    let centre = a.0 + (b.0 - a.0) * ((r - a.1) / d);
+    // The centre's rounding moves it by a few ulps of its coordinates: cover that as well.
+    (
+        centre,
+        r * (1.0 + MARGIN) + MARGIN * centre.abs().max_element(),
+    )
+}
+
 /// Node Jacobians estimated by least squares from full node positions: for each node, the
 /// `G` minimising `Σ_k w_k ‖(u_k − u_j) − G (x_k − x_j)‖²` over its 8 nearest rest
 /// neighbours with the weights of eq. 2 (regularised where the neighbours are coplanar).

@@ -13,7 +13,7 @@
 //! nearest hit, ties to the lower surfel).
 
 use crate::kinds::surfels::deform::{
-    deform_surfel, node_sphere, radius_from_children, DeformedSurfel, StepFrame,
+    deform_surfel, node_sphere, radius_from_children, sphere_around, DeformedSurfel, StepFrame,
 };
 use crate::kinds::surfels::model::SurfelModel;
 use crate::kinds::surfels::scene::{SurfelOptions, SurfelRuntime, SurfelScene, UpdateMode};
@@ -21,7 +21,7 @@ use crate::kinds::surfels::tree::{SphereTree, TreeNode};
 use glam::{Mat3, Vec3};
 use rayon::prelude::*;
 use std::borrow::Cow;
-use std::sync::atomic::{AtomicU32, AtomicU64, Ordering};
+use std::sync::atomic::{fence, AtomicU32, AtomicU64, Ordering};
 use std::sync::{Arc, OnceLock};
 use std::time::Instant;
 
@@ -40,19 +40,27 @@ static NEXT_ID: AtomicU64 = AtomicU64::new(1);
 
 /// One sphere of a lazy step, with the node's children alongside so that a traversal reads
 /// one 24-byte record per node: empty until a ray first touches it, then its eq. 4 centre
-/// and its radius (eq. 9, lowered by eq. 11 once both children are updated); a leaf's is
-/// its deformed surfel's sphere.
+/// and eq. 9 radius; once both children are updated, the smallest sphere around them where
+/// that is tighter (eq. 11's bound with the parent's centre free to move,
+/// [`sphere_around`]); a leaf's is its deformed surfel's sphere.
 ///
-/// Lock-free and deterministic: the centre and eq. 9 radius are a pure function of the
-/// step, so threads that race to fill a node store the same bits; the radius is written only
-/// by `fetch_min` (a positive `f32`'s bits order like its value), so it only ever shrinks
-/// and the first fill publishes the centre (release, read with acquire).
+/// Lock-free and deterministic. The sphere is a sequence lock that never waits: a writer
+/// claims the record (`CLAIMED`), writes the centre and publishes a radius strictly smaller
+/// than the one it replaced; a reader that finds the record claimed, or its radius changed
+/// while it read the centre, takes `None` and computes the node's eq. 4 and 9 sphere itself
+/// (a pure function of the step). Radii only decrease, so a radius read twice the same is
+/// the same publication. Every sphere the record ever holds bounds the surfels below, so
+/// which one a ray sees changes its work, never its hits (the traversal returns the nearest
+/// hit, ties to the lower surfel).
 #[derive(Debug)]
 pub struct LazyNode {
     pub kids: [u32; 2],
     centre: [AtomicU32; 3],
     radius: AtomicU32,
 }
+
+/// A [`LazyNode`]'s radius while one thread writes it (above every positive `f32`'s bits).
+const CLAIMED: u32 = u32::MAX - 1;
 
 impl LazyNode {
     fn new(kids: [u32; 2]) -> LazyNode {
@@ -63,33 +71,70 @@ impl LazyNode {
         }
     }
 
-    /// The sphere in use, if the node is updated.
+    /// The sphere in use, if the node is updated and not being written.
     #[inline]
     pub fn get(&self) -> Option<(Vec3, f32)> {
         let r = self.radius.load(Ordering::Acquire);
-        if r == EMPTY {
+        if r >= CLAIMED {
             return None;
         }
-        let c = self
-            .centre
-            .each_ref()
-            .map(|a| f32::from_bits(a.load(Ordering::Relaxed)));
-        Some((Vec3::from_array(c), f32::from_bits(r)))
+        let c = load3(&self.centre);
+        fence(Ordering::Acquire);
+        (self.radius.load(Ordering::Relaxed) == r).then(|| (c, f32::from_bits(r)))
     }
 
-    /// Fills the node with its eq. 4 centre and eq. 9 radius.
+    /// Publishes `(centre, radius)` if its radius is below the one held (or none is held) and
+    /// no other thread is writing; otherwise leaves the record as it is.
     #[inline]
     pub fn set(&self, centre: Vec3, radius: f32) {
+        let bits = radius.to_bits();
+        let now = self.radius.load(Ordering::Relaxed);
+        if now == CLAIMED || (now != EMPTY && now <= bits) {
+            return;
+        }
+        if (self.radius)
+            .compare_exchange(now, CLAIMED, Ordering::Acquire, Ordering::Relaxed)
+            .is_err()
+        {
+            return;
+        }
+        fence(Ordering::Release);
         for (a, v) in self.centre.iter().zip(centre.to_array()) {
             a.store(v.to_bits(), Ordering::Relaxed);
         }
-        self.radius.fetch_min(radius.to_bits(), Ordering::Release);
+        self.radius.store(bits, Ordering::Release);
     }
 
-    /// Lowers an updated node's radius to `radius` if that is smaller (eq. 11).
+    /// Given both children's spheres of an updated node whose sphere in use has `radius`:
+    /// keeps the sphere around the children if that is tighter.
     #[inline]
-    pub fn lower(&self, radius: f32) {
-        self.radius.fetch_min(radius.to_bits(), Ordering::Relaxed);
+    pub fn tighten(&self, radius: f32, kids: [(Vec3, f32); 2]) {
+        let (centre, around) = sphere_around(kids[0], kids[1]);
+        if around < radius {
+            self.set(centre, around);
+        }
+    }
+}
+
+#[inline]
+fn load3(a: &[AtomicU32; 3]) -> Vec3 {
+    Vec3::from_array(
+        a.each_ref()
+            .map(|v| f32::from_bits(v.load(Ordering::Relaxed))),
+    )
+}
+
+/// The tighter of a parent's eq. 4 sphere lowered by eq. 11 and the sphere around its two
+/// children (what a lazy node settles on once its children are final; the eager refit uses
+/// it bottom-up).
+#[inline]
+pub fn parent_sphere(centre: Vec3, radius: f32, kids: [(Vec3, f32); 2]) -> (Vec3, f32) {
+    let r = radius.min(radius_from_children(centre, kids));
+    let around = sphere_around(kids[0], kids[1]);
+    if around.1 < r {
+        around
+    } else {
+        (centre, r)
     }
 }
 
@@ -223,7 +268,8 @@ impl PreparedSurfels {
         });
     }
 
-    /// Every surfel by eq. 1, every inner sphere by eqs. 4 and 9, then bottom-up eq. 11.
+    /// Every surfel by eq. 1, every inner sphere by eqs. 4 and 9, then bottom-up eq. 11 or
+    /// the sphere around both children, whichever is tighter ([`parent_sphere`]).
     fn eager_refit(&self) -> Vec<TreeNode> {
         self.deform_all();
         let tree = &self.model.tree.nodes;
@@ -250,8 +296,9 @@ impl PreparedSurfels {
             let n = nodes[i];
             if !n.is_leaf() {
                 let kid = |k: u32| (nodes[k as usize].centre, nodes[k as usize].radius);
-                let r11 = radius_from_children(n.centre, [kid(n.kids[0]), kid(n.kids[1])]);
-                nodes[i].radius = n.radius.min(r11);
+                let (centre, radius) = parent_sphere(n.centre, n.radius, n.kids.map(kid));
+                nodes[i].centre = centre;
+                nodes[i].radius = radius;
             }
         }
         nodes

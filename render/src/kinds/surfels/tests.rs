@@ -6,7 +6,7 @@ use crate::camera::Camera;
 use crate::geom::rng::SplitMix64;
 use crate::kinds::dispatch::Geometry;
 use crate::kinds::surfels::counters::SurfelCounters;
-use crate::kinds::surfels::deform::deform_surfel;
+use crate::kinds::surfels::deform::{deform_surfel, node_sphere};
 use crate::kinds::surfels::demo::{self, SurfelDemoKind};
 use crate::kinds::surfels::model::{Surfel, SurfelError, SurfelModel, SurfelSet};
 use crate::kinds::surfels::prepared::PreparedSurfels;
@@ -168,6 +168,48 @@ mod containment {
             prop_assert!(check_containment(&p, &model.tree.nodes) > 0);
         }
     }
+}
+
+#[test]
+fn spheres_moved_around_their_children_still_hold_every_surfel_and_are_tighter() {
+    let model = Arc::new(ball_model(300, 17));
+    let (u, g) = random_step(&mut SplitMix64(11), &model, 0.3);
+    let scene = SurfelScene::new(
+        model.clone(),
+        u.into(),
+        g.into(),
+        SurfelOptions::new(UpdateMode::Lazy, false),
+        Arc::new(SurfelRuntime::default()),
+    );
+    let p = PreparedSurfels::new(scene.expect("valid"));
+    assert_eq!(p.used, UpdateMode::Lazy);
+    let mut c = SurfelCounters::default();
+    let mut r = SplitMix64(5);
+    for _ in 0..3 {
+        for _ in 0..300 {
+            let origin = r.in_unit_ball().normalize_or(Vec3::Z) * 6.0;
+            let target = r.in_unit_ball() * 1.5;
+            p.nearest(&Ray::new(origin, target - origin), 0.0, 100.0, None, &mut c);
+        }
+    }
+    // Spheres whose centre left eq. 4's: each must be smaller than eq. 9 and eq. 11 allow.
+    let spheres = p.current_spheres();
+    let mut moved = 0;
+    for (i, node) in model.tree.nodes.iter().enumerate() {
+        let (Some((centre, radius)), false) = (spheres[i], node.is_leaf()) else {
+            continue;
+        };
+        let (c4, r9) = node_sphere(&model, &p.step, i);
+        if centre != c4 {
+            moved += 1;
+            assert!(
+                radius < r9,
+                "node {i}: moved sphere {radius} not below eq. 9's {r9}"
+            );
+        }
+    }
+    assert!(moved > 0, "no sphere moved off its eq. 4 centre");
+    assert!(check_containment(&p, &model.tree.nodes) > 0);
 }
 
 #[test]

@@ -8,7 +8,7 @@
 //! fixed view reads a refitted or rebuilt tree. Both are monomorphic; nothing allocates.
 
 use crate::kinds::surfels::counters::SurfelCounters;
-use crate::kinds::surfels::deform::{node_sphere, radius_from_children};
+use crate::kinds::surfels::deform::node_sphere;
 use crate::kinds::surfels::intersect::{intersect_leaf, LeafHit};
 use crate::kinds::surfels::prepared::{LazyNode, PreparedSurfels};
 use crate::kinds::surfels::tree::{TreeNode, LEAF};
@@ -26,9 +26,9 @@ pub trait Spheres {
     fn sphere(&self, n: u32, c: &mut SurfelCounters) -> (Vec3, f32);
     /// Whether node `n` already has its sphere for this step.
     fn updated(&self, n: u32) -> bool;
-    /// Told the spheres of both children of inner node `n` (whose sphere is `centre`,
-    /// `radius`): a lazy view tightens `n` by eq. 11.
-    fn tighten(&self, _n: u32, _centre: Vec3, _radius: f32, _kids: [(Vec3, f32); 2]) {}
+    /// Told the spheres of both children of inner node `n` (whose sphere in use has
+    /// `radius`): a lazy view tightens `n` to the sphere around them where that is smaller.
+    fn tighten(&self, _n: u32, _radius: f32, _kids: [(Vec3, f32); 2]) {}
 }
 
 /// The model's hierarchy, updated on first touch.
@@ -43,12 +43,40 @@ impl Spheres for LazyView<'_> {
         self.nodes[n as usize].kids
     }
 
-    #[inline]
+    #[inline(always)]
     fn sphere(&self, n: u32, c: &mut SurfelCounters) -> (Vec3, f32) {
-        let node = &self.nodes[n as usize];
-        if let Some(s) = node.get() {
-            return s;
+        match self.nodes[n as usize].get() {
+            Some(s) => s,
+            None => self.fill(n, c),
         }
+    }
+
+    /// Eq. 11 once both children are updated (§4.4: "if a node is already visited before,
+    /// update the radius using Equation 11"), and the sphere around both children where
+    /// that is tighter: the traversal calls this right after it has updated and tested both
+    /// children, so their spheres come for free; the node is written only when a sphere
+    /// actually shrinks.
+    #[inline]
+    fn tighten(&self, n: u32, radius: f32, kids: [(Vec3, f32); 2]) {
+        self.nodes[n as usize].tighten(radius, kids);
+    }
+
+    /// Whether `n`'s record holds a sphere (a leaf's is filled when a ray first touches it,
+    /// so its surfel is deformed; reading the record, not the surfel, keeps this test on the
+    /// tree's records, which the traversal reads next anyway).
+    #[inline]
+    fn updated(&self, n: u32) -> bool {
+        self.nodes[n as usize].get().is_some()
+    }
+}
+
+impl LazyView<'_> {
+    /// Node `n`'s sphere on first touch (or while another thread writes it): eq. 4 and 9,
+    /// or a leaf's deformed surfel.
+    #[cold]
+    #[inline(never)]
+    fn fill(&self, n: u32, c: &mut SurfelCounters) -> (Vec3, f32) {
+        let node = &self.nodes[n as usize];
         if node.kids[0] == LEAF {
             // The leaf's sphere is copied into its record, so that later tests read the
             // tree's records only (the surfels lie in input order, not tree order).
@@ -62,28 +90,6 @@ impl Spheres for LazyView<'_> {
         let (centre, radius) = node_sphere(&self.p.model, &self.p.step, n as usize);
         node.set(centre, radius);
         (centre, radius)
-    }
-
-    /// Eq. 11 once both children are updated (§4.4: "if a node is already visited before,
-    /// update the radius using Equation 11"): the traversal calls this right after it has
-    /// updated and tested both children, so their spheres come for free; the node's radius
-    /// is written only when it actually shrinks.
-    #[inline]
-    fn tighten(&self, n: u32, centre: Vec3, radius: f32, kids: [(Vec3, f32); 2]) {
-        let r11 = radius_from_children(centre, kids);
-        if r11 < radius {
-            self.nodes[n as usize].lower(r11);
-        }
-    }
-
-    #[inline]
-    fn updated(&self, n: u32) -> bool {
-        let node = &self.nodes[n as usize];
-        if node.kids[0] == LEAF {
-            self.p.surfels[node.kids[1] as usize].get().is_some()
-        } else {
-            node.get().is_some()
-        }
     }
 }
 
@@ -141,17 +147,17 @@ pub fn first_hit<V: Spheres>(
         best = intersect_leaf(p, ray, s as usize, t_min, t_max, c);
         c.cache_hits += best.is_some() as u64;
     }
-    let mut stack = [(0u32, 0f32, Vec3::ZERO, 0f32); STACK];
+    let mut stack = [(0u32, 0f32, 0f32); STACK];
     let mut top = 0;
     c.sphere_tests += 1;
     let (rc, rr) = v.sphere(0, c);
     if let Some(t) = sphere_entry(ray, rc, rr, t_min, t_max) {
-        stack[0] = (0, t, rc, rr);
+        stack[0] = (0, t, rr);
         top = 1;
     }
     while top > 0 {
         top -= 1;
-        let (n, entry, centre, radius) = stack[top];
+        let (n, entry, radius) = stack[top];
         let limit = best.map_or(t_max, |b| b.t);
         if entry > limit {
             continue;
@@ -168,7 +174,7 @@ pub fn first_hit<V: Spheres>(
             }
             continue;
         }
-        let mut kids = [(0u32, f32::INFINITY, Vec3::ZERO, 0f32); 2];
+        let mut kids = [(0u32, f32::INFINITY, 0f32); 2];
         let mut spheres = [(Vec3::ZERO, 0f32); 2];
         let mut count = 0;
         for (slot, k) in kids_of.into_iter().enumerate() {
@@ -176,11 +182,11 @@ pub fn first_hit<V: Spheres>(
             let (kc, kr) = v.sphere(k, c);
             spheres[slot] = (kc, kr);
             if let Some(t) = sphere_entry(ray, kc, kr, t_min, limit) {
-                kids[count] = (k, t, kc, kr);
+                kids[count] = (k, t, kr);
                 count += 1;
             }
         }
-        v.tighten(n, centre, radius, spheres);
+        v.tighten(n, radius, spheres);
         if count == 2 && kids[1].1 > kids[0].1 {
             kids.swap(0, 1);
         }
