@@ -97,6 +97,9 @@ pub struct Tracer<'a> {
     pub counters: SceneCounters,
     /// Scratch for the crossings of a ray through transparent surfaces.
     hits: Vec<Hit>,
+    /// A camera ray's first hit on `[0, T_MAX]` as the kind's tile query found it, for the
+    /// next [`Tracer::closest`] to use instead of asking again ([`Tracer::primary_from`]).
+    given: Option<Option<Hit>>,
 }
 
 impl<'a> Tracer<'a> {
@@ -109,7 +112,31 @@ impl<'a> Tracer<'a> {
             counts: RayCounts::default(),
             counters: SceneCounters::default(),
             hits: Vec::new(),
+            given: None,
         }
+    }
+
+    /// Whether a camera ray's first crossing is the kind's first hit on `[0, T_MAX]` (no clip
+    /// box cuts the ray, no volume is integrated along it), so that a tile's primary hits,
+    /// found together (as a packet where the kind has one), can stand in for it.
+    pub fn takes_tile_hits(&self) -> bool {
+        self.plan.clip_box.is_none() && !self.plan.volume
+    }
+
+    /// [`Tracer::primary`] given the ray's first hit on `[0, T_MAX]`, found by the kind's tile
+    /// query ([`PreparedScene::primary_hits`], the same hit as [`PreparedScene::first_hit`]);
+    /// only when [`Tracer::takes_tile_hits`]. The image is [`Tracer::primary`]'s.
+    pub fn primary_from(
+        &mut self,
+        ray: &Ray,
+        first: Option<Hit>,
+        rng: &mut PixelRng,
+    ) -> (Vec3, f32) {
+        debug_assert!(self.takes_tile_hits());
+        self.given = Some(first);
+        let out = self.primary(ray, rng);
+        debug_assert!(self.given.is_none(), "closest took the given hit");
+        out
     }
 
     /// Linear colour and hit distance (`INFINITY` on a miss) of a camera ray.
@@ -228,8 +255,16 @@ impl<'a> Tracer<'a> {
     fn closest(&mut self, ray: &Ray, t0: f32, t1: f32) -> Option<SurfaceHit> {
         let mut best: Option<SurfaceHit> = None;
         let mut limit = t1;
+        let given = self.given.take();
         if !self.plan.volume {
-            if let Some(h) = self.crossing(ray, t0, limit, self.isovalue) {
+            let first = match given {
+                // A camera ray's tile hit is `crossing`'s answer unless the ray starts inside
+                // the solid (then `crossing` asks for the way out).
+                Some(Some(h)) if h.t > t0 + INSIDE_EPS => Some(h),
+                Some(None) => None,
+                Some(Some(_)) | None => self.crossing(ray, t0, limit, self.isovalue),
+            };
+            if let Some(h) = first {
                 limit = h.t;
                 best = Some(SurfaceHit {
                     t: h.t,
