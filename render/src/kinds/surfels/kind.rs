@@ -125,8 +125,9 @@ impl PreparedKind for PreparedSurfels {
         0.0
     }
 
-    /// Ray by ray; with the cache on, each pixel's last nearest surfel is tested first and
-    /// this frame's is remembered (the image is the same either way).
+    /// In 8×8 packets ([`traverse::first_hits`]); with the cache on, each pixel's last
+    /// nearest surfel is tested first and this frame's is remembered (the image is the same
+    /// either way, and the same as ray by ray).
     fn primary_tile(
         &self,
         rays: &PrimaryRays,
@@ -135,22 +136,49 @@ impl PreparedKind for PreparedSurfels {
         t_max: f32,
         c: &mut SurfelCounters,
     ) -> Vec<(Ray, Option<Hit>)> {
+        const SIDE: u32 = 8;
         let (x0, y0, x1, y1) = rect;
-        let mut out = Vec::with_capacity(((x1 - x0) * (y1 - y0)) as usize);
+        let width = (x1 - x0) as usize;
+        let mut out = vec![(Ray::new(rays.eye(), glam::Vec3::Z), None); width * (y1 - y0) as usize];
         let cache = self.options.cache;
-        for y in y0..y1 {
-            for x in x0..x1 {
-                let ray = rays.through_pixel(x, y);
-                let hint = if cache {
-                    self.runtime.cached(x, y)
-                } else {
-                    None
-                };
-                let hit = self.nearest(&ray, 0.0, t_max, hint, c);
-                if cache {
-                    self.runtime.remember(x, y, hit.map(|h| h.surfel));
+        let (mut packet, mut hints, mut pixels) = (Vec::new(), Vec::new(), Vec::new());
+        let mut hits = [None; traverse::PACKET];
+        for by in (y0..y1).step_by(SIDE as usize) {
+            for bx in (x0..x1).step_by(SIDE as usize) {
+                packet.clear();
+                hints.clear();
+                pixels.clear();
+                for y in by..(by + SIDE).min(y1) {
+                    for x in bx..(bx + SIDE).min(x1) {
+                        packet.push(rays.through_pixel(x, y));
+                        hints.push(if cache {
+                            self.runtime.cached(x, y)
+                        } else {
+                            None
+                        });
+                        pixels.push((x, y));
+                    }
                 }
-                out.push((ray, hit.map(Self::record)));
+                c.rays += packet.len() as u64;
+                match &self.accel {
+                    Accel::Lazy(nodes) => {
+                        let v = LazyView { p: self, nodes };
+                        traverse::first_hits(&v, self, &packet, t_max, &hints, &mut hits, c);
+                    }
+                    Accel::Fixed(nodes) => {
+                        let v = FixedView(nodes);
+                        traverse::first_hits(&v, self, &packet, t_max, &hints, &mut hits, c);
+                    }
+                }
+                for (k, &(x, y)) in pixels.iter().enumerate() {
+                    let hit = hits[k];
+                    c.hits += hit.is_some() as u64;
+                    if cache {
+                        self.runtime.remember(x, y, hit.map(|h| h.surfel));
+                    }
+                    let at = (y - y0) as usize * width + (x - x0) as usize;
+                    out[at] = (packet[k], hit.map(Self::record));
+                }
             }
         }
         out

@@ -316,6 +316,48 @@ fn lazy_eager_and_rebuild_give_the_same_image_on_every_demo() {
     }
 }
 
+/// 8×8 packets give each ray the single ray's answer bit for bit (hit or miss, distance,
+/// surfel), on every demo, for every update mode, with and without the cache, on a tile whose
+/// sides are not multiples of 8.
+#[test]
+fn packets_give_the_single_rays_hits_on_every_demo() {
+    use crate::kinds::contract::PreparedKind;
+    let (w, h) = (44, 29);
+    for kind in SurfelDemoKind::ALL {
+        let demo = demo::build(kind, 0.03, 12).expect("demo");
+        let rays = demo.camera.rays(w, h);
+        for (mode, cache) in [
+            (UpdateMode::Lazy, false),
+            (UpdateMode::Lazy, true),
+            (UpdateMode::Eager, false),
+            (UpdateMode::Rebuild, false),
+        ] {
+            let rt = Arc::new(SurfelRuntime::default());
+            // Twice, so that the cache has something from the first frame.
+            for _ in 0..2 {
+                let packets = prepare(&demo, 7, mode, cache, &rt);
+                let single = prepare(&demo, 7, mode, false, &rt);
+                let mut c = SurfelCounters::default();
+                let got = packets.primary_tile(&rays, (3, 2, w, h), 0.0, 1e4, &mut c);
+                let mut hits = 0;
+                for (k, (ray, hit)) in got.iter().enumerate() {
+                    let (x, y) = (3 + k as u32 % (w - 3), 2 + k as u32 / (w - 3));
+                    assert_eq!(*ray, rays.through_pixel(x, y));
+                    let want = single.nearest(ray, 0.0, 1e4, None, &mut c);
+                    let key = |h: Option<(f32, u32)>| h.map(|(t, s)| (t.to_bits(), s));
+                    assert_eq!(
+                        key(hit.map(|h| (h.t, h.primitive))),
+                        key(want.map(|h| (h.t, h.surfel))),
+                        "{kind:?} {mode:?} cache {cache} pixel ({x}, {y})"
+                    );
+                    hits += want.is_some() as usize;
+                }
+                assert!(hits > 30, "{kind:?}: only {hits} hits");
+            }
+        }
+    }
+}
+
 #[test]
 fn the_image_with_shadows_is_the_same_on_1_2_and_8_threads() {
     use crate::effects::toggles::Effects;

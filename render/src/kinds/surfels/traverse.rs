@@ -201,6 +201,129 @@ pub fn first_hit<V: Spheres>(
     best
 }
 
+/// Rays of one packet of [`first_hits`] (a mask bit each).
+pub const PACKET: usize = 64;
+
+/// [`first_hit`] for up to [`PACKET`] rays on `[0, t_max]` together (coherent camera rays):
+/// each node's sphere is read, updated and tightened once for the packet, and each ray tests
+/// it only while it is active (it met the parent and the parent's entry was not beyond its
+/// nearest hit so far). `hints` holds each ray's cached surfel (tested first, as the single
+/// ray does).
+///
+/// The answers are [`first_hit`]'s: a ray's answer is the nearest hit (ties to the lower
+/// surfel) over the leaves it tests, a leaf's hit does not depend on the order, and a ray
+/// drops a node only where the single ray would (entry beyond its nearest hit so far, which
+/// only shrinks), so every leaf holding its nearest hit is tested by both.
+pub fn first_hits<V: Spheres>(
+    v: &V,
+    p: &PreparedSurfels,
+    rays: &[Ray],
+    t_max: f32,
+    hints: &[Option<u32>],
+    out: &mut [Option<LeafHit>],
+    c: &mut SurfelCounters,
+) {
+    let n = rays.len().min(PACKET).min(hints.len()).min(out.len());
+    for i in 0..n {
+        out[i] = None;
+        if let Some(s) = hints[i].filter(|&s| (s as usize) < p.surfels.len()) {
+            out[i] = intersect_leaf(p, &rays[i], s as usize, 0.0, t_max, c);
+            c.cache_hits += out[i].is_some() as u64;
+        }
+    }
+    let limit = |out: &[Option<LeafHit>], i: usize| out[i].map_or(t_max, |b| b.t);
+    // Stack slot k: node, its radius, its rays and their entry distances.
+    let mut stack = [(0u32, 0f32, 0u64); STACK];
+    let mut entries = [[0f32; PACKET]; STACK];
+    let (rc, rr) = v.sphere(0, c);
+    c.sphere_tests += n as u64;
+    let mut mask = 0u64;
+    for i in 0..n {
+        if let Some(t) = sphere_entry(&rays[i], rc, rr, 0.0, t_max) {
+            entries[0][i] = t;
+            mask |= 1 << i;
+        }
+    }
+    stack[0] = (0, rr, mask);
+    let mut top = (mask != 0) as usize;
+    while top > 0 {
+        top -= 1;
+        let (node, radius, mut mask) = stack[top];
+        let entry = entries[top];
+        for i in Bits(mask) {
+            if entry[i] > limit(out, i) {
+                mask &= !(1 << i);
+            }
+        }
+        if mask == 0 {
+            continue;
+        }
+        let kids_of = v.kids(node);
+        if kids_of[0] == LEAF {
+            for i in Bits(mask) {
+                if Some(kids_of[1]) == hints[i] {
+                    continue;
+                }
+                let lim = limit(out, i);
+                let h = intersect_leaf(p, &rays[i], kids_of[1] as usize, 0.0, lim, c);
+                if let Some(h) = h {
+                    if out[i].is_none_or(|b| h.before(&b)) {
+                        out[i] = Some(h);
+                    }
+                }
+            }
+            continue;
+        }
+        let spheres = kids_of.map(|k| v.sphere(k, c));
+        c.sphere_tests += 2 * mask.count_ones() as u64;
+        let mut kid_entries = [[f32::INFINITY; PACKET]; 2];
+        let mut kid_masks = [0u64; 2];
+        let mut nearer = [0u32; 2];
+        for i in Bits(mask) {
+            let lim = limit(out, i);
+            for (k, &(kc, kr)) in spheres.iter().enumerate() {
+                if let Some(t) = sphere_entry(&rays[i], kc, kr, 0.0, lim) {
+                    kid_entries[k][i] = t;
+                    kid_masks[k] |= 1 << i;
+                }
+            }
+            if kid_masks[0] & kid_masks[1] & (1 << i) != 0 {
+                nearer[(kid_entries[1][i] < kid_entries[0][i]) as usize] += 1;
+            }
+        }
+        v.tighten(node, radius, spheres);
+        // Far first, so that the child nearer for most rays is popped first.
+        let order = if nearer[1] > nearer[0] {
+            [0, 1]
+        } else {
+            [1, 0]
+        };
+        for k in order {
+            if kid_masks[k] != 0 && top < STACK {
+                stack[top] = (kids_of[k], spheres[k].1, kid_masks[k]);
+                entries[top] = kid_entries[k];
+                top += 1;
+            }
+        }
+    }
+}
+
+/// The set bits of a mask, lowest first.
+struct Bits(u64);
+
+impl Iterator for Bits {
+    type Item = usize;
+    #[inline]
+    fn next(&mut self) -> Option<usize> {
+        if self.0 == 0 {
+            return None;
+        }
+        let i = self.0.trailing_zeros() as usize;
+        self.0 &= self.0 - 1;
+        Some(i)
+    }
+}
+
 /// Some hit in `[t_min, t_max]`, the first found.
 pub fn any_hit<V: Spheres>(
     v: &V,
