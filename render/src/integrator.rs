@@ -25,6 +25,8 @@
 //! Shadow and occlusion rays ask the scene for any hit, with early exit; with transparent
 //! materials in the plan they walk the crossings instead and multiply `1 - α` of each.
 
+mod batch;
+
 use crate::effects::plan::EffectsPlan;
 use crate::effects::rays::{RayCounts, RayKind};
 use crate::geom::rng::PixelRng;
@@ -100,6 +102,10 @@ pub struct Tracer<'a> {
     /// A camera ray's first hit on `[0, T_MAX]` as the kind's tile query found it, for the
     /// next [`Tracer::closest`] to use instead of asking again ([`Tracer::primary_from`]).
     given: Option<Option<Hit>>,
+    /// Hard shadow rays of a tile's camera rays traced together ([`Tracer::primaries_from`]).
+    batch: batch::ShadowBatch,
+    /// The point light the next shadow ray goes to (`None`: directional), for the batch.
+    shadow_light: Option<Vec3>,
 }
 
 impl<'a> Tracer<'a> {
@@ -113,6 +119,8 @@ impl<'a> Tracer<'a> {
             counters: SceneCounters::default(),
             hits: Vec::new(),
             given: None,
+            batch: batch::ShadowBatch::Off,
+            shadow_light: None,
         }
     }
 
@@ -428,16 +436,27 @@ impl<'a> Tracer<'a> {
                 }
                 seen / n as f32
             }
-            Light::Sphere { radius, .. } => {
+            Light::Sphere { center, radius, .. } => {
                 self.counts.bump(RayKind::Shadow);
+                self.shadow_light = Some(center);
                 let ray = Ray {
                     origin,
                     dir: to_light,
                 };
                 self.transmittance(&ray, (distance - radius).max(0.0))
             }
-            Light::Point { .. } | Light::Directional { .. } => {
+            Light::Point { position, .. } => {
                 self.counts.bump(RayKind::Shadow);
+                self.shadow_light = Some(position);
+                let ray = Ray {
+                    origin,
+                    dir: to_light,
+                };
+                self.transmittance(&ray, distance.min(T_MAX))
+            }
+            Light::Directional { .. } => {
+                self.counts.bump(RayKind::Shadow);
+                self.shadow_light = None;
                 let ray = Ray {
                     origin,
                     dir: to_light,
@@ -477,7 +496,16 @@ impl<'a> Tracer<'a> {
                 (s.isovalue, Some(s.material))
             };
             if self.plan.layers == 0 {
-                if self.blocked(ray, 0.0, t_max, isovalue) {
+                let batched = if k == 0 {
+                    self.batched(ray, t_max)
+                } else {
+                    None
+                };
+                let blocked = match batched {
+                    Some(blocked) => blocked,
+                    None => self.blocked(ray, 0.0, t_max, isovalue),
+                };
+                if blocked {
                     return 0.0;
                 }
                 continue;
@@ -522,25 +550,24 @@ impl<'a> Tracer<'a> {
     fn blocked(&mut self, ray: &Ray, a: f32, b: f32, isovalue: f32) -> bool {
         let (segments, n) = self.segments(ray, a, b);
         for &(lo, hi) in &segments[..n] {
-            match self
-                .scene
-                .any_hit_counted(ray, lo, hi, isovalue, &mut self.counters)
-            {
-                None => {}
-                Some(t) if t > lo + INSIDE_EPS => return true,
-                // Starting inside the solid: its boundary blocks if the ray leaves it here.
-                Some(_)
-                    if self
-                        .scene
-                        .exit_hit_counted(ray, lo, hi, isovalue, &mut self.counters)
-                        .is_some() =>
-                {
-                    return true;
-                }
-                Some(_) => {}
+            let root = (self.scene).any_hit_counted(ray, lo, hi, isovalue, &mut self.counters);
+            if self.settles(ray, lo, hi, isovalue, root) {
+                return true;
             }
         }
         false
+    }
+
+    /// Whether `[lo, hi]` is blocked, given the any-hit query's `root` on it.
+    fn settles(&mut self, ray: &Ray, lo: f32, hi: f32, isovalue: f32, root: Option<f32>) -> bool {
+        match root {
+            None => false,
+            Some(t) if t > lo + INSIDE_EPS => true,
+            // Starting inside the solid: its boundary blocks if the ray leaves it here.
+            Some(_) => (self.scene)
+                .exit_hit_counted(ray, lo, hi, isovalue, &mut self.counters)
+                .is_some(),
+        }
     }
 
     /// `∫ F dt` over `[a, b]` outside the clip box.

@@ -20,6 +20,7 @@ use crate::kinds::metaballs::engine::PrepareOptions;
 use crate::kinds::tets::prepared::TetOptions;
 use crate::ray::{Hit, Ray};
 use crate::shade::Lighting;
+use glam::Vec3;
 use std::sync::Arc;
 
 // The closed kind enums live with their dispatch; these paths stay for the other crates.
@@ -209,6 +210,21 @@ impl PreparedScene {
         counters: &mut impl Tally,
     ) -> Option<f32> {
         self.prepared.any_hit(ray, t_min, t_max, isovalue, counters)
+    }
+
+    /// Shadow rays towards one light traced together, where the kind has a packet for them
+    /// ([`crate::kinds::contract::PreparedKind::any_hits_towards`]).
+    #[allow(clippy::too_many_arguments)]
+    pub fn any_hits_towards(
+        &self,
+        rays: &[Ray],
+        t_min: f32,
+        t_max: &[f32],
+        light: Option<Vec3>,
+        isovalue: f32,
+        counters: &mut impl Tally,
+    ) -> Option<Vec<Option<f32>>> {
+        (self.prepared).any_hits_towards(rays, t_min, t_max, light, isovalue, counters)
     }
 
     /// From a start inside the solid, where the ray leaves it within `[t_min, t_max]`.

@@ -269,9 +269,14 @@ fn trace_pass(
                 T_MAX,
                 &mut tracer.counters,
             );
-            let pixels = (y0..y1).flat_map(|y| (x0..x1).map(move |x| (x, y)));
-            for ((ray, hit), (x, y)) in hits.into_iter().zip(pixels) {
-                let (c, t) = tracer.primary_from(&ray, hit, &mut PixelRng::new(x, y, pass));
+            let pixels: Vec<(u32, u32)> = (y0..y1)
+                .flat_map(|y| (x0..x1).map(move |x| (x, y)))
+                .collect();
+            for ((c, t), (ray, _)) in tracer
+                .primaries_from(&hits, &pixels, pass)
+                .into_iter()
+                .zip(&hits)
+            {
                 color.push(c);
                 depth.push(t * ray.dir.dot(forward));
             }
@@ -330,17 +335,21 @@ mod tests {
         assert!(one.hit_count() < 37 * 23, "and some background");
     }
 
-    /// Every kind (metaball and tet packets, surfels ray by ray) with shadows, reflections and
-    /// occlusion: camera rays' first hits taken from the tile query give the image of asking
-    /// pixel by pixel, bit for bit; a clip box or a volume keeps the pixel-by-pixel path.
+    /// Every kind (metaball, tet and surfel packets): camera rays' first hits taken from the
+    /// tile query, and with hard shadows alone the shadow rays traced together, give the
+    /// image of asking pixel by pixel, bit for bit (with reflections and occlusion the shadow
+    /// rays stay single); a clip box or a volume keeps the pixel-by-pixel path.
     #[test]
     fn effects_frames_from_tile_hits_are_the_pixel_by_pixel_frames() {
-        let effects = Effects {
+        let shadows = Effects {
             shadows: true,
+            ..Effects::OFF
+        };
+        let more = Effects {
             reflections: true,
             ambient_occlusion: true,
             ao_samples: 2,
-            ..Effects::OFF
+            ..shadows
         };
         let demos = [
             DemoScene::Blobs,
@@ -349,8 +358,9 @@ mod tests {
             DemoScene::TetBucky,
             DemoScene::Glass,
             DemoScene::SurfelHeads,
+            DemoScene::SurfelBalls,
         ];
-        let mut used = 0;
+        let (mut tiles_used, mut batched) = (0, 0);
         for demo in demos {
             let scene = Arc::new(demo.state_at(0.5)).prepare();
             let view = View {
@@ -359,19 +369,25 @@ mod tests {
                 camera: demo.default_camera(),
                 isovalue: demo.default_isovalue(),
             };
-            let plan = accumulator::plan_for(&scene, &effects);
-            used += Tracer::new(&scene, &plan, view.isovalue).takes_tile_hits() as usize;
-            let tiles = trace_pass(&scene, &view, &plan, 0, true);
-            let pixels = trace_pass(&scene, &view, &plan, 0, false);
-            assert!(
-                tiles.depth.iter().any(|d| d.is_finite()),
-                "{demo:?}: nothing hit"
-            );
-            assert_eq!(tiles.color, pixels.color, "{demo:?}: colours");
-            let bits = |d: &[f32]| d.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
-            assert_eq!(bits(&tiles.depth), bits(&pixels.depth), "{demo:?}: depths");
+            for effects in [shadows, more] {
+                let plan = accumulator::plan_for(&scene, &effects);
+                let tracer = Tracer::new(&scene, &plan, view.isovalue);
+                tiles_used += tracer.takes_tile_hits() as usize;
+                batched += tracer.batches_shadows() as usize;
+                let tiles = trace_pass(&scene, &view, &plan, 0, true);
+                let pixels = trace_pass(&scene, &view, &plan, 0, false);
+                assert!(
+                    tiles.depth.iter().any(|d| d.is_finite()),
+                    "{demo:?}: nothing hit"
+                );
+                assert_eq!(tiles.color, pixels.color, "{demo:?} {effects:?}: colours");
+                let bits = |d: &[f32]| d.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+                assert_eq!(bits(&tiles.depth), bits(&pixels.depth), "{demo:?}: depths");
+                assert_eq!(tiles.rays.rays, pixels.rays.rays, "{demo:?}: rays per kind");
+            }
         }
-        assert_eq!(used, demos.len(), "every demo took the tile path");
+        assert_eq!(tiles_used, 2 * demos.len(), "every demo took the tile path");
+        assert_eq!(batched, demos.len(), "hard shadows alone were batched");
     }
 }
 

@@ -9,6 +9,7 @@ use crate::camera::PrimaryRays;
 use crate::geom::counters::KindCounters;
 use crate::kinds::counters::SceneCounters;
 use crate::ray::{surface_offset, Hit, Ray, INSIDE_EPS};
+use glam::Vec3;
 
 /// A prepared state of one primitive kind, ready to trace.
 pub trait PreparedKind {
@@ -93,6 +94,26 @@ pub trait PreparedKind {
         t_max: f32,
         counters: &mut Self::Counters,
     ) -> Vec<(Ray, Option<Hit>)>;
+
+    /// Shadow rays from surface points (unit directions towards `light`, a point light's
+    /// position, or `None` for a directional light; `t_max[i]` at most the distance to it),
+    /// traced together: for each ray, `Some` root on `[t_min, t_max[i]]` exactly when
+    /// [`PreparedKind::any_hit`] finds one; a kind whose rays can start inside a solid (a root
+    /// at `t_min`) returns `any_hit`'s own root, a kind of sheets (surfels, whose way out is
+    /// any later hit) may return another. `None` where the kind has no packet for these rays
+    /// (the caller asks ray by ray).
+    #[allow(clippy::too_many_arguments)]
+    fn any_hits_towards(
+        &self,
+        _rays: &[Ray],
+        _t_min: f32,
+        _t_max: &[f32],
+        _light: Option<Vec3>,
+        _isovalue: f32,
+        _counters: &mut Self::Counters,
+    ) -> Option<Vec<Option<f32>>> {
+        None
+    }
 }
 
 /// [`PreparedKind::crossings`] with one [`PreparedKind::first_hit`] or

@@ -19,6 +19,7 @@ use crate::kinds::surfels::scene::SurfelScene;
 use crate::kinds::tets::mesh::{TetError, TetScene};
 use crate::kinds::tets::prepared::{PreparedTets, TetOptions};
 use crate::ray::{Hit, Ray};
+use glam::Vec3;
 use std::sync::Arc;
 
 /// The primitive kinds isoray traces. New kinds are new variants, matched in this file.
@@ -307,6 +308,30 @@ impl PreparedGeometry {
             }
         }
     }
+
+    /// [`PreparedKind::any_hits_towards`] of the kind.
+    #[allow(clippy::too_many_arguments)]
+    pub fn any_hits_towards<C: Tally>(
+        &self,
+        rays: &[Ray],
+        t_min: f32,
+        t_max: &[f32],
+        light: Option<Vec3>,
+        isovalue: f32,
+        counters: &mut C,
+    ) -> Option<Vec<Option<f32>>> {
+        match self {
+            PreparedGeometry::Metaballs(m) => {
+                any_hits_towards(m.as_ref(), rays, t_min, t_max, light, isovalue, counters)
+            }
+            PreparedGeometry::Tets(t) => {
+                any_hits_towards(t.as_ref(), rays, t_min, t_max, light, isovalue, counters)
+            }
+            PreparedGeometry::Surfels(s) => {
+                any_hits_towards(s.as_ref(), rays, t_min, t_max, light, isovalue, counters)
+            }
+        }
+    }
 }
 
 fn build_ms<K: PreparedKind>(k: &K) -> f64 {
@@ -386,4 +411,17 @@ fn primary_tile<K: PreparedKind, C: Tally>(
     counters: &mut C,
 ) -> Vec<(Ray, Option<Hit>)> {
     counters.count::<K, _>(|c| k.primary_tile(rays, rect, isovalue, t_max, c))
+}
+
+#[allow(clippy::too_many_arguments)]
+fn any_hits_towards<K: PreparedKind, C: Tally>(
+    k: &K,
+    rays: &[Ray],
+    t_min: f32,
+    t_max: &[f32],
+    light: Option<Vec3>,
+    isovalue: f32,
+    counters: &mut C,
+) -> Option<Vec<Option<f32>>> {
+    counters.count::<K, _>(|c| k.any_hits_towards(rays, t_min, t_max, light, isovalue, c))
 }

@@ -44,6 +44,20 @@ impl PreparedKind for PreparedMetaballs {
         self.any_hit_counted(ray, t_min, t_max, isovalue, counters)
     }
 
+    /// The Fitted BVH's shadow packets ([`PreparedMetaballs::any_hits_packet`]: any_hit's
+    /// own roots) for a point light; none for a directional one (no cone to cull by).
+    fn any_hits_towards(
+        &self,
+        rays: &[Ray],
+        t_min: f32,
+        t_max: &[f32],
+        light: Option<glam::Vec3>,
+        isovalue: f32,
+        counters: &mut MetaballCounters,
+    ) -> Option<Vec<Option<f32>>> {
+        self.any_hits_packet(rays, t_min, t_max, light?, isovalue, counters)
+    }
+
     #[inline]
     fn exit_hit(
         &self,

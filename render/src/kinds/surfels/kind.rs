@@ -106,6 +106,44 @@ impl PreparedKind for PreparedSurfels {
         hit
     }
 
+    /// Packets of up to 64 rays ([`traverse::any_hits`]) whatever the light: `Some` exactly
+    /// where [`PreparedKind::any_hit`] finds a hit (perhaps another one: a sheet's way out is
+    /// any later hit, so the integrator decides the same).
+    fn any_hits_towards(
+        &self,
+        rays: &[Ray],
+        t_min: f32,
+        t_max: &[f32],
+        _light: Option<glam::Vec3>,
+        _isovalue: f32,
+        c: &mut SurfelCounters,
+    ) -> Option<Vec<Option<f32>>> {
+        if t_max.len() != rays.len() {
+            return None;
+        }
+        let mut out = vec![None; rays.len()];
+        let before = c.sphere_tests + c.surfel_tests;
+        for (k, chunk) in rays.chunks(traverse::PACKET).enumerate() {
+            let at = k * traverse::PACKET;
+            let (hi, found) = (&t_max[at..], &mut out[at..at + chunk.len()]);
+            match &self.accel {
+                Accel::Lazy(nodes) => {
+                    let v = LazyView { p: self, nodes };
+                    traverse::any_hits(&v, self, chunk, t_min, hi, found, c);
+                }
+                Accel::Fixed(nodes) => {
+                    traverse::any_hits(&FixedView(nodes), self, chunk, t_min, hi, found, c);
+                }
+            }
+        }
+        let n = rays.len() as u64;
+        c.rays += n;
+        c.hits += out.iter().filter(|h| h.is_some()).count() as u64;
+        c.any_rays += n;
+        c.any_tests += c.sphere_tests + c.surfel_tests - before;
+        Some(out)
+    }
+
     /// A surfel surface is a sheet: the way out of a closed object is its next crossing.
     #[inline]
     fn exit_hit(

@@ -358,6 +358,51 @@ fn packets_give_the_single_rays_hits_on_every_demo() {
     }
 }
 
+/// Shadow packets find a hit exactly for the rays the single any-hit query finds one for, on
+/// every demo, lazy and eager, rays from the visible surface towards a light above it.
+#[test]
+fn shadow_packets_are_blocked_where_single_shadow_rays_are() {
+    use crate::kinds::contract::PreparedKind;
+    let (w, h) = (36, 27);
+    for kind in SurfelDemoKind::ALL {
+        let demo = demo::build(kind, 0.03, 12).expect("demo");
+        let rays = demo.camera.rays(w, h);
+        for mode in [UpdateMode::Lazy, UpdateMode::Eager] {
+            let rt = Arc::new(SurfelRuntime::default());
+            let p = prepare(&demo, 7, mode, false, &rt);
+            let mut c = SurfelCounters::default();
+            let light = demo.camera.eye + Vec3::new(3.0, 9.0, 2.0);
+            let (mut shadow, mut t_max) = (Vec::new(), Vec::new());
+            for (_, hit) in p.primary_tile(&rays, (0, 0, w, h), 0.0, 1e4, &mut c) {
+                let Some(hit) = hit else { continue };
+                let origin = hit.position + hit.normal * 1e-3;
+                let to = light - origin;
+                shadow.push(Ray::new(origin, to.normalize()));
+                t_max.push(to.length());
+            }
+            let single = prepare(&demo, 7, mode, false, &rt);
+            let packed = p
+                .any_hits_towards(&shadow, 0.0, &t_max, Some(light), 0.0, &mut c)
+                .expect("surfels have shadow packets");
+            let mut blocked = 0;
+            for (i, ray) in shadow.iter().enumerate() {
+                let want = single.any_hit(ray, 0.0, t_max[i], 0.0, &mut c).is_some();
+                assert_eq!(
+                    packed[i].is_some(),
+                    want,
+                    "{kind:?} {mode:?} shadow ray {i}"
+                );
+                blocked += want as usize;
+            }
+            assert!(
+                blocked > 0 && blocked < shadow.len(),
+                "{kind:?}: {blocked} of {} blocked",
+                shadow.len()
+            );
+        }
+    }
+}
+
 #[test]
 fn the_image_with_shadows_is_the_same_on_1_2_and_8_threads() {
     use crate::effects::toggles::Effects;

@@ -308,6 +308,75 @@ pub fn first_hits<V: Spheres>(
     }
 }
 
+/// [`any_hit`] for up to [`PACKET`] rays (shadow rays of neighbouring pixels) together: each
+/// node's sphere is read and updated once for the packet and tested by the rays still
+/// searching that met its parent; a ray stops at its first hit. `out[i]` is `Some` exactly
+/// when [`any_hit`] finds a hit for ray `i` (both search until a hit or the whole tree:
+/// every sphere bounds its surfels), though it may be another hit.
+pub fn any_hits<V: Spheres>(
+    v: &V,
+    p: &PreparedSurfels,
+    rays: &[Ray],
+    t_min: f32,
+    t_max: &[f32],
+    out: &mut [Option<f32>],
+    c: &mut SurfelCounters,
+) {
+    let n = rays.len().min(PACKET).min(t_max.len()).min(out.len());
+    out[..n].fill(None);
+    let mut stack = [(0u32, 0u64); STACK];
+    stack[0] = (
+        0,
+        if n == PACKET {
+            u64::MAX
+        } else {
+            (1u64 << n) - 1
+        },
+    );
+    let mut top = (n > 0) as usize;
+    let mut done = 0u64;
+    while top > 0 {
+        top -= 1;
+        let (node, mask) = stack[top];
+        let mask = mask & !done;
+        if mask == 0 {
+            continue;
+        }
+        let (sc, sr) = v.sphere(node, c);
+        c.sphere_tests += mask.count_ones() as u64;
+        let mut inside = 0u64;
+        for i in Bits(mask) {
+            if sphere_entry(&rays[i], sc, sr, t_min, t_max[i]).is_some() {
+                inside |= 1 << i;
+            }
+        }
+        if inside == 0 {
+            continue;
+        }
+        let [a, b] = v.kids(node);
+        if a == LEAF {
+            for i in Bits(inside) {
+                if let Some(h) = intersect_leaf(p, &rays[i], b as usize, t_min, t_max[i], c) {
+                    out[i] = Some(h.t);
+                    done |= 1 << i;
+                }
+            }
+            continue;
+        }
+        // §4.4: if only one child is updated, it goes on top (is tried first).
+        let (first, second) = if !v.updated(a) && v.updated(b) {
+            (b, a)
+        } else {
+            (a, b)
+        };
+        if top + 2 <= STACK {
+            stack[top] = (second, inside);
+            stack[top + 1] = (first, inside);
+            top += 2;
+        }
+    }
+}
+
 /// The set bits of a mask, lowest first.
 struct Bits(u64);
 
