@@ -159,7 +159,8 @@ pub(crate) fn measure(demos: &[DemoScene], runs: usize, time: f64) -> Vec<Packet
                         if rays.is_empty() {
                             return;
                         }
-                        let hits = m.any_hits_packet(rays, 0.0, t_max, light, isovalue, &mut c);
+                        let hits =
+                            m.any_hits_packet(rays, 0.0, t_max, Some(light), isovalue, &mut c);
                         std::hint::black_box(hits);
                     })
                 },

@@ -73,6 +73,9 @@ pub struct OverlapArgs {
     /// Also write the report as JSON to this file.
     #[arg(long)]
     json: Option<PathBuf>,
+    /// Switch hard shadows on (the viewer sends an `effects` message after connecting).
+    #[arg(long)]
+    shadows: bool,
 }
 
 /// One frame as the client saw it.
@@ -202,7 +205,7 @@ pub fn run(args: OverlapArgs) -> Result<(), String> {
     let alone = if args.no_alone {
         None
     } else {
-        Some(alone(scene, width, height, args.threads)?)
+        Some(alone(scene, width, height, args.threads, args.shadows)?)
     };
     if let Some(a) = &alone {
         println!(
@@ -243,6 +246,7 @@ pub fn run(args: OverlapArgs) -> Result<(), String> {
             let (samples, busy_cores) = runtime.block_on(viewer(
                 &ws,
                 (width, height),
+                args.shadows,
                 mode,
                 Duration::from_secs_f64(args.warmup),
                 Duration::from_secs_f64(args.seconds),
@@ -381,6 +385,7 @@ fn alone(
     width: u32,
     height: u32,
     threads: usize,
+    shadows: bool,
 ) -> Result<Alone, String> {
     let backend = Backend::cpu(threads).map_err(|e| e.to_string())?;
     // The server's build pool: its own pool of the same size.
@@ -394,7 +399,8 @@ fn alone(
         camera: scene.default_camera(),
         isovalue: scene.default_isovalue(),
     };
-    let effects = scene.lighting().effects;
+    let mut effects = scene.lighting().effects;
+    effects.shadows |= shadows;
     let (mut build, mut trace, mut encode) = (Vec::new(), Vec::new(), Vec::new());
     // CPU time summed over the repetitions (the clock ticks at 100 Hz), then per repetition.
     let mut cpu = [0.0f64; 3];
@@ -431,6 +437,7 @@ fn alone(
 async fn viewer(
     url: &str,
     size: (u32, u32),
+    shadows: bool,
     mode: Mode,
     warmup: Duration,
     seconds: Duration,
@@ -447,8 +454,15 @@ async fn viewer(
     ws.send(Message::Text(resize.to_string().into()))
         .await
         .map_err(|e| format!("send: {e}"))?;
+    if shadows {
+        let effects =
+            serde_json::json!({"type": "effects", "input_id": 2, "effects": {"shadows": true}});
+        ws.send(Message::Text(effects.to_string().into()))
+            .await
+            .map_err(|e| format!("send: {e}"))?;
+    }
     // Serial: the time pinned last (and its input id), far from the live clock's states.
-    let mut pinned = (2, 1000.0f64);
+    let mut pinned = (3, 1000.0f64);
     if mode == Mode::Serial {
         pin(&mut ws, pinned).await?;
     }

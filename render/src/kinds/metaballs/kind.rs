@@ -55,7 +55,7 @@ impl PreparedKind for PreparedMetaballs {
         isovalue: f32,
         counters: &mut MetaballCounters,
     ) -> Option<Vec<Option<f32>>> {
-        self.any_hits_packet(rays, t_min, t_max, light?, isovalue, counters)
+        self.any_hits_packet(rays, t_min, t_max, light, isovalue, counters)
     }
 
     #[inline]

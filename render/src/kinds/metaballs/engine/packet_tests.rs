@@ -126,58 +126,72 @@ fn packets_switched_off_leave_the_tile_to_single_rays() {
         .is_none());
 }
 
-/// Shadow rays from every primary hit towards one point light: the packet's any-hit roots
-/// equal the single rays' (hit/miss identical, roots within the tolerance).
+/// Shadow rays from every primary hit towards one point light, and towards one directional
+/// light: the packet's any-hit roots equal the single rays' (hit/miss identical, roots within
+/// the tolerance).
 #[test]
 fn shadow_packets_match_single_rays_on_every_demo() {
-    let mut shadowed = 0;
+    let mut shadowed = [0; 2];
     for (demo, prepared, m) in demos() {
         let demo = *demo;
         let camera = demo.default_camera();
         let rays = prepared.primary_rays(&camera, WIDTH, HEIGHT);
         let isovalue = demo.default_isovalue();
         let tolerance = m.options().tolerance;
-        // A light above and beside the eye.
+        // A light above and beside the eye; the sun from the same side.
         let eye = rays.through_pixel(0, 0).origin;
-        let light = eye + Vec3::new(3.0, 5.0, 1.0) * (1.0 + eye.length() * 0.2);
-        for rect in tiles() {
-            let mut c = MetaballCounters::default();
-            let hits = m
-                .primary_tile_packet(&rays, rect, isovalue, T_MAX, &mut c)
-                .expect("a packet");
-            let (shadow_rays, t_max): (Vec<Ray>, Vec<f32>) = hits
-                .iter()
-                .filter_map(|(_, h)| h.as_ref())
-                .map(|h| {
-                    let origin = h.position + h.normal * 1e-3;
-                    let to = light - origin;
-                    (Ray::new(origin, to), to.length())
-                })
-                .unzip();
-            if shadow_rays.is_empty() {
-                continue;
-            }
-            let packet = m
-                .any_hits_packet(&shadow_rays, 0.0, &t_max, light, isovalue, &mut c)
-                .expect("a shadow packet");
-            for (k, (ray, &hi)) in shadow_rays.iter().zip(&t_max).enumerate() {
-                let single = m.any_hit_counted(ray, 0.0, hi, isovalue, &mut c);
-                match (packet[k], single) {
-                    (Some(p), Some(s)) => {
-                        shadowed += 1;
-                        assert!(
-                            (p - s).abs() <= tolerance,
-                            "{} shadow ray {k}: {p} against {s}",
-                            demo.id()
-                        );
+        let point = eye + Vec3::new(3.0, 5.0, 1.0) * (1.0 + eye.length() * 0.2);
+        let sun = Vec3::new(0.4, 1.0, 0.3).normalize();
+        for (which, light) in [Some(point), None].into_iter().enumerate() {
+            for rect in tiles() {
+                let mut c = MetaballCounters::default();
+                let hits = m
+                    .primary_tile_packet(&rays, rect, isovalue, T_MAX, &mut c)
+                    .expect("a packet");
+                let (shadow_rays, t_max): (Vec<Ray>, Vec<f32>) = hits
+                    .iter()
+                    .filter_map(|(_, h)| h.as_ref())
+                    .map(|h| {
+                        let origin = h.position + h.normal * 1e-3;
+                        match light {
+                            Some(light) => {
+                                let to = light - origin;
+                                (Ray::new(origin, to), to.length())
+                            }
+                            None => (Ray::new(origin, sun), T_MAX),
+                        }
+                    })
+                    .unzip();
+                if shadow_rays.is_empty() {
+                    continue;
+                }
+                let packet = m
+                    .any_hits_packet(&shadow_rays, 0.0, &t_max, light, isovalue, &mut c)
+                    .expect("a shadow packet");
+                for (k, (ray, &hi)) in shadow_rays.iter().zip(&t_max).enumerate() {
+                    let single = m.any_hit_counted(ray, 0.0, hi, isovalue, &mut c);
+                    match (packet[k], single) {
+                        (Some(p), Some(s)) => {
+                            shadowed[which] += 1;
+                            assert!(
+                                (p - s).abs() <= tolerance,
+                                "{} shadow ray {k}: {p} against {s}",
+                                demo.id()
+                            );
+                        }
+                        (None, None) => {}
+                        (p, s) => {
+                            panic!("{} shadow ray {k}: packet {p:?}, single {s:?}", demo.id())
+                        }
                     }
-                    (None, None) => {}
-                    (p, s) => panic!("{} shadow ray {k}: packet {p:?}, single {s:?}", demo.id()),
                 }
             }
         }
     }
-    assert!(shadowed > 0, "no shadow ray was blocked");
+    assert!(
+        shadowed.iter().all(|&s| s > 0),
+        "no shadow ray was blocked: {shadowed:?}"
+    );
 }
 
 /// The structure-of-arrays gather of a packet leaf gives, for every ray from the shared

@@ -64,9 +64,108 @@ impl Cone {
     }
 }
 
+/// A packet of parallel segments `A_i + s·d`, `s ∈ [0, s_max]` (shadow rays towards a
+/// directional light): the per-axis ranges of the starts `A_i`.
+struct Parallel {
+    dir: [f32; 3],
+    inv_dir: [f32; 3],
+    lo: [f32; 3],
+    hi: [f32; 3],
+    s_max: f32,
+}
+
+impl Parallel {
+    /// Whether no segment can meet `b` (conservative): per axis, the `s` at which some start
+    /// moved by `s·d` lies in the box's slab, intersected over the axes and `[0, s_max]`.
+    #[inline]
+    fn misses(&self, b: &Aabb) -> bool {
+        let (bmin, bmax) = (b.min.to_array(), b.max.to_array());
+        let (mut s_lo, mut s_hi) = (0.0f32, self.s_max);
+        for k in 0..3 {
+            let (d, inv) = (self.dir[k], self.inv_dir[k]);
+            let (enter, leave) = (bmin[k] - self.hi[k], bmax[k] - self.lo[k]);
+            if d > 0.0 {
+                s_lo = s_lo.max(enter * inv);
+                s_hi = s_hi.min(leave * inv);
+            } else if d < 0.0 {
+                s_lo = s_lo.max(leave * inv);
+                s_hi = s_hi.min(enter * inv);
+            } else if enter > 0.0 || leave < 0.0 {
+                return true; // no start lies in the slab, and no segment moves along this axis
+            }
+        }
+        // Slack far beyond rounding.
+        s_lo > s_hi + 1e-4 * (1.0 + self.s_max)
+    }
+}
+
+/// What a shadow packet culls by: the cone towards a point light, or parallel segments.
+enum Beam {
+    Cone(Cone),
+    Parallel(Parallel),
+}
+
+impl Beam {
+    #[inline]
+    fn misses(&self, b: &Aabb) -> bool {
+        match self {
+            Beam::Cone(c) => c.misses(b),
+            Beam::Parallel(p) => p.misses(b),
+        }
+    }
+
+    /// The beam of `rays` from `t_min` to each `t_max`: the cone from `light`, or with no
+    /// light the parallel segments (every ray must then share one direction); `None` when the
+    /// rays give no finite beam.
+    fn new(rays: &[Ray], t_min: f32, t_max: &[f32], light: Option<Vec3>) -> Option<Beam> {
+        let (mut lo, mut hi) = ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]);
+        let from = |r: &Ray| match light {
+            Some(l) => r.at(t_min) - l,
+            None => r.at(t_min),
+        };
+        for r in rays {
+            for (k, v) in from(r).to_array().into_iter().enumerate() {
+                lo[k] = lo[k].min(v);
+                hi[k] = hi[k].max(v);
+            }
+        }
+        if !(lo.iter().chain(&hi).all(|v| v.is_finite())) {
+            return None;
+        }
+        let recip = |v: [f32; 3]| v.map(|x| 1.0 / x);
+        match light {
+            Some(l) => Some(Beam::Cone(Cone {
+                light: l.to_array(),
+                lo,
+                hi,
+                inv_lo: recip(lo),
+                inv_hi: recip(hi),
+            })),
+            None => {
+                let dir = rays.first()?.dir;
+                if rays.iter().any(|r| r.dir != dir) {
+                    return None;
+                }
+                let s_max = t_max.iter().fold(0.0f32, |m, &t| m.max(t - t_min));
+                if !s_max.is_finite() {
+                    return None;
+                }
+                Some(Beam::Parallel(Parallel {
+                    dir: dir.to_array(),
+                    inv_dir: recip(dir.to_array()),
+                    lo,
+                    hi,
+                    s_max,
+                }))
+            }
+        }
+    }
+}
+
 impl PreparedMetaballs {
     /// For each `rays[i]` (unit directions towards `light`, `t_max[i]` at most the distance
-    /// to it) what [`PreparedMetaballs::any_hit_counted`] returns on `[t_min, t_max[i]]`,
+    /// to it; with no light, one direction shared by every ray, towards a directional light)
+    /// what [`PreparedMetaballs::any_hit_counted`] returns on `[t_min, t_max[i]]`,
     /// the rays traced as one packet; `None` where packets do not apply, and the caller
     /// traces single rays.
     pub fn any_hits_packet(
@@ -74,7 +173,7 @@ impl PreparedMetaballs {
         rays: &[Ray],
         t_min: f32,
         t_max: &[f32],
-        light: Vec3,
+        light: Option<Vec3>,
         isovalue: f32,
         counters: &mut MetaballCounters,
     ) -> Option<Vec<Option<f32>>> {
@@ -93,27 +192,7 @@ impl PreparedMetaballs {
             Accel::Tree(tree) => tree,
             Accel::BruteForce | Accel::ActiveList => return None,
         };
-        let mut cone = Cone {
-            light: light.to_array(),
-            lo: [f32::INFINITY; 3],
-            hi: [f32::NEG_INFINITY; 3],
-            inv_lo: [0.0; 3],
-            inv_hi: [0.0; 3],
-        };
-        for r in rays {
-            let d = (r.at(t_min) - light).to_array();
-            for (k, v) in d.into_iter().enumerate() {
-                cone.lo[k] = cone.lo[k].min(v);
-                cone.hi[k] = cone.hi[k].max(v);
-            }
-        }
-        if !(cone.lo.iter().chain(&cone.hi).all(|v| v.is_finite())) {
-            return None;
-        }
-        for k in 0..3 {
-            cone.inv_lo[k] = 1.0 / cone.lo[k];
-            cone.inv_hi[k] = 1.0 / cone.hi[k];
-        }
+        let cone = Beam::new(rays, t_min, t_max, light)?;
         let inv: Vec<Vec3> = rays.iter().map(|r| r.dir.recip()).collect();
         let params = self.params(isovalue);
         let finder = self.options.finder;
