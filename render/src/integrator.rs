@@ -147,6 +147,57 @@ impl<'a> Tracer<'a> {
         out
     }
 
+    /// Whether a tile's camera rays spawn nothing but hard shadow rays towards the lights (no
+    /// reflection, refraction, layers, occlusion, soft shadows, further isosurfaces, volume
+    /// or clip box), so that [`Tracer::primaries_from`] can trace those together.
+    pub fn batches_shadows(&self) -> bool {
+        let p = self.plan;
+        self.takes_tile_hits()
+            && p.shadows
+            && !p.soft_shadows
+            && p.reflection_depth == 0
+            && p.refraction_depth == 0
+            && p.layers == 0
+            && p.ao_samples == 0
+            && (!p.isosurfaces || self.lighting.isosurfaces.is_empty())
+    }
+
+    /// [`Tracer::primary_from`] for each camera ray of a tile (`hits` from the kind's tile
+    /// query, `pixels` their pixels) in order. Where the camera rays spawn only hard shadow
+    /// rays, a first shading pass records those, they are traced together
+    /// ([`batch::trace_shadows`]), and the second pass takes their answers in the order it
+    /// asks; the image is [`Tracer::primary`]'s.
+    pub fn primaries_from(
+        &mut self,
+        hits: &[(Ray, Option<Hit>)],
+        pixels: &[(u32, u32)],
+        pass: u32,
+    ) -> Vec<(Vec3, f32)> {
+        let shade = |tracer: &mut Self| -> Vec<(Vec3, f32)> {
+            (hits.iter().zip(pixels))
+                .map(|(&(ray, hit), &(x, y))| {
+                    tracer.primary_from(&ray, hit, &mut PixelRng::new(x, y, pass))
+                })
+                .collect()
+        };
+        if self.batches_shadows() {
+            let counts = self.counts;
+            self.batch = batch::ShadowBatch::Record(Vec::new());
+            shade(self);
+            // The recording pass traced nothing (its shadow rays were only noted).
+            self.counts = counts;
+            if let batch::ShadowBatch::Record(queries) = std::mem::take(&mut self.batch) {
+                let answers =
+                    batch::trace_shadows(self.scene, self.isovalue, &queries, &mut self.counters);
+                self.batch =
+                    batch::ShadowBatch::Replay(queries.into_iter().zip(answers).collect(), 0);
+            }
+        }
+        let out = shade(self);
+        self.batch = batch::ShadowBatch::Off;
+        out
+    }
+
     /// Linear colour and hit distance (`INFINITY` on a miss) of a camera ray.
     pub fn primary(&mut self, ray: &Ray, rng: &mut PixelRng) -> (Vec3, f32) {
         self.counts.bump(RayKind::Primary);
@@ -497,7 +548,11 @@ impl<'a> Tracer<'a> {
             };
             if self.plan.layers == 0 {
                 let batched = if k == 0 {
-                    self.batched(ray, t_max)
+                    self.batch.answer(batch::ShadowQuery {
+                        ray: *ray,
+                        t_max,
+                        light: self.shadow_light,
+                    })
                 } else {
                     None
                 };
@@ -551,23 +606,18 @@ impl<'a> Tracer<'a> {
         let (segments, n) = self.segments(ray, a, b);
         for &(lo, hi) in &segments[..n] {
             let root = (self.scene).any_hit_counted(ray, lo, hi, isovalue, &mut self.counters);
-            if self.settles(ray, lo, hi, isovalue, root) {
+            if batch::settles(
+                self.scene,
+                ray,
+                (lo, hi),
+                isovalue,
+                root,
+                &mut self.counters,
+            ) {
                 return true;
             }
         }
         false
-    }
-
-    /// Whether `[lo, hi]` is blocked, given the any-hit query's `root` on it.
-    fn settles(&mut self, ray: &Ray, lo: f32, hi: f32, isovalue: f32, root: Option<f32>) -> bool {
-        match root {
-            None => false,
-            Some(t) if t > lo + INSIDE_EPS => true,
-            // Starting inside the solid: its boundary blocks if the ray leaves it here.
-            Some(_) => (self.scene)
-                .exit_hit_counted(ray, lo, hi, isovalue, &mut self.counters)
-                .is_some(),
-        }
     }
 
     /// `∫ F dt` over `[a, b]` outside the clip box.

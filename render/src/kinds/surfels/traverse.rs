@@ -363,17 +363,23 @@ pub fn any_hits<V: Spheres>(
             }
             continue;
         }
-        // §4.4: if only one child is updated, it goes on top (is tried first).
-        let (first, second) = if !v.updated(a) && v.updated(b) {
-            (b, a)
-        } else {
-            (a, b)
-        };
+        let (first, second) = updated_first(v, a, b);
         if top + 2 <= STACK {
             stack[top] = (second, inside);
             stack[top + 1] = (first, inside);
             top += 2;
         }
+    }
+}
+
+/// Children `a` and `b` in the order an any-hit search tries them: §4.4, if only one child
+/// is updated, it is tried first.
+#[inline]
+fn updated_first<V: Spheres>(v: &V, a: u32, b: u32) -> (u32, u32) {
+    if !v.updated(a) && v.updated(b) {
+        (b, a)
+    } else {
+        (a, b)
     }
 }
 
@@ -420,12 +426,7 @@ pub fn any_hit<V: Spheres>(
             }
             continue;
         }
-        // §4.4: if only one child is updated, it goes on top (is tried first).
-        let (first, second) = if !v.updated(a) && v.updated(b) {
-            (b, a)
-        } else {
-            (a, b)
-        };
+        let (first, second) = updated_first(v, a, b);
         if top + 2 <= STACK {
             stack[top] = second;
             stack[top + 1] = first;
