@@ -213,7 +213,8 @@ fn impact(
         r,
         1.0,
     );
-    let (model, mut sim) = b.finish(Vec3::new(-6.0, -1.3, -6.0), Vec3::splat(6.0))?;
+    // Walls close enough that the knocked blob bounces back into view within the loop.
+    let (model, mut sim) = b.finish(Vec3::new(-2.6, -1.3, -2.6), Vec3::new(2.8, 2.2, 2.6))?;
     sim.place(1, Vec3::new(-1.6, 0.35, 0.1));
     sim.throw(1, Vec3::new(-7.0, 0.5, 0.0));
     sim.gravity = Vec3::ZERO;
