@@ -51,7 +51,7 @@ const TO_BERNSTEIN: [[[f64; MAX_DEGREE + 1]; MAX_DEGREE + 1]; MAX_DEGREE + 1] = 
 };
 
 /// `b_j = Σ_{i ≤ j} C(j, i) / C(n, i) · p_i` for `p(v) = Σ p_i v^i` on `[0, 1]`.
-#[inline]
+#[inline(always)]
 pub fn power_to_bernstein<R: Real>(poly: &[R], n: usize, out: &mut [R]) {
     let m = &TO_BERNSTEIN[n];
     for j in 0..=n {
@@ -64,7 +64,7 @@ pub fn power_to_bernstein<R: Real>(poly: &[R], n: usize, out: &mut [R]) {
 }
 
 /// De Casteljau at `v`: the control points of `[0, v]` into `left`, `[v, 1]` into `right`.
-#[inline]
+#[inline(always)]
 pub(crate) fn de_casteljau<R: Real>(b: &[R], n: usize, v: R, left: &mut [R], right: &mut [R]) {
     let mut tmp = [R::default(); MAX_DEGREE + 1];
     tmp[..=n].copy_from_slice(&b[..=n]);
@@ -80,7 +80,7 @@ pub(crate) fn de_casteljau<R: Real>(b: &[R], n: usize, v: R, left: &mut [R], rig
 
 /// The smallest `v ∈ [0, 1]` where the Bernstein polynomial `b` reaches zero from below
 /// (`b_0 ≥ 0` gives 0), to within `tol_v`; `None` when it stays negative.
-#[inline]
+#[inline(always)]
 pub fn bezier_first_root<R: Real>(
     b: &[R; MAX_DEGREE + 1],
     n: usize,

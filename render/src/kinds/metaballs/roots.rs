@@ -286,8 +286,6 @@ pub fn find_first<R: Real>(
     }
 }
 
-type SectionFn<R> =
-    fn(&FindParams<R>, &[RayBall<R>], &[u32], R, R, &mut u32, &mut HalfStack<R>) -> Option<R>;
 
 /// Whether the field can reach `T` on `[a, b]`. The kernels are monotone in `s` with one
 /// sign (a caller may negate them, as the exit query does), and `s` grows with the distance
@@ -343,14 +341,20 @@ fn stretch_may_reach<R: Real>(p: &FindParams<R>, balls: &[RayBall<R>], lo: R, hi
 
 /// Sorts the entry/exit points in `[lo, hi]` and calls `section` on each stretch between
 /// consecutive ones with the balls active there (the tutorial's active list).
-fn walk_sections<R: Real>(
+/// `section` is a generic parameter rather than a function pointer so that each finder's
+/// section search is compiled into its own copy of this walk.
+#[inline(always)]
+fn walk_sections<R: Real, S>(
     p: &FindParams<R>,
     balls: &[RayBall<R>],
     lo: R,
     hi: R,
     scratch: &mut Scratch<R>,
-    section: SectionFn<R>,
-) -> Found<R> {
+    section: S,
+) -> Found<R>
+where
+    S: Fn(&FindParams<R>, &[RayBall<R>], &[u32], R, R, &mut u32, &mut HalfStack<R>) -> Option<R>,
+{
     if !stretch_may_reach(p, balls, lo, hi) {
         return Found::default();
     }
@@ -646,6 +650,11 @@ fn secant<R: Real>(
 }
 
 /// (c) The section's field minus `T` as a Bernstein polynomial, then Bézier clipping.
+///
+/// The kernels in use have `w`-degree 3 (Wyvill) or 2 (Murakami): each gets its own copy of
+/// [`bezier_section_of`] with the degree a constant, so the per-ball polynomial products and the
+/// clipping loops are unrolled; the operations and their order are those of the general copy,
+/// so the roots are bit for bit the same.
 fn bezier_section<R: Real>(
     p: &FindParams<R>,
     balls: &[RayBall<R>],
@@ -655,8 +664,28 @@ fn bezier_section<R: Real>(
     iters: &mut u32,
     halves: &mut HalfStack<R>,
 ) -> Option<R> {
+    match p.kernel.degree {
+        3 => bezier_section_of(3, p, balls, active, a, b, iters, halves),
+        2 => bezier_section_of(2, p, balls, active, a, b, iters, halves),
+        w => bezier_section_of(w, p, balls, active, a, b, iters, halves),
+    }
+}
+
+/// [`bezier_section`] for a kernel of `w`-degree `w_degree` (`p.kernel.degree`).
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+fn bezier_section_of<R: Real>(
+    w_degree: usize,
+    p: &FindParams<R>,
+    balls: &[RayBall<R>],
+    active: &[u32],
+    a: R,
+    b: R,
+    iters: &mut u32,
+    halves: &mut HalfStack<R>,
+) -> Option<R> {
     let h = b - a;
-    let degree = 2 * p.kernel.degree;
+    let degree = 2 * w_degree;
     let mut poly = [R::default(); MAX_DEGREE + 1];
     for &i in active {
         let ball = &balls[i as usize];
@@ -680,7 +709,7 @@ fn bezier_section<R: Real>(
                     poly[j] = poly[j] + ck * wk[j];
                 }
             }
-            if k == p.kernel.degree {
+            if k == w_degree {
                 break;
             }
             // wk ← wk · (w0 + w1 v + w2 v²), from the top down so it works in place.
