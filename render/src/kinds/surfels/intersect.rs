@@ -16,13 +16,14 @@ use crate::kinds::surfels::prepared::PreparedSurfels;
 use crate::ray::Ray;
 use glam::Vec3;
 
-/// A converged, unclipped intersection with one leaf.
+/// A converged, unclipped intersection with one leaf. Its colour is left to
+/// [`LeafHit::colour`]: a ray may converge on several leaves before the nearest wins, and a
+/// shadow ray needs none.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct LeafHit {
     pub t: f32,
     pub position: Vec3,
     pub normal: Vec3,
-    pub colour: Vec3,
     pub surfel: u32,
 }
 
@@ -69,8 +70,7 @@ pub fn intersect_leaf(
     if a * a + b * b > radius * radius {
         return None;
     }
-    let stretch = leaf.leaf_radius / p.model.leaf_radius[s].max(1e-20);
-    let h = p.model.support[s] * stretch.max(1e-3);
+    let h = support(p, s, leaf.leaf_radius);
     let neighbours = p.model.neighbours.row(s);
     let mut x = ray.at(t0);
     let (iterations, epsilon) = (p.options.mls_iterations, p.options.mls_epsilon);
@@ -109,7 +109,6 @@ pub fn intersect_leaf(
                 t,
                 position: x,
                 normal: n,
-                colour: colour_at(p, neighbours, x, inv_h2),
                 surfel: s as u32,
             });
         }
@@ -126,8 +125,29 @@ pub fn intersect_leaf(
     None
 }
 
-/// The weighted average colour of the neighbourhood at the converged point (eq. 12's
-/// weights), computed once per hit rather than on every iteration.
+/// The support radius of leaf surfel `s`'s neighbourhood weights, grown with its deformed
+/// leaf sphere (`leaf_radius`).
+#[inline]
+fn support(p: &PreparedSurfels, s: usize, leaf_radius: f32) -> f32 {
+    let stretch = leaf_radius / p.model.leaf_radius[s].max(1e-20);
+    p.model.support[s] * stretch.max(1e-3)
+}
+
+impl LeafHit {
+    /// The weighted average colour of the hit surfel's neighbourhood at the hit (eq. 12's
+    /// weights), computed once for the hit a ray keeps rather than on every iteration or for
+    /// every leaf it converged on.
+    pub fn colour(&self, p: &PreparedSurfels) -> Vec3 {
+        let s = self.surfel as usize;
+        let Some(leaf) = p.surfels[s].get() else {
+            return p.model.surfels[s].colour; // unreachable: the hit deformed its leaf
+        };
+        let h = support(p, s, leaf.leaf_radius);
+        colour_at(p, p.model.neighbours.row(s), self.position, 1.0 / (h * h))
+    }
+}
+
+/// The weighted average colour of the neighbourhood at the converged point `x`.
 fn colour_at(p: &PreparedSurfels, neighbours: &[u32], x: Vec3, inv_h2: f32) -> Vec3 {
     let (mut sw, mut sc) = (0.0f32, Vec3::ZERO);
     for &k in neighbours {

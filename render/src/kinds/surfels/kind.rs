@@ -38,12 +38,12 @@ impl PreparedSurfels {
     }
 
     #[inline]
-    fn record(h: LeafHit) -> Hit {
+    fn record(&self, h: LeafHit) -> Hit {
         Hit {
             t: h.t,
             position: h.position,
             normal: h.normal,
-            albedo: h.colour,
+            albedo: h.colour(self),
             primitive: h.surfel,
         }
     }
@@ -74,12 +74,12 @@ impl PreparedKind for PreparedSurfels {
         // A camera ray of the effects integrator (no pixel here) starts at 0: with the cache
         // on, its last nearest surfel is tested first (§4.2.2). The image is the same.
         if !(self.options.cache && t_min == 0.0) {
-            return self.nearest(ray, t_min, t_max, None, c).map(Self::record);
+            return self.nearest(ray, t_min, t_max, None, c).map(|h| self.record(h));
         }
         let key = SurfelRuntime::ray_key(ray);
         let hit = self.nearest(ray, t_min, t_max, self.runtime.cached_ray(key), c);
         self.runtime.remember_ray(key, hit.map(|h| h.surfel));
-        hit.map(Self::record)
+        hit.map(|h| self.record(h))
     }
 
     #[inline]
@@ -155,7 +155,7 @@ impl PreparedKind for PreparedSurfels {
         c: &mut SurfelCounters,
     ) -> Option<Hit> {
         let _ = isovalue;
-        self.nearest(ray, t_min, t_max, None, c).map(Self::record)
+        self.nearest(ray, t_min, t_max, None, c).map(|h| self.record(h))
     }
 
     /// Surfels have no density.
@@ -215,7 +215,7 @@ impl PreparedKind for PreparedSurfels {
                         self.runtime.remember(x, y, hit.map(|h| h.surfel));
                     }
                     let at = (y - y0) as usize * width + (x - x0) as usize;
-                    out[at] = (packet[k], hit.map(Self::record));
+                    out[at] = (packet[k], hit.map(|h| self.record(h)));
                 }
             }
         }
