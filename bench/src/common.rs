@@ -10,6 +10,8 @@ pub struct Machine {
     pub cpu: String,
     pub nproc: usize,
     pub threads: usize,
+    /// `portable build (x86_64)` or the instruction-set extensions the build uses.
+    pub build: String,
 }
 
 impl Machine {
@@ -27,13 +29,14 @@ impl Machine {
             cpu,
             nproc: std::thread::available_parallelism().map_or(1, |n| n.get()),
             threads: rayon::current_num_threads(),
+            build: isoray_render::cpu::build_line(),
         }
     }
 
     pub fn line(&self) -> String {
         format!(
-            "{} (nproc {}), {} worker threads",
-            self.cpu, self.nproc, self.threads
+            "{} (nproc {}), {} worker threads, {}",
+            self.cpu, self.nproc, self.threads, self.build
         )
     }
 }

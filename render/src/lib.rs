@@ -23,6 +23,7 @@
 pub mod backend;
 pub mod camera;
 pub mod colormap;
+pub mod cpu;
 mod demo_effects;
 mod demo_surfels;
 pub mod effects;

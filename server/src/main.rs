@@ -10,6 +10,18 @@ use tokio::net::TcpListener;
 use tracing_subscriber::EnvFilter;
 
 fn main() -> std::process::ExitCode {
+    // A build for newer CPUs (README, "Building for the host CPU") refuses to start on one
+    // that lacks what it was compiled to use, rather than dying of an illegal instruction.
+    let missing = isoray_render::cpu::missing();
+    if !missing.is_empty() {
+        eprintln!(
+            "isoray: this binary was built for CPUs with {}; this CPU lacks {}. \
+             Use the portable build (cargo build --release, no target-cpu).",
+            isoray_render::cpu::compiled_for().join(", "),
+            missing.join(", ")
+        );
+        return std::process::ExitCode::from(2);
+    }
     // The commands are picked by the first argument, so that every flag-only (or empty)
     // command line still starts the server exactly as before.
     let command = std::env::args_os().nth(1);
@@ -69,6 +81,7 @@ async fn run(config: Config) -> Result<(), String> {
     tracing::info!(
         threads = state.backend().threads(),
         backend = state.backend().name(),
+        build = %isoray_render::cpu::build_line(),
         "render pool started"
     );
     println!("isoray is serving its demo scenes: open http://{addr}/ in a browser");

@@ -286,7 +286,6 @@ pub fn find_first<R: Real>(
     }
 }
 
-
 /// Whether the field can reach `T` on `[a, b]`. The kernels are monotone in `s` with one
 /// sign (a caller may negate them, as the exit query does), and `s` grows with the distance
 /// from the ball's nearest point `tc`, so a ball whose term is positive is largest at the

@@ -74,7 +74,9 @@ impl PreparedKind for PreparedSurfels {
         // A camera ray of the effects integrator (no pixel here) starts at 0: with the cache
         // on, its last nearest surfel is tested first (§4.2.2). The image is the same.
         if !(self.options.cache && t_min == 0.0) {
-            return self.nearest(ray, t_min, t_max, None, c).map(|h| self.record(h));
+            return self
+                .nearest(ray, t_min, t_max, None, c)
+                .map(|h| self.record(h));
         }
         let key = SurfelRuntime::ray_key(ray);
         let hit = self.nearest(ray, t_min, t_max, self.runtime.cached_ray(key), c);
@@ -155,7 +157,8 @@ impl PreparedKind for PreparedSurfels {
         c: &mut SurfelCounters,
     ) -> Option<Hit> {
         let _ = isovalue;
-        self.nearest(ray, t_min, t_max, None, c).map(|h| self.record(h))
+        self.nearest(ray, t_min, t_max, None, c)
+            .map(|h| self.record(h))
     }
 
     /// Surfels have no density.
