@@ -148,11 +148,17 @@ impl<R: Real> RayBall<R> {
     /// The ball's term of the field at `t`.
     #[inline]
     pub fn term(&self, k: &KernelPoly<R>, t: R) -> R {
+        self.term_of::<0>(k, t)
+    }
+
+    /// [`RayBall::term`] with the kernel's `w`-degree `W` a constant (0: read from `k`).
+    #[inline(always)]
+    fn term_of<const W: usize>(&self, k: &KernelPoly<R>, t: R) -> R {
         let s = self.s_at(t);
         if s >= R::of(1.0) {
             return R::default();
         }
-        self.q * k.at_w(R::of(1.0) - s)
+        self.q * k.at_w_of::<W>(R::of(1.0) - s)
     }
 
     /// The parameter of the centre's projection.
@@ -184,8 +190,16 @@ impl<R: Real> KernelPoly<R> {
 
     #[inline]
     pub fn at_w(&self, w: R) -> R {
-        let mut acc = self.c[self.degree];
-        let mut k = self.degree;
+        self.at_w_of::<0>(w)
+    }
+
+    /// [`KernelPoly::at_w`] with the degree `W` a constant the loop unrolls to (0: the
+    /// kernel's own degree, read at run time); the same Horner steps either way.
+    #[inline(always)]
+    fn at_w_of<const W: usize>(&self, w: R) -> R {
+        let degree = if W == 0 { self.degree } else { W };
+        let mut acc = self.c[degree];
+        let mut k = degree;
         while k > 0 {
             k -= 1;
             acc = acc * w + self.c[k];
@@ -280,9 +294,17 @@ pub fn find_first<R: Real>(
     }
     match finder {
         RootFinder::Secant => secant(p, balls, lo, hi, scratch),
-        RootFinder::March => walk_sections(p, balls, lo, hi, scratch, march_section),
-        RootFinder::BezierClipping => walk_sections(p, balls, lo, hi, scratch, bezier_section),
-        RootFinder::SphereTracing => walk_sections(p, balls, lo, hi, scratch, trace_section),
+        RootFinder::March => walk_sections::<R, 0, _>(p, balls, lo, hi, scratch, march_section),
+        // The default finder gets a copy per kernel degree in use (Wyvill 3, Murakami 2):
+        // the section bounds' and the polynomials' loops unroll; the same operations.
+        RootFinder::BezierClipping => match p.kernel.degree {
+            3 => walk_sections::<R, 3, _>(p, balls, lo, hi, scratch, bezier_section::<R, 3>),
+            2 => walk_sections::<R, 2, _>(p, balls, lo, hi, scratch, bezier_section::<R, 2>),
+            _ => walk_sections::<R, 0, _>(p, balls, lo, hi, scratch, bezier_section::<R, 0>),
+        },
+        RootFinder::SphereTracing => {
+            walk_sections::<R, 0, _>(p, balls, lo, hi, scratch, trace_section)
+        }
     }
 }
 
@@ -295,20 +317,32 @@ pub fn find_first<R: Real>(
 /// overlapping balls the negated field stays far below `-T` and every section there is
 /// skipped (Molecule with 4 transparent layers at 640×480: 28.0 million finder iterations
 /// a frame before, 5.0 million after).
-#[inline]
-fn may_reach<R: Real>(p: &FindParams<R>, balls: &[RayBall<R>], active: &[u32], a: R, b: R) -> bool {
-    let peak = p.kernel.at_w(R::of(1.0));
+#[inline(always)]
+fn may_reach<R: Real, const W: usize>(
+    p: &FindParams<R>,
+    balls: &[RayBall<R>],
+    active: &[u32],
+    a: R,
+    b: R,
+) -> bool {
+    let peak = p.kernel.at_w_of::<W>(R::of(1.0));
     let mut bound = R::default();
     for &i in active {
-        bound = bound + term_bound(p, peak, &balls[i as usize], a, b);
+        bound = bound + term_bound::<R, W>(p, peak, &balls[i as usize], a, b);
     }
     !(bound < p.isovalue)
 }
 
 /// The most `ball`'s term can be on `[a, b]`, which its support covers: a positive term at
 /// the point nearest the ball's `tc`, a negative one at the end farthest from it.
-#[inline]
-fn term_bound<R: Real>(p: &FindParams<R>, peak: R, ball: &RayBall<R>, a: R, b: R) -> R {
+#[inline(always)]
+fn term_bound<R: Real, const W: usize>(
+    p: &FindParams<R>,
+    peak: R,
+    ball: &RayBall<R>,
+    a: R,
+    b: R,
+) -> R {
     let t = if ball.q * peak > R::default() {
         ball.tc.max(a).min(b)
     } else if (a - ball.tc).abs() > (b - ball.tc).abs() {
@@ -316,7 +350,7 @@ fn term_bound<R: Real>(p: &FindParams<R>, peak: R, ball: &RayBall<R>, a: R, b: R
     } else {
         b
     };
-    ball.term(&p.kernel, t)
+    ball.term_of::<W>(&p.kernel, t)
 }
 
 /// Whether the field can reach `T` anywhere on `[lo, hi]`: [`may_reach`]'s bound over the
@@ -324,16 +358,21 @@ fn term_bound<R: Real>(p: &FindParams<R>, peak: R, ball: &RayBall<R>, a: R, b: R
 /// ball that does not may add 0). It is at least every section's bound, so when it says no,
 /// every section would have been skipped: the stretch is passed over before its events are
 /// sorted (an exit search through a leaf that lies inside the solid).
-#[inline]
-fn stretch_may_reach<R: Real>(p: &FindParams<R>, balls: &[RayBall<R>], lo: R, hi: R) -> bool {
-    let peak = p.kernel.at_w(R::of(1.0));
+#[inline(always)]
+fn stretch_may_reach<R: Real, const W: usize>(
+    p: &FindParams<R>,
+    balls: &[RayBall<R>],
+    lo: R,
+    hi: R,
+) -> bool {
+    let peak = p.kernel.at_w_of::<W>(R::of(1.0));
     let mut bound = R::default();
     for ball in balls {
         let (a, b) = (ball.t0.max(lo), ball.t1.min(hi));
         if !(a < b) || (!(ball.q * peak > R::default()) && (a > lo || b < hi)) {
             continue;
         }
-        bound = bound + term_bound(p, peak, ball, a, b);
+        bound = bound + term_bound::<R, W>(p, peak, ball, a, b);
     }
     !(bound < p.isovalue)
 }
@@ -343,7 +382,7 @@ fn stretch_may_reach<R: Real>(p: &FindParams<R>, balls: &[RayBall<R>], lo: R, hi
 /// `section` is a generic parameter rather than a function pointer so that each finder's
 /// section search is compiled into its own copy of this walk.
 #[inline(always)]
-fn walk_sections<R: Real, S>(
+fn walk_sections<R: Real, const W: usize, S>(
     p: &FindParams<R>,
     balls: &[RayBall<R>],
     lo: R,
@@ -354,7 +393,7 @@ fn walk_sections<R: Real, S>(
 where
     S: Fn(&FindParams<R>, &[RayBall<R>], &[u32], R, R, &mut u32, &mut HalfStack<R>) -> Option<R>,
 {
-    if !stretch_may_reach(p, balls, lo, hi) {
+    if !stretch_may_reach::<R, W>(p, balls, lo, hi) {
         return Found::default();
     }
     let events = &mut scratch.events;
@@ -396,7 +435,7 @@ where
             continue;
         }
         let next = events[e].0;
-        if !may_reach(p, balls, active, t, next) {
+        if !may_reach::<R, W>(p, balls, active, t, next) {
             continue;
         }
         let mut iters = 0;
@@ -650,11 +689,11 @@ fn secant<R: Real>(
 
 /// (c) The section's field minus `T` as a Bernstein polynomial, then Bézier clipping.
 ///
-/// The kernels in use have `w`-degree 3 (Wyvill) or 2 (Murakami): each gets its own copy of
-/// [`bezier_section_of`] with the degree a constant, so the per-ball polynomial products and the
-/// clipping loops are unrolled; the operations and their order are those of the general copy,
-/// so the roots are bit for bit the same.
-fn bezier_section<R: Real>(
+/// `W` is the kernel's `w`-degree as a constant (0: read from `p.kernel` at run time): the
+/// kernels in use, Wyvill (3) and Murakami (2), each get a copy whose per-ball polynomial
+/// products and clipping loops are unrolled; the operations and their order are those of the
+/// general copy, so the roots are bit for bit the same.
+fn bezier_section<R: Real, const W: usize>(
     p: &FindParams<R>,
     balls: &[RayBall<R>],
     active: &[u32],
@@ -663,11 +702,8 @@ fn bezier_section<R: Real>(
     iters: &mut u32,
     halves: &mut HalfStack<R>,
 ) -> Option<R> {
-    match p.kernel.degree {
-        3 => bezier_section_of(3, p, balls, active, a, b, iters, halves),
-        2 => bezier_section_of(2, p, balls, active, a, b, iters, halves),
-        w => bezier_section_of(w, p, balls, active, a, b, iters, halves),
-    }
+    let w_degree = if W == 0 { p.kernel.degree } else { W };
+    bezier_section_of(w_degree, p, balls, active, a, b, iters, halves)
 }
 
 /// [`bezier_section`] for a kernel of `w`-degree `w_degree` (`p.kernel.degree`).
