@@ -231,3 +231,49 @@ fn the_shared_origin_gather_is_the_single_rays_bit_for_bit() {
     }
     assert!(compared > 1000, "{compared} gathered balls compared");
 }
+
+/// The shadow packets' structure-of-arrays gather ([`super::soa::LeafSpheres`]) appends, for
+/// rays with origins of their own, the balls the single ray's gather gives, field for field
+/// to the bit: every demo's spheres, shadow rays from the surface points of a grid of camera
+/// rays towards a point light, a range cutting some balls.
+#[test]
+fn the_shadow_rays_gather_is_the_single_rays_bit_for_bit() {
+    use super::soa::LeafSpheres;
+    let mut compared = 0usize;
+    for (demo, prepared, m) in demos() {
+        let all: Vec<u32> = (0..m.balls.len() as u32).collect();
+        let mut soa = LeafSpheres::default();
+        if !soa.load(m, &all) {
+            continue; // ellipsoids: the packet gathers as single rays do
+        }
+        let camera = demo.default_camera();
+        let light = camera.target + Vec3::new(3.0, 9.0, 2.0);
+        let rays = prepared.primary_rays(&camera, WIDTH, HEIGHT);
+        let far = 2.0 * (camera.target - camera.eye).length();
+        for y in (0..HEIGHT).step_by(3) {
+            for x in (0..WIDTH).step_by(3) {
+                let camera_ray = rays.through_pixel(x, y);
+                let Some(hit) = m.first_hit(&camera_ray, 0.0, far, demo.default_isovalue()) else {
+                    continue;
+                };
+                let start = hit.position + hit.normal * 1e-3;
+                let ray = Ray::new(start, (light - start).normalize());
+                let (lo, hi) = (0.0, 0.5 * (light - start).length());
+                let (mut single, mut packet) = (Vec::new(), Vec::new());
+                for &b in &all {
+                    m.gather(&ray, b, true, lo, hi, &mut single);
+                }
+                soa.gather(m, ray.origin, ray.dir, lo, hi, &mut packet);
+                assert_eq!(single.len(), packet.len(), "{demo:?} pixel {x},{y}");
+                for (s, p) in single.iter().zip(&packet) {
+                    let bits = |b: &crate::kinds::metaballs::roots::RayBall<f32>| {
+                        [b.t0, b.t1, b.a, b.tc, b.s_min, b.q].map(f32::to_bits)
+                    };
+                    assert_eq!((s.ball, bits(s)), (p.ball, bits(p)), "{demo:?} {x},{y}");
+                }
+                compared += single.len();
+            }
+        }
+    }
+    assert!(compared > 1000, "{compared} gathered balls compared");
+}

@@ -18,6 +18,8 @@
 //!    single-ray walk returns, since a ray crosses disjoint leaves in the order of their
 //!    entries — so a ray stays active after a root, but only for boxes it enters before that leaf.
 
+use super::queries::search_gathered;
+use super::soa::LeafSpheres;
 use super::{Accel, PreparedMetaballs, SCRATCH};
 use crate::geom::aabb::Aabb;
 use crate::kinds::metaballs::counters::MetaballCounters;
@@ -216,6 +218,7 @@ impl PreparedMetaballs {
             let mut stack: Vec<(u32, u32, u32)> = vec![(0, 0, n as u32)];
             let mut culled: Vec<u32> = Vec::new();
             let mut searching: Vec<(usize, (f32, f32))> = Vec::new();
+            let mut soa = LeafSpheres::default();
             while let Some((i, from, to)) = stack.pop() {
                 let (from, to) = (from as usize, to as usize);
                 let node = &tree.nodes[i as usize];
@@ -246,19 +249,28 @@ impl PreparedMetaballs {
                     } else {
                         leaf
                     };
+                    // Several rays: the balls as structure-of-arrays, gathered in one vector loop.
+                    let spheres = searching.len() >= 2 && soa.load(self, balls);
                     for &(r, (near, far)) in searching.iter() {
-                        let found = self.search_leaf(
-                            balls,
-                            balls.len(),
-                            &rays[r],
-                            near,
-                            far,
-                            &params,
-                            finder,
-                            gathered,
-                            scratch,
-                            counters,
-                        );
+                        let ray = &rays[r];
+                        let found = if spheres {
+                            gathered.clear();
+                            soa.gather(self, ray.origin, ray.dir, near, far, gathered);
+                            search_gathered(&params, finder, near, far, gathered, scratch, counters)
+                        } else {
+                            self.search_leaf(
+                                balls,
+                                balls.len(),
+                                ray,
+                                near,
+                                far,
+                                &params,
+                                finder,
+                                gathered,
+                                scratch,
+                                counters,
+                            )
+                        };
                         if let Some(t) = found {
                             best[r] = Some((near, t));
                         }
