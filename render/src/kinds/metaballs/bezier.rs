@@ -156,3 +156,43 @@ pub fn bezier_first_root<R: Real>(
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn bezier_clipping_finds_the_smallest_root_of_a_cubic() {
+        // (v - 0.2)(v - 0.5)(v - 0.9) · -1: negative at 0, roots at 0.2, 0.5, 0.9.
+        let poly = [0.09, -0.73, 1.6, -1.0, 0.0, 0.0, 0.0, 0.0, 0.0];
+        let mut b = [0.0f64; MAX_DEGREE + 1];
+        power_to_bernstein(&poly, 3, &mut b);
+        let mut iters = 0;
+        let v = bezier_first_root(
+            &[-b[0], -b[1], -b[2], -b[3], 0.0, 0.0, 0.0, 0.0, 0.0],
+            3,
+            1e-12,
+            &mut iters,
+            &mut Vec::new(),
+        )
+        .expect("a root");
+        assert!((v - 0.2).abs() < 1e-9, "v = {v}");
+        assert!(iters < 40, "{iters} iterations");
+    }
+
+    #[test]
+    fn de_casteljau_halves_evaluate_like_the_whole() {
+        let b = [0.1f64, -0.5, 0.3, 0.9, 0.0, 0.0, 0.0, 0.0, 0.0];
+        let mut l = [0.0; MAX_DEGREE + 1];
+        let mut r = [0.0; MAX_DEGREE + 1];
+        de_casteljau(&b, 3, 0.3, &mut l, &mut r);
+        assert!((l[3] - r[0]).abs() < 1e-12);
+        let eval = |c: &[f64], v: f64| {
+            (0..=3)
+                .map(|k| BINOMIAL[3][k] * v.powi(k as i32) * (1.0 - v).powi(3 - k as i32) * c[k])
+                .sum::<f64>()
+        };
+        assert!((eval(&b, 0.15) - eval(&l, 0.5)).abs() < 1e-12);
+        assert!((eval(&b, 0.65) - eval(&r, 0.5)).abs() < 1e-12);
+    }
+}

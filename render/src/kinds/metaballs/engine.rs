@@ -17,7 +17,7 @@ use crate::kinds::metaballs::roots::{self, FindParams, KernelPoly, RayBall, Root
 use crate::kinds::metaballs::scene::{MetaballScene, Shape};
 use crate::kinds::metaballs::tree::{BuildOptions, Tree, TreeBall, TreeKind, TreeStats};
 use crate::ray::{Hit, Ray};
-use glam::{Mat3, Vec3};
+use glam::Mat3;
 use std::cell::RefCell;
 use std::sync::{Arc, OnceLock};
 
@@ -29,6 +29,7 @@ mod packet_tests;
 mod shadows;
 
 mod soa;
+use soa::Ball;
 // Secondary-ray queries (any hit, exit from the solid, optical depth): the effects layer's.
 mod queries;
 // Successive crossings along a ray in one walk (depth peeling).
@@ -95,42 +96,6 @@ impl PrepareOptions {
     }
 }
 
-/// The hot-path copy of one ball.
-#[derive(Clone, Copy, Debug)]
-struct Ball {
-    center: Vec3,
-    inv_r: f32,
-    strength: f32,
-    lipschitz: f32,
-    min_radius: f32,
-    /// Index into `frames` for an ellipsoid, `u32::MAX` for a sphere.
-    frame: u32,
-}
-
-impl Ball {
-    /// This ball (index `i`) as a ray sees it, from what [`RayBall::along`] returns.
-    #[inline]
-    fn seen(
-        &self,
-        i: u32,
-        (t0, t1, a, tc, s_min): (f32, f32, f32, f32, f32),
-        owner: bool,
-    ) -> RayBall<f32> {
-        RayBall {
-            ball: i,
-            t0,
-            t1,
-            a,
-            tc,
-            s_min,
-            q: self.strength,
-            lipschitz: self.lipschitz,
-            min_radius: self.min_radius,
-            owner,
-        }
-    }
-}
-
 /// A metaball state ready to trace.
 #[derive(Debug)]
 pub struct PreparedMetaballs {
@@ -146,6 +111,8 @@ pub struct PreparedMetaballs {
     /// Whether `accel` is a Fitted BVH whose every box lies inside its parent's, the
     /// condition under which a packet's per-ray leaf ranges equal the single ray's.
     nested: bool,
+    /// The main tree's leaf lists as structure-of-arrays (scenes of spheres only).
+    spheres: Option<soa::TreeSpheres>,
 }
 
 /// Per-thread buffers of a ray query: the balls along the ray, the root finder's scratch and
@@ -163,7 +130,7 @@ impl PreparedMetaballs {
         let started = std::time::Instant::now();
         let slope = scene.kernel.max_slope();
         let mut frames = Vec::new();
-        let balls = scene
+        let balls: Vec<Ball> = scene
             .balls
             .iter()
             .map(|b| {
@@ -189,6 +156,10 @@ impl PreparedMetaballs {
             Accel::Tree(tree) => tree.kind == TreeKind::Fitted && tree.boxes_nest(),
             Accel::BruteForce | Accel::ActiveList => false,
         };
+        let spheres = match &accel {
+            Accel::Tree(tree) => soa::TreeSpheres::build(&balls, tree),
+            Accel::BruteForce | Accel::ActiveList => None,
+        };
         PreparedMetaballs {
             scene,
             balls,
@@ -198,6 +169,7 @@ impl PreparedMetaballs {
             build_ms: started.elapsed().as_secs_f64() * 1e3,
             fallback: OnceLock::new(),
             nested,
+            spheres,
         }
     }
 

@@ -143,7 +143,7 @@ impl PreparedMetaballs {
                     if balls.is_empty() {
                         continue;
                     }
-                    let shared = soa.load(self, origin, balls);
+                    let shared = soa.load(&self.balls, origin, balls);
                     cover.visit(width, from as usize, n, |r| {
                         if done[r] {
                             return false;
@@ -155,7 +155,7 @@ impl PreparedMetaballs {
                         };
                         let found = if shared {
                             gathered.clear();
-                            soa.gather(self, ray.dir, near, far, gathered);
+                            soa.gather(&self.balls, ray.dir, near, far, gathered);
                             search_gathered(&params, finder, near, far, gathered, scratch, counters)
                         } else {
                             self.search_leaf(

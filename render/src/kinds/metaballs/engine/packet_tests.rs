@@ -206,7 +206,7 @@ fn the_shared_origin_gather_is_the_single_rays_bit_for_bit() {
         let rays = prepared.primary_rays(&demo.default_camera(), WIDTH, HEIGHT);
         let origin = rays.through_pixel(0, 0).origin;
         let mut soa = SharedOriginBalls::default();
-        if !soa.load(m, origin, &all) {
+        if !soa.load(&m.balls, origin, &all) {
             continue; // ellipsoids: the packet gathers as single rays do
         }
         for y in (0..HEIGHT).step_by(3) {
@@ -217,7 +217,7 @@ fn the_shared_origin_gather_is_the_single_rays_bit_for_bit() {
                 for &b in &all {
                     m.gather(&ray, b, true, lo, hi, &mut single);
                 }
-                soa.gather(m, ray.dir, lo, hi, &mut shared);
+                soa.gather(&m.balls, ray.dir, lo, hi, &mut shared);
                 assert_eq!(single.len(), shared.len(), "{demo:?} pixel {x},{y}");
                 for (s, p) in single.iter().zip(&shared) {
                     let bits = |b: &crate::kinds::metaballs::roots::RayBall<f32>| {
@@ -243,7 +243,7 @@ fn the_shadow_rays_gather_is_the_single_rays_bit_for_bit() {
     for (demo, prepared, m) in demos() {
         let all: Vec<u32> = (0..m.balls.len() as u32).collect();
         let mut soa = LeafSpheres::default();
-        if !soa.load(m, &all) {
+        if !soa.load(&m.balls, &all) {
             continue; // ellipsoids: the packet gathers as single rays do
         }
         let camera = demo.default_camera();
@@ -263,7 +263,7 @@ fn the_shadow_rays_gather_is_the_single_rays_bit_for_bit() {
                 for &b in &all {
                     m.gather(&ray, b, true, lo, hi, &mut single);
                 }
-                soa.gather(m, ray.origin, ray.dir, lo, hi, &mut packet);
+                soa.gather(&m.balls, ray.origin, ray.dir, lo, hi, &mut packet);
                 assert_eq!(single.len(), packet.len(), "{demo:?} pixel {x},{y}");
                 for (s, p) in single.iter().zip(&packet) {
                     let bits = |b: &crate::kinds::metaballs::roots::RayBall<f32>| {
@@ -276,4 +276,73 @@ fn the_shadow_rays_gather_is_the_single_rays_bit_for_bit() {
         }
     }
     assert!(compared > 1000, "{compared} gathered balls compared");
+}
+
+/// A single ray's leaf gather from the tree's structure-of-arrays
+/// ([`super::soa::TreeSpheres`]) appends the balls, owner flags included, that gathering ball
+/// by ball gives, field for field to the bit: every demo's Fitted BVH, and Blobs under the
+/// BVH with split metaballs (whose leaves mark owners), rays from the camera through a grid,
+/// every leaf each ray crosses.
+#[test]
+fn the_tree_leaf_gather_is_the_ball_by_ball_gather_bit_for_bit() {
+    use super::Accel;
+    use crate::kinds::metaballs::tree::BuildOptions;
+    use crate::kinds::metaballs::{AccelKind, PrepareOptions};
+    let mut states: Vec<(DemoScene, Arc<PreparedMetaballs>)> =
+        demos().iter().map(|(d, _, m)| (*d, m.clone())).collect();
+    let blobs = demos()
+        .iter()
+        .find(|(d, _, _)| *d == DemoScene::Blobs)
+        .expect("blobs");
+    let options = PrepareOptions::fitted(blobs.2.scene().min_isovalue)
+        .with_accel(AccelKind::Tree(BuildOptions::bvh()));
+    let bvh = PreparedMetaballs::new(blobs.2.scene().clone(), options);
+    states.push((DemoScene::Blobs, Arc::new(bvh)));
+    let (mut compared, mut owners) = (0usize, [0usize; 2]);
+    let prepared = &demos()[0].1;
+    for (demo, m) in &states {
+        let (Accel::Tree(tree), Some(soa)) = (&m.accel, &m.spheres) else {
+            continue; // ellipsoids, or no tree: single rays gather ball by ball
+        };
+        let owners_only = tree.kind != crate::kinds::metaballs::tree::TreeKind::Fitted;
+        let rays = prepared.primary_rays(&demo.default_camera(), WIDTH, HEIGHT);
+        for y in (0..HEIGHT).step_by(4) {
+            for x in (0..WIDTH).step_by(4) {
+                let ray = rays.through_pixel(x, y);
+                for node in tree.nodes.iter().filter(|n| n.is_leaf() && n.count > 0) {
+                    let Some(range) = node.bounds.ray_range(ray.origin, ray.dir.recip(), 0.0, 1e4)
+                    else {
+                        continue;
+                    };
+                    let leaf = tree.leaf_balls(node);
+                    let (mut single, mut stored) = (Vec::new(), Vec::new());
+                    for (k, &b) in leaf.iter().enumerate() {
+                        let owner = !owners_only || k < node.owned as usize;
+                        m.gather(&ray, b, owner, range.0, range.1, &mut single);
+                    }
+                    let first = node.first as usize;
+                    let own = (node.owned as usize, owners_only);
+                    soa.gather(&m.balls, leaf, first, own, &ray, range, &mut stored);
+                    assert_eq!(single.len(), stored.len(), "{demo:?} pixel {x},{y}");
+                    for (s, p) in single.iter().zip(&stored) {
+                        let bits = |b: &crate::kinds::metaballs::roots::RayBall<f32>| {
+                            [b.t0, b.t1, b.a, b.tc, b.s_min, b.q].map(f32::to_bits)
+                        };
+                        assert_eq!(
+                            (s.ball, s.owner, bits(s)),
+                            (p.ball, p.owner, bits(p)),
+                            "{demo:?} {x},{y}"
+                        );
+                        owners[s.owner as usize] += 1;
+                    }
+                    compared += single.len();
+                }
+            }
+        }
+    }
+    assert!(compared > 10_000, "{compared} gathered balls compared");
+    assert!(
+        owners[0] > 0 && owners[1] > 0,
+        "owners and split balls both seen: {owners:?}"
+    );
 }

@@ -67,6 +67,7 @@ impl PreparedMetaballs {
         let finder = self.options.finder;
         let enough = out.len() + max;
         let mut state = Peel { t: t_min, inside };
+        let spheres = self.spheres_of(tree);
         PEEL.with(|cell| {
             let mut guard = cell.borrow_mut();
             let (leaf_balls, gathered, scratch, stack) = &mut *guard;
@@ -84,8 +85,18 @@ impl PreparedMetaballs {
                         return None;
                     }
                     leaf_balls.clear();
-                    for &b in tree.leaf_balls(node) {
-                        self.gather(ray, b, true, near.max(state.t), far, leaf_balls);
+                    let leaf = tree.leaf_balls(node);
+                    let range = (near.max(state.t), far);
+                    match spheres {
+                        Some(soa) => {
+                            let (first, all) = (node.first as usize, (leaf.len(), false));
+                            soa.gather(&self.balls, leaf, first, all, ray, range, leaf_balls);
+                        }
+                        None => {
+                            for &b in leaf {
+                                self.gather(ray, b, true, range.0, range.1, leaf_balls);
+                            }
+                        }
                     }
                     while out.len() < enough {
                         let lo = near.max(state.t);

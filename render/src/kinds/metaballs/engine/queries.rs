@@ -189,6 +189,7 @@ impl PreparedMetaballs {
         let inv_dir = ray.dir.recip();
         let mut best_balls: Vec<RayBall<f32>> = Vec::new();
         let mut node_traversals = counters.node_traversals;
+        let spheres = self.spheres_of(tree);
         let best = tree.walk(
             ray.origin,
             inv_dir,
@@ -198,18 +199,36 @@ impl PreparedMetaballs {
             stack,
             &mut node_traversals,
             |node, near, far, best| {
-                let t = self.search_leaf(
-                    tree.leaf_balls(node),
-                    node.owned as usize,
-                    ray,
-                    near,
-                    far,
-                    &leaf_params,
-                    finder,
-                    gathered,
-                    scratch,
-                    counters,
-                )?;
+                let leaf = tree.leaf_balls(node);
+                let t = match spheres {
+                    Some(soa) => {
+                        gathered.clear();
+                        let owners = (node.owned as usize, leaf_params.owners_only);
+                        let first = node.first as usize;
+                        soa.gather(&self.balls, leaf, first, owners, ray, (near, far), gathered);
+                        search_gathered(
+                            &leaf_params,
+                            finder,
+                            near,
+                            far,
+                            gathered,
+                            scratch,
+                            counters,
+                        )
+                    }
+                    None => self.search_leaf(
+                        leaf,
+                        node.owned as usize,
+                        ray,
+                        near,
+                        far,
+                        &leaf_params,
+                        finder,
+                        gathered,
+                        scratch,
+                        counters,
+                    ),
+                }?;
                 if first_leaf {
                     return Some(t);
                 }
@@ -227,6 +246,16 @@ impl PreparedMetaballs {
             *gathered = best_balls;
         }
         best
+    }
+
+    /// `tree`'s leaf lists as structure-of-arrays, when `tree` is this state's main tree and
+    /// the scene is all spheres.
+    #[inline]
+    pub(super) fn spheres_of(&self, tree: &Tree) -> Option<&super::soa::TreeSpheres> {
+        match (&self.accel, &self.spheres) {
+            (Accel::Tree(main), Some(s)) if std::ptr::eq(main, tree) => Some(s),
+            _ => None,
+        }
     }
 
     /// A leaf searched on `[near, far]` of `ray`: of `balls` (a leaf's list, owned balls

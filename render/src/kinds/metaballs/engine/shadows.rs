@@ -250,12 +250,12 @@ impl PreparedMetaballs {
                         leaf
                     };
                     // Several rays: the balls as structure-of-arrays, gathered in one vector loop.
-                    let spheres = searching.len() >= 2 && soa.load(self, balls);
+                    let spheres = searching.len() >= 2 && soa.load(&self.balls, balls);
                     for &(r, (near, far)) in searching.iter() {
                         let ray = &rays[r];
                         let found = if spheres {
                             gathered.clear();
-                            soa.gather(self, ray.origin, ray.dir, near, far, gathered);
+                            soa.gather(&self.balls, ray.origin, ray.dir, near, far, gathered);
                             search_gathered(&params, finder, near, far, gathered, scratch, counters)
                         } else {
                             self.search_leaf(

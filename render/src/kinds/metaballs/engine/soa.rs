@@ -7,12 +7,50 @@
 //! in one branch-free loop over the arrays, which the compiler turns into vector code (checked
 //! in the release assembly: `mulps`/`divps` over 4 lanes at the portable `x86-64` level);
 //! only the balls whose support the ray crosses go on to the scalar tail. The operations and
-//! their order are those of [`PreparedMetaballs::gather`] with `along`, in IEEE `f32` without
+//! their order are those of `PreparedMetaballs::gather` with `along`, in IEEE `f32` without
 //! contraction, so the gathered balls are bit for bit the single ray's.
 
-use super::PreparedMetaballs;
 use crate::kinds::metaballs::roots::RayBall;
+use crate::kinds::metaballs::tree::Tree;
+use crate::ray::Ray;
 use glam::Vec3;
+use rayon::prelude::*;
+
+/// The hot-path copy of one ball.
+#[derive(Clone, Copy, Debug)]
+pub(super) struct Ball {
+    pub(super) center: Vec3,
+    pub(super) inv_r: f32,
+    pub(super) strength: f32,
+    pub(super) lipschitz: f32,
+    pub(super) min_radius: f32,
+    /// Index into `frames` for an ellipsoid, `u32::MAX` for a sphere.
+    pub(super) frame: u32,
+}
+
+impl Ball {
+    /// This ball (index `i`) as a ray sees it, from what [`RayBall::along`] returns.
+    #[inline]
+    pub(super) fn seen(
+        &self,
+        i: u32,
+        (t0, t1, a, tc, s_min): (f32, f32, f32, f32, f32),
+        owner: bool,
+    ) -> RayBall<f32> {
+        RayBall {
+            ball: i,
+            t0,
+            t1,
+            a,
+            tc,
+            s_min,
+            q: self.strength,
+            lipschitz: self.lipschitz,
+            min_radius: self.min_radius,
+            owner,
+        }
+    }
+}
 
 /// The balls of one leaf for one shared origin (spheres only).
 #[derive(Debug, Default)]
@@ -31,14 +69,14 @@ impl SharedOriginBalls {
     /// Loads `balls` (indices into `m`'s balls) as seen from `origin`; `false` when one of them
     /// is an ellipsoid (whose frame this layout does not hold), and the caller gathers as a
     /// single ray does.
-    pub(super) fn load(&mut self, m: &PreparedMetaballs, origin: Vec3, balls: &[u32]) -> bool {
+    pub(super) fn load(&mut self, records: &[Ball], origin: Vec3, balls: &[u32]) -> bool {
         self.ids.clear();
         self.ex.clear();
         self.ey.clear();
         self.ez.clear();
         self.inv_r.clear();
         for &i in balls {
-            let b = &m.balls[i as usize];
+            let b = &records[i as usize];
             if b.frame != u32::MAX {
                 return false;
             }
@@ -58,10 +96,10 @@ impl SharedOriginBalls {
 
     /// The balls whose support the ray along `dir` from the shared origin crosses within
     /// `[lo, hi]`, appended to `out` in the loaded order: what
-    /// [`PreparedMetaballs::gather`] appends for each of them.
+    /// `PreparedMetaballs::gather` appends for each of them.
     pub(super) fn gather(
         &mut self,
-        m: &PreparedMetaballs,
+        records: &[Ball],
         dir: Vec3,
         lo: f32,
         hi: f32,
@@ -97,14 +135,14 @@ impl SharedOriginBalls {
                 continue;
             }
             let i = self.ids[k];
-            out.push(m.balls[i as usize].seen(i, (t0, t1, a, tc, s_min), true));
+            out.push(records[i as usize].seen(i, (t0, t1, a, tc, s_min), true));
         }
     }
 }
 
 /// The balls of one leaf (spheres only) for rays with origins of their own (shadow rays): per
 /// ray, `e = (o − p) / R` is computed in the same branch-free loop as `a`, `tc`, `s_min`, with
-/// [`PreparedMetaballs::gather`]'s operations in its order, so the gathered balls are bit for
+/// `PreparedMetaballs::gather`'s operations in its order, so the gathered balls are bit for
 /// bit the single ray's.
 #[derive(Debug, Default)]
 pub(super) struct LeafSpheres {
@@ -121,14 +159,14 @@ pub(super) struct LeafSpheres {
 impl LeafSpheres {
     /// Loads `balls` (indices into `m`'s balls); `false` when one of them is an ellipsoid,
     /// and the caller gathers as a single ray does.
-    pub(super) fn load(&mut self, m: &PreparedMetaballs, balls: &[u32]) -> bool {
+    pub(super) fn load(&mut self, records: &[Ball], balls: &[u32]) -> bool {
         self.ids.clear();
         self.cx.clear();
         self.cy.clear();
         self.cz.clear();
         self.inv_r.clear();
         for &i in balls {
-            let b = &m.balls[i as usize];
+            let b = &records[i as usize];
             if b.frame != u32::MAX {
                 return false;
             }
@@ -146,10 +184,10 @@ impl LeafSpheres {
     }
 
     /// The balls whose support `o + t·dir` crosses within `[lo, hi]`, appended to `out` in
-    /// the loaded order: what [`PreparedMetaballs::gather`] appends for each of them.
+    /// the loaded order: what `PreparedMetaballs::gather` appends for each of them.
     pub(super) fn gather(
         &mut self,
-        m: &PreparedMetaballs,
+        records: &[Ball],
         origin: Vec3,
         dir: Vec3,
         lo: f32,
@@ -191,7 +229,100 @@ impl LeafSpheres {
                 continue;
             }
             let i = self.ids[k];
-            out.push(m.balls[i as usize].seen(i, (t0, t1, a, tc, s_min), true));
+            out.push(records[i as usize].seen(i, (t0, t1, a, tc, s_min), true));
+        }
+    }
+}
+
+/// The main tree's leaf lists as structure-of-arrays, built with the tree: entry `k` holds
+/// the centre and `1/R` of ball `tree.balls[k]`, so a single ray's leaf gather reads a
+/// contiguous stretch and runs the same branch-free loop (16 balls at a time) instead of
+/// reaching into the ball records one by one. Only for scenes of spheres.
+#[derive(Debug)]
+pub(super) struct TreeSpheres {
+    cx: Vec<f32>,
+    cy: Vec<f32>,
+    cz: Vec<f32>,
+    inv_r: Vec<f32>,
+}
+
+/// Balls a gather works through at a time: fixed-size arrays the compiler vectorises.
+const LANES: usize = 16;
+
+impl TreeSpheres {
+    /// `None` when the scene has an ellipsoid. `tree` is built over `records`.
+    pub(super) fn build(records: &[Ball], tree: &Tree) -> Option<TreeSpheres> {
+        if records.iter().any(|b| b.frame != u32::MAX) {
+            return None;
+        }
+        // One parallel pass on the pool with the tree (a state's build time counts it): each
+        // record is read once (the lists name balls in scene order, so the reads are random).
+        type Columns = ((Vec<f32>, Vec<f32>), (Vec<f32>, Vec<f32>));
+        let ((cx, cy), (cz, inv_r)): Columns = tree
+            .balls
+            .par_iter()
+            .map(|&i| {
+                let b = &records[i as usize];
+                ((b.center.x, b.center.y), (b.center.z, b.inv_r))
+            })
+            .collect();
+        Some(TreeSpheres { cx, cy, cz, inv_r })
+    }
+
+    /// The balls of `tree.balls[first..first + ids.len()]` (`ids`, a leaf's list) whose
+    /// support `ray` crosses within `[lo, hi]`, appended to `out` in the leaf's order, the
+    /// first `owned` of them owners (all of them unless `owners_only`): what
+    /// `PreparedMetaballs::gather` appends for each, bit for bit.
+    #[allow(clippy::too_many_arguments)]
+    pub(super) fn gather(
+        &self,
+        records: &[Ball],
+        ids: &[u32],
+        first: usize,
+        (owned, owners_only): (usize, bool),
+        ray: &Ray,
+        (lo, hi): (f32, f32),
+        out: &mut Vec<RayBall<f32>>,
+    ) {
+        let (o, d) = (ray.origin, ray.dir);
+        let mut start = 0;
+        while start < ids.len() {
+            let len = (ids.len() - start).min(LANES);
+            let at = first + start;
+            let (cx, cy, cz, inv_r) = (
+                &self.cx[at..at + len],
+                &self.cy[at..at + len],
+                &self.cz[at..at + len],
+                &self.inv_r[at..at + len],
+            );
+            let (mut a_of, mut tc_of, mut s_of) = ([0f32; LANES], [0f32; LANES], [0f32; LANES]);
+            for k in 0..len {
+                let r = inv_r[k];
+                let (ex, ey, ez) = ((o.x - cx[k]) * r, (o.y - cy[k]) * r, (o.z - cz[k]) * r);
+                let (gx, gy, gz) = (d.x * r, d.y * r, d.z * r);
+                let a = gx * gx + gy * gy + gz * gz;
+                let tc = -(ex * gx + ey * gy + ez * gz) / a;
+                let (qx, qy, qz) = (ex + tc * gx, ey + tc * gy, ez + tc * gz);
+                a_of[k] = a;
+                tc_of[k] = tc;
+                s_of[k] = qx * qx + qy * qy + qz * qz;
+            }
+            for k in 0..len {
+                let (a, s_min) = (a_of[k], s_of[k]);
+                if !(a > 0.0) || !(s_min < 1.0) {
+                    continue;
+                }
+                let tc = tc_of[k];
+                let half = ((1.0 - s_min) / a).sqrt();
+                let (t0, t1) = (tc - half, tc + half);
+                if t1 < lo || t0 > hi {
+                    continue;
+                }
+                let i = ids[start + k];
+                let owner = !owners_only || start + k < owned;
+                out.push(records[i as usize].seen(i, (t0, t1, a, tc, s_min), owner));
+            }
+            start += len;
         }
     }
 }
