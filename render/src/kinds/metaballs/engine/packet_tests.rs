@@ -27,6 +27,27 @@ fn tiles() -> Vec<(u32, u32, u32, u32)> {
         .collect()
 }
 
+/// Asserts that a structure-of-arrays gather appended the balls the ball-by-ball gather did,
+/// in order, every field (owner flag included) to the bit; returns how many.
+fn assert_same_balls(
+    single: &[crate::kinds::metaballs::roots::RayBall<f32>],
+    other: &[crate::kinds::metaballs::roots::RayBall<f32>],
+    at: impl Fn() -> String,
+) -> usize {
+    assert_eq!(single.len(), other.len(), "{}", at());
+    let bits = |b: &crate::kinds::metaballs::roots::RayBall<f32>| {
+        (
+            b.ball,
+            b.owner,
+            [b.t0, b.t1, b.a, b.tc, b.s_min, b.q].map(f32::to_bits),
+        )
+    };
+    for (s, o) in single.iter().zip(other) {
+        assert_eq!(bits(s), bits(o), "{}", at());
+    }
+    single.len()
+}
+
 /// Every metaball demo prepared with the defaults, once for the tests of this file.
 fn demos() -> &'static [(DemoScene, PreparedScene, Arc<PreparedMetaballs>)] {
     static DEMOS: OnceLock<Vec<(DemoScene, PreparedScene, Arc<PreparedMetaballs>)>> =
@@ -218,14 +239,7 @@ fn the_shared_origin_gather_is_the_single_rays_bit_for_bit() {
                     m.gather(&ray, b, true, lo, hi, &mut single);
                 }
                 soa.gather(&m.balls, ray.dir, lo, hi, &mut shared);
-                assert_eq!(single.len(), shared.len(), "{demo:?} pixel {x},{y}");
-                for (s, p) in single.iter().zip(&shared) {
-                    let bits = |b: &crate::kinds::metaballs::roots::RayBall<f32>| {
-                        [b.t0, b.t1, b.a, b.tc, b.s_min, b.q].map(f32::to_bits)
-                    };
-                    assert_eq!((s.ball, bits(s)), (p.ball, bits(p)), "{demo:?} {x},{y}");
-                }
-                compared += single.len();
+                compared += assert_same_balls(&single, &shared, || format!("{demo:?} {x},{y}"));
             }
         }
     }
@@ -264,14 +278,7 @@ fn the_shadow_rays_gather_is_the_single_rays_bit_for_bit() {
                     m.gather(&ray, b, true, lo, hi, &mut single);
                 }
                 soa.gather(&m.balls, ray.origin, ray.dir, lo, hi, &mut packet);
-                assert_eq!(single.len(), packet.len(), "{demo:?} pixel {x},{y}");
-                for (s, p) in single.iter().zip(&packet) {
-                    let bits = |b: &crate::kinds::metaballs::roots::RayBall<f32>| {
-                        [b.t0, b.t1, b.a, b.tc, b.s_min, b.q].map(f32::to_bits)
-                    };
-                    assert_eq!((s.ball, bits(s)), (p.ball, bits(p)), "{demo:?} {x},{y}");
-                }
-                compared += single.len();
+                compared += assert_same_balls(&single, &packet, || format!("{demo:?} {x},{y}"));
             }
         }
     }
@@ -323,19 +330,10 @@ fn the_tree_leaf_gather_is_the_ball_by_ball_gather_bit_for_bit() {
                     let first = node.first as usize;
                     let own = (node.owned as usize, owners_only);
                     soa.gather(&m.balls, leaf, first, own, &ray, range, &mut stored);
-                    assert_eq!(single.len(), stored.len(), "{demo:?} pixel {x},{y}");
-                    for (s, p) in single.iter().zip(&stored) {
-                        let bits = |b: &crate::kinds::metaballs::roots::RayBall<f32>| {
-                            [b.t0, b.t1, b.a, b.tc, b.s_min, b.q].map(f32::to_bits)
-                        };
-                        assert_eq!(
-                            (s.ball, s.owner, bits(s)),
-                            (p.ball, p.owner, bits(p)),
-                            "{demo:?} {x},{y}"
-                        );
+                    compared += assert_same_balls(&single, &stored, || format!("{demo:?} {x},{y}"));
+                    for s in &single {
                         owners[s.owner as usize] += 1;
                     }
-                    compared += single.len();
                 }
             }
         }
