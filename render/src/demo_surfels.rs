@@ -40,7 +40,8 @@ fn served(kind: SurfelDemoKind) -> &'static Served {
         SurfelDemoKind::Impact => 1,
         SurfelDemoKind::Heads => 2,
     };
-    CELLS[slot].get_or_init(|| Served {
+    // Built with no lock held: the build forks on the pool (crate::once).
+    crate::once::built(&CELLS[slot], || Served {
         // The demos are fixed, valid objects: a failure here is a bug in the generator.
         demo: demo::build(kind, detail(kind), FRAMES).expect("the surfel demos are valid"),
         runtime: Arc::new(SurfelRuntime::default()),

@@ -31,6 +31,7 @@ pub mod framebuffer;
 pub mod geom;
 pub mod integrator;
 pub mod kinds;
+pub mod once;
 pub mod ray;
 pub mod sampling;
 pub mod scene;

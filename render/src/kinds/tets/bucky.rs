@@ -35,7 +35,8 @@ pub const BUCKY_ISOVALUE: f32 = 0.5;
 /// The rest mesh and its material field (built once).
 fn rest() -> &'static (Arc<TetMesh>, Arc<[f32]>) {
     static REST: OnceLock<(Arc<TetMesh>, Arc<[f32]>)> = OnceLock::new();
-    REST.get_or_init(|| {
+    // Built with no lock held: the build forks on the pool (crate::once).
+    crate::once::built(&REST, || {
         let mesh = Arc::new(grid_mesh(
             [BUCKY_CELLS; 3],
             Vec3::splat(-RADIUS),

@@ -264,7 +264,8 @@ pub const DEMO_CELLS: usize = 32;
 /// The demo mesh: a ball of radius 2 cut from a jittered Kuhn grid (built once).
 pub fn demo_mesh() -> Arc<TetMesh> {
     static MESH: OnceLock<Arc<TetMesh>> = OnceLock::new();
-    MESH.get_or_init(|| {
+    // Built with no lock held: the build forks on the pool (crate::once).
+    crate::once::built(&MESH, || {
         Arc::new(grid_mesh(
             [DEMO_CELLS; 3],
             Vec3::splat(-2.0),

@@ -153,8 +153,11 @@ impl TetMesh {
             BuildKind::Bih => &self.shared[0],
             BuildKind::Sah => &self.shared[1],
         };
-        slot.get_or_init(|| Arc::new(Bvh::build(&self.tets, &self.vertices, kind)))
-            .clone()
+        // Built with no lock held: the build forks on the pool (crate::once).
+        crate::once::built(slot, || {
+            Arc::new(Bvh::build(&self.tets, &self.vertices, kind))
+        })
+        .clone()
     }
 
     /// The structure deforming steps of `kind` refit now: the shared BVH over the rest
