@@ -9,47 +9,39 @@
 //! naming what is missing. Images do not depend on the build: Rust does not contract `a * b + c`
 //! into a fused multiply-add unless asked, so every build computes the same IEEE operations.
 
-/// The extensions beyond the portable baseline this binary was compiled to use.
-pub fn compiled_for() -> Vec<&'static str> {
+/// Each extension this module knows: its name, whether this build uses it, and whether the
+/// running CPU has it (one list, so the two questions cannot drift apart).
+fn extensions() -> Vec<(&'static str, bool, bool)> {
     #[allow(unused_mut)]
-    let mut on: Vec<&'static str> = Vec::new();
+    let mut all: Vec<(&'static str, bool, bool)> = Vec::new();
     #[cfg(target_arch = "x86_64")]
     {
-        macro_rules! feature {
+        macro_rules! each {
             ($($f:tt),*) => {$(
-                if cfg!(target_feature = $f) {
-                    on.push($f);
-                }
+                all.push(($f, cfg!(target_feature = $f), std::arch::is_x86_feature_detected!($f)));
             )*};
         }
-        feature!(
+        each!(
             "sse3", "ssse3", "sse4.1", "sse4.2", "popcnt", "avx", "avx2", "fma", "bmi1", "bmi2",
             "lzcnt", "f16c", "movbe", "avx512f"
         );
     }
-    on
+    all
+}
+
+/// The extensions beyond the portable baseline this binary was compiled to use.
+pub fn compiled_for() -> Vec<&'static str> {
+    let used = extensions().into_iter().filter(|&(_, used, _)| used);
+    used.map(|(name, _, _)| name).collect()
 }
 
 /// Of [`compiled_for`], the extensions the running CPU lacks (empty when it can run this
 /// binary).
 pub fn missing() -> Vec<&'static str> {
-    #[allow(unused_mut)]
-    let mut missing: Vec<&'static str> = Vec::new();
-    #[cfg(target_arch = "x86_64")]
-    {
-        macro_rules! need {
-            ($($f:tt),*) => {$(
-                if cfg!(target_feature = $f) && !std::arch::is_x86_feature_detected!($f) {
-                    missing.push($f);
-                }
-            )*};
-        }
-        need!(
-            "sse3", "ssse3", "sse4.1", "sse4.2", "popcnt", "avx", "avx2", "fma", "bmi1", "bmi2",
-            "lzcnt", "f16c", "movbe", "avx512f"
-        );
-    }
-    missing
+    let lacking = extensions()
+        .into_iter()
+        .filter(|&(_, used, has)| used && !has);
+    lacking.map(|(name, _, _)| name).collect()
 }
 
 /// One line for logs and benchmark headers: `portable x86-64` or the extensions in use.
