@@ -254,8 +254,8 @@ impl Found<f32> {
 
 /// Reusable buffers, one set per thread.
 #[derive(Debug, Default)]
-pub struct Scratch<R> {
-    events: Vec<(R, u32)>,
+pub struct Scratch<R: Real> {
+    events: Vec<R::EventKey>,
     active: Vec<u32>,
     samples: Vec<R>,
     domains: Vec<(R, R)>,
@@ -401,25 +401,22 @@ where
     for (i, b) in balls.iter().enumerate() {
         let (t0, t1) = (b.t0.max(lo), b.t1.min(hi));
         if t0 < t1 {
-            events.push((t0, (i as u32) << 1));
-            events.push((t1, ((i as u32) << 1) | 1));
+            events.push(t0.event_key((i as u32) << 1));
+            events.push(t1.event_key(((i as u32) << 1) | 1));
         }
     }
-    events.sort_unstable_by(|x, y| {
-        x.0.partial_cmp(&y.0)
-            .unwrap_or(std::cmp::Ordering::Equal)
-            .then(x.1.cmp(&y.1))
-    });
+    // By parameter, then ball and kind (the order `partial_cmp` then code gives: no NaN here).
+    events.sort_unstable();
     let active = &mut scratch.active;
     active.clear();
     let mut owners = 0u32;
     let mut found = Found::default();
     let mut e = 0;
     while e < events.len() {
-        let t = events[e].0;
+        let (t, _) = R::of_event_key(events[e]);
         // Apply every event at this parameter.
-        while e < events.len() && !(t < events[e].0) {
-            let (_, code) = events[e];
+        while e < events.len() && !(t < R::of_event_key(events[e]).0) {
+            let (_, code) = R::of_event_key(events[e]);
             let i = code >> 1;
             let owner = balls[i as usize].owner;
             if code & 1 == 0 {
@@ -434,7 +431,7 @@ where
         if e >= events.len() || active.is_empty() || (p.owners_only && owners == 0) {
             continue;
         }
-        let next = events[e].0;
+        let next = R::of_event_key(events[e]).0;
         if !may_reach::<R, W>(p, balls, active, t, next) {
             continue;
         }
