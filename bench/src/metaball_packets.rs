@@ -6,7 +6,8 @@
 //! once with `PrepareOptions::packets` off and once on; the shadow pass starts from the
 //! packet's primary hits (untimed) and traces a ray from each hit towards the light, single
 //! rays through `any_hit_counted` and packets of a tile's shadow rays through
-//! `any_hits_packet`. Runs of the two alternate, medians over `--runs`; rays per second per
+//! `any_hits_packet`, or one by one where `shadow_packet_pays` finds the tile's rays too
+//! spread out for a packet to gain (the renderer's choice). Runs of the two alternate, medians over `--runs`; rays per second per
 //! core divide by the worker threads.
 
 use crate::common::median;
@@ -159,9 +160,17 @@ pub(crate) fn measure(demos: &[DemoScene], runs: usize, time: f64) -> Vec<Packet
                         if rays.is_empty() {
                             return;
                         }
-                        let hits =
-                            m.any_hits_packet(rays, 0.0, t_max, Some(light), isovalue, &mut c);
-                        std::hint::black_box(hits);
+                        // As the renderer does: a packet where its rays are coherent enough.
+                        if m.shadow_packet_pays(rays, 0.0) {
+                            let hits =
+                                m.any_hits_packet(rays, 0.0, t_max, Some(light), isovalue, &mut c);
+                            std::hint::black_box(hits);
+                        } else {
+                            for (ray, &hi) in rays.iter().zip(t_max) {
+                                let hit = m.any_hit_counted(ray, 0.0, hi, isovalue, &mut c);
+                                std::hint::black_box(hit);
+                            }
+                        }
                     })
                 },
             );

@@ -113,6 +113,8 @@ pub struct PreparedMetaballs {
     nested: bool,
     /// The main tree's leaf lists as structure-of-arrays (scenes of spheres only).
     spheres: Option<soa::TreeSpheres>,
+    /// The balls' mean support radius: the length a shadow packet's spread is measured in.
+    mean_radius: f32,
 }
 
 /// Per-thread buffers of a ray query: the balls along the ray, the root finder's scratch and
@@ -160,7 +162,14 @@ impl PreparedMetaballs {
             Accel::Tree(tree) => soa::TreeSpheres::build(&balls, tree),
             Accel::BruteForce | Accel::ActiveList => None,
         };
+        let mean_radius = if scene.balls.is_empty() {
+            0.0
+        } else {
+            (scene.balls.iter().map(|b| b.radius as f64).sum::<f64>() / scene.balls.len() as f64)
+                as f32
+        };
         PreparedMetaballs {
+            mean_radius,
             scene,
             balls,
             frames,

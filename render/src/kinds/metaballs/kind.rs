@@ -45,7 +45,9 @@ impl PreparedKind for PreparedMetaballs {
     }
 
     /// The Fitted BVH's shadow packets ([`PreparedMetaballs::any_hits_packet`]: any_hit's
-    /// own roots) for a point light; none for a directional one (no cone to cull by).
+    /// own roots) towards a point or a directional light, where the rays are coherent enough
+    /// to gain from one ([`PreparedMetaballs::shadow_packet_pays`]); otherwise none, and the
+    /// caller traces them one by one.
     fn any_hits_towards(
         &self,
         rays: &[Ray],
@@ -55,6 +57,9 @@ impl PreparedKind for PreparedMetaballs {
         isovalue: f32,
         counters: &mut MetaballCounters,
     ) -> Option<Vec<Option<f32>>> {
+        if !self.shadow_packet_pays(rays, t_min) {
+            return None;
+        }
         self.any_hits_packet(rays, t_min, t_max, light, isovalue, counters)
     }
 
