@@ -45,6 +45,9 @@ impl Camera {
     }
 }
 
+/// Pixels [`PrimaryRays::row_rays`] computes together.
+pub const ROW_LANES: usize = 8;
+
 /// Generator of primary rays for one image size.
 #[derive(Clone, Copy, Debug)]
 pub struct PrimaryRays {
@@ -65,6 +68,49 @@ impl PrimaryRays {
         let dir =
             self.top_left + self.right_step * (x as f32 + 0.5) + self.down_step * (y as f32 + 0.5);
         Ray::new(self.eye, dir)
+    }
+
+    /// The rays through pixels `x0..x0 + out.len()` of row `y`, into `out`, and their
+    /// directions' reciprocals into `inv` (as long): `through_pixel(x, y)` and `dir.recip()`,
+    /// bit for bit — the same IEEE operations in the same order — computed [`ROW_LANES`]
+    /// pixels at a time in arrays, so that the compiler turns the square roots and divisions
+    /// into vector instructions (a 16-wide tile's rays one by one cost about a tenth of its
+    /// packet traversal).
+    pub fn row_rays(&self, y: u32, x0: u32, out: &mut [Ray], inv: &mut [Vec3]) {
+        const L: usize = ROW_LANES;
+        let fy = y as f32 + 0.5;
+        let (tl, rs, ds) = (self.top_left, self.right_step, self.down_step);
+        let n = out.len().min(inv.len());
+        for start in (0..n).step_by(L) {
+            let (mut dx, mut dy, mut dz) = ([0f32; L], [0f32; L], [0f32; L]);
+            for l in 0..L {
+                // `x as f32` for every pixel index (below 2^31, where i32 and u32 agree).
+                let fx = (x0 as i32 + (start + l) as i32) as f32 + 0.5;
+                dx[l] = tl.x + rs.x * fx + ds.x * fy;
+                dy[l] = tl.y + rs.y * fx + ds.y * fy;
+                dz[l] = tl.z + rs.z * fx + ds.z * fy;
+            }
+            // `Vec3::normalize`: `self * (1 / sqrt(x·x + y·y + z·z))`.
+            for l in 0..L {
+                let r = 1.0 / (dx[l] * dx[l] + dy[l] * dy[l] + dz[l] * dz[l]).sqrt();
+                dx[l] *= r;
+                dy[l] *= r;
+                dz[l] *= r;
+            }
+            let (mut ix, mut iy, mut iz) = ([0f32; L], [0f32; L], [0f32; L]);
+            for l in 0..L {
+                ix[l] = 1.0 / dx[l];
+                iy[l] = 1.0 / dy[l];
+                iz[l] = 1.0 / dz[l];
+            }
+            for l in 0..L.min(n - start) {
+                out[start + l] = Ray {
+                    origin: self.eye,
+                    dir: Vec3::new(dx[l], dy[l], dz[l]),
+                };
+                inv[start + l] = Vec3::new(ix[l], iy[l], iz[l]);
+            }
+        }
     }
 
     /// The unnormalised direction (component 1 along the view axis) of the ray through the
@@ -147,5 +193,45 @@ mod tests {
             rays.pixel_of(Vec3::new(0.0, 0.0, 6.0)).is_none(),
             "behind the eye"
         );
+    }
+
+    /// The row generator gives `through_pixel`'s rays and their reciprocal directions bit
+    /// for bit, at any start and length (partial lane groups included), for cameras looking
+    /// along and across the axes.
+    #[test]
+    fn row_rays_are_through_pixel_bit_for_bit() {
+        let cameras = [
+            (Vec3::new(0.0, 0.0, 5.0), Vec3::ZERO, 45.0),
+            (Vec3::new(3.1, -2.7, 11.3), Vec3::new(0.2, 0.4, -0.9), 30.0),
+            (Vec3::new(-40.0, 25.0, 0.5), Vec3::new(1.0, -3.0, 2.0), 70.0),
+        ];
+        let bits = |v: Vec3| v.to_array().map(f32::to_bits);
+        let mut compared = 0;
+        for (eye, target, fov_y_deg) in cameras {
+            let camera = Camera {
+                eye,
+                target,
+                up: Vec3::Y,
+                fov_y_deg,
+            };
+            for (w, h) in [(1920, 1080), (37, 29)] {
+                let rays = camera.rays(w, h);
+                for y in [0, h / 3, h - 1] {
+                    for (x0, len) in [(0, w), (5, 16), (w - 3, 3), (17, 1)] {
+                        let mut out = vec![Ray::new(Vec3::ZERO, Vec3::Z); len as usize];
+                        let mut inv = vec![Vec3::ZERO; len as usize];
+                        rays.row_rays(y, x0, &mut out, &mut inv);
+                        for (k, (r, i)) in out.iter().zip(&inv).enumerate() {
+                            let want = rays.through_pixel(x0 + k as u32, y);
+                            assert_eq!(bits(r.origin), bits(want.origin));
+                            assert_eq!(bits(r.dir), bits(want.dir), "pixel {} {y}", x0 + k as u32);
+                            assert_eq!(bits(*i), bits(want.dir.recip()));
+                            compared += 1;
+                        }
+                    }
+                }
+            }
+        }
+        assert!(compared > 10_000);
     }
 }

@@ -98,18 +98,20 @@ impl PreparedMetaballs {
             width: x1 - x0,
             height: y1 - y0,
         };
-        let tile_rays: Vec<Ray> = (y0..y1)
-            .flat_map(|y| (x0..x1).map(move |x| rays.through_pixel(x, y)))
-            .collect();
-        let inv: Vec<Vec3> = tile_rays.iter().map(|r| r.dir.recip()).collect();
-        let n = tile_rays.len();
+        let n = (tile.width * tile.height) as usize;
+        let width = tile.width as usize;
+        let mut tile_rays = vec![Ray::new(Vec3::ZERO, Vec3::Z); n];
+        let mut inv = vec![Vec3::ZERO; n];
+        for (row, y) in (y0..y1).enumerate() {
+            let span = row * width..(row + 1) * width;
+            rays.row_rays(y, x0, &mut tile_rays[span.clone()], &mut inv[span]);
+        }
         let origin = tile_rays[0].origin;
         if tile_rays.iter().any(|r| r.origin != origin) {
             return None;
         }
         let params = self.params(isovalue);
         let finder = self.options.finder;
-        let width = tile.width as usize;
         let mut hits: Vec<Option<Hit>> = vec![None; n];
         let mut done = vec![false; n];
         counters.rays += n as u64;
