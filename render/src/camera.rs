@@ -72,15 +72,54 @@ impl PrimaryRays {
 
     /// The rays through pixels `x0..x0 + out.len()` of row `y`, into `out`, and their
     /// directions' reciprocals into `inv` (as long): `through_pixel(x, y)` and `dir.recip()`,
-    /// bit for bit — the same IEEE operations in the same order — computed [`ROW_LANES`]
-    /// pixels at a time in arrays, so that the compiler turns the square roots and divisions
-    /// into vector instructions (a 16-wide tile's rays one by one cost about a tenth of its
-    /// packet traversal).
+    /// bit for bit ([`PrimaryRays::row_directions`]).
     pub fn row_rays(&self, y: u32, x0: u32, out: &mut [Ray], inv: &mut [Vec3]) {
+        let n = out.len().min(inv.len());
+        self.row_directions(y, x0, n, |k, dir, recip| {
+            out[k] = Ray {
+                origin: self.eye,
+                dir,
+            };
+            inv[k] = recip;
+        });
+    }
+
+    /// The rays through pixels `x0..x1` × `y0..y1`, row by row, into `out`, and their
+    /// directions' reciprocals into `inv` (both cleared first).
+    pub fn tile_rays(
+        &self,
+        (x0, y0, x1, y1): (u32, u32, u32, u32),
+        out: &mut Vec<Ray>,
+        inv: &mut Vec<Vec3>,
+    ) {
+        let width = x1.saturating_sub(x0) as usize;
+        let n = width * y1.saturating_sub(y0) as usize;
+        out.clear();
+        out.resize(n, Ray::new(self.eye, Vec3::Z));
+        inv.clear();
+        inv.resize(n, Vec3::ZERO);
+        for (row, y) in (y0..y1).enumerate() {
+            let span = row * width..(row + 1) * width;
+            self.row_rays(y, x0, &mut out[span.clone()], &mut inv[span]);
+        }
+    }
+
+    /// `put(k, dir, recip)` for the pixels `x0 + k`, `k < n`, of row `y`: `through_pixel`'s
+    /// unit direction and its `recip()`, bit for bit — the same IEEE operations in the same
+    /// order — computed [`ROW_LANES`] pixels at a time in arrays, so that the compiler turns
+    /// the square roots and divisions into vector instructions (a 16-wide tile's rays one by
+    /// one cost about a seventh of a metaball packet's traversal).
+    #[inline]
+    pub fn row_directions(
+        &self,
+        y: u32,
+        x0: u32,
+        n: usize,
+        mut put: impl FnMut(usize, Vec3, Vec3),
+    ) {
         const L: usize = ROW_LANES;
         let fy = y as f32 + 0.5;
         let (tl, rs, ds) = (self.top_left, self.right_step, self.down_step);
-        let n = out.len().min(inv.len());
         for start in (0..n).step_by(L) {
             let (mut dx, mut dy, mut dz) = ([0f32; L], [0f32; L], [0f32; L]);
             for l in 0..L {
@@ -104,11 +143,11 @@ impl PrimaryRays {
                 iz[l] = 1.0 / dz[l];
             }
             for l in 0..L.min(n - start) {
-                out[start + l] = Ray {
-                    origin: self.eye,
-                    dir: Vec3::new(dx[l], dy[l], dz[l]),
-                };
-                inv[start + l] = Vec3::new(ix[l], iy[l], iz[l]);
+                put(
+                    start + l,
+                    Vec3::new(dx[l], dy[l], dz[l]),
+                    Vec3::new(ix[l], iy[l], iz[l]),
+                );
             }
         }
     }

@@ -110,8 +110,10 @@ impl PreparedKind for PreparedMetaballs {
         if let Some(hits) = self.primary_tile_packet(rays, rect, isovalue, t_max, counters) {
             return hits;
         }
-        (y0..y1)
-            .flat_map(|y| (x0..x1).map(move |x| rays.through_pixel(x, y)))
+        let (mut tile_rays, mut inv) = (Vec::new(), Vec::new());
+        rays.tile_rays(rect, &mut tile_rays, &mut inv);
+        tile_rays
+            .into_iter()
             .map(|ray| {
                 let hit = self.first_hit_counted(&ray, 0.0, t_max, isovalue, counters);
                 (ray, hit)

@@ -190,8 +190,12 @@ impl PreparedKind for PreparedSurfels {
                 hints.clear();
                 pixels.clear();
                 for y in by..(by + SIDE).min(y1) {
+                    let row = ((bx + SIDE).min(x1) - bx) as usize;
+                    let eye = rays.eye();
+                    rays.row_directions(y, bx, row, |_, dir, _| {
+                        packet.push(Ray { origin: eye, dir })
+                    });
                     for x in bx..(bx + SIDE).min(x1) {
-                        packet.push(rays.through_pixel(x, y));
                         hints.push(if cache {
                             self.runtime.cached(x, y)
                         } else {

@@ -55,9 +55,7 @@ impl<'a> RayPacket<'a> {
     ) -> RayPacket<'a> {
         dirs.clear();
         for y in y0..y1 {
-            for x in x0..x1 {
-                dirs.push(rays.through_pixel(x, y).dir);
-            }
+            rays.row_directions(y, x0, (x1 - x0) as usize, |_, dir, _| dirs.push(dir));
         }
         // Directions are affine in the pixel position, so the four corner pixels' rays span
         // every ray of the tile.

@@ -98,14 +98,10 @@ impl PreparedMetaballs {
             width: x1 - x0,
             height: y1 - y0,
         };
-        let n = (tile.width * tile.height) as usize;
+        let (mut tile_rays, mut inv) = (Vec::new(), Vec::new());
+        rays.tile_rays((x0, y0, x1, y1), &mut tile_rays, &mut inv);
+        let n = tile_rays.len();
         let width = tile.width as usize;
-        let mut tile_rays = vec![Ray::new(Vec3::ZERO, Vec3::Z); n];
-        let mut inv = vec![Vec3::ZERO; n];
-        for (row, y) in (y0..y1).enumerate() {
-            let span = row * width..(row + 1) * width;
-            rays.row_rays(y, x0, &mut tile_rays[span.clone()], &mut inv[span]);
-        }
         let origin = tile_rays[0].origin;
         if tile_rays.iter().any(|r| r.origin != origin) {
             return None;
