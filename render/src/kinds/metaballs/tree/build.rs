@@ -9,6 +9,7 @@ use crate::kinds::metaballs::tree::flat::*;
 use crate::kinds::metaballs::tree::neighbours::neighbour_lists;
 use crate::kinds::metaballs::tree::sah::*;
 use glam::Vec3;
+use std::sync::Arc;
 
 /// Per-thread buffers of the sequential build.
 #[derive(Default)]
@@ -44,15 +45,9 @@ impl Tree {
     ) -> Tree {
         let q_max = balls.iter().fold(0.0f32, |m, b| m.max(b.strength));
         let root_s_star = if opts.depends_on_isovalue() && opts.isovalue > 0.0 && q_max > 0.0 {
-            (0..S_TABLE)
-                .map(|n| {
-                    kernel
-                        .s_at_value(opts.isovalue / (n.max(1) as f32 * q_max))
-                        .sqrt()
-                })
-                .collect()
+            root_s_star_table(kernel, opts.isovalue, q_max)
         } else {
-            Vec::new()
+            Arc::from(Vec::new())
         };
         let mut ctx = Ctx {
             centers: balls.iter().map(|b| b.center).collect(),

@@ -5,6 +5,7 @@ use crate::geom::aabb::Aabb;
 use crate::kinds::metaballs::kernel::Kernel;
 use crate::kinds::metaballs::tree::flat::{BuildOptions, Node};
 use glam::Vec3;
+use std::sync::{Arc, Mutex, PoisonError};
 
 /// A subtree built on one thread: node 0 is its root; child and ball indices are local.
 pub(super) struct Chunk {
@@ -68,14 +69,54 @@ pub(super) struct Ctx {
     pub(super) neighbours: Vec<u32>,
     /// The largest positive strength of the whole set: a node's `q_max` is at most this.
     pub(super) q_max: f32,
-    /// `sqrt(s*)` for `n = 0..S_TABLE` positive balls of strength `q_max`.
-    pub(super) root_s_star: Vec<f32>,
+    /// `sqrt(s*)` for `n = 0..S_TABLE` positive balls of strength `q_max`
+    /// ([`root_s_star_table`]; empty when the build does not depend on the isovalue).
+    pub(super) root_s_star: Arc<[f32]>,
     /// Whether the build may fork on rayon.
     pub(super) parallel: bool,
 }
 
 /// Node sizes whose `r_max` comes from a table rather than a bisection.
 pub(super) const S_TABLE: usize = 4096;
+
+/// `sqrt(s*)` for `n = 0..S_TABLE` positive balls of strength `q_max` at `isovalue`: the
+/// table is [`S_TABLE`] 40-step bisections of the kernel, about 3 ms (more than the rest of a
+/// 1,000-ball scene's build), and depends on nothing else, so it is computed once per
+/// `(kernel, isovalue, q_max)` and shared: every state of an animated scene, and every
+/// viewer's, asks for the same one. The last few tables are kept; each is a pure function of
+/// its key, so which are kept changes no build.
+pub(super) fn root_s_star_table(kernel: Kernel, isovalue: f32, q_max: f32) -> Arc<[f32]> {
+    type Key = (Kernel, u32, u32);
+    static TABLES: Mutex<Vec<(Key, Arc<[f32]>)>> = Mutex::new(Vec::new());
+    const KEPT: usize = 8;
+    let key = (kernel, isovalue.to_bits(), q_max.to_bits());
+    let kept = |tables: &[(Key, Arc<[f32]>)]| {
+        tables
+            .iter()
+            .find(|(k, _)| *k == key)
+            .map(|(_, t)| t.clone())
+    };
+    if let Some(table) = kept(&TABLES.lock().unwrap_or_else(PoisonError::into_inner)) {
+        return table;
+    }
+    // Computed with no lock held; a table another thread stored meanwhile is the same.
+    let table: Arc<[f32]> = (0..S_TABLE)
+        .map(|n| {
+            kernel
+                .s_at_value(isovalue / (n.max(1) as f32 * q_max))
+                .sqrt()
+        })
+        .collect();
+    let mut tables = TABLES.lock().unwrap_or_else(PoisonError::into_inner);
+    if let Some(stored) = kept(&tables) {
+        return stored;
+    }
+    if tables.len() >= KEPT {
+        tables.remove(0);
+    }
+    tables.push((key, table.clone()));
+    table
+}
 /// Split-metaball discarding (§5.3.2) costs `split × (owned + split)` per leaf; larger
 /// leaves (rare: the SAH splits them) keep their lists.
 pub(super) const DISCARD_MAX_BALLS: usize = 96;

@@ -92,4 +92,25 @@ mod tests {
         tree.balls[first] = other;
         assert!(tree.validate(balls.len()).is_err());
     }
+
+    /// The `s*` table is computed once per kernel, isovalue and strength and then shared:
+    /// the same entries as computing it afresh, the same `Arc` on the second call, and a
+    /// different table for another isovalue.
+    #[test]
+    fn the_s_star_table_is_shared_and_equals_a_fresh_one() {
+        use super::ctx::{root_s_star_table, S_TABLE};
+        use std::sync::Arc;
+        let (kernel, iso, q) = (Kernel::Wyvill, 0.4321, 1.25);
+        let first = root_s_star_table(kernel, iso, q);
+        let second = root_s_star_table(kernel, iso, q);
+        assert!(Arc::ptr_eq(&first, &second));
+        assert_eq!(first.len(), S_TABLE);
+        for (n, &got) in first.iter().enumerate() {
+            let fresh = kernel.s_at_value(iso / (n.max(1) as f32 * q)).sqrt();
+            assert_eq!(got.to_bits(), fresh.to_bits(), "entry {n}");
+        }
+        let other = root_s_star_table(kernel, 0.5, q);
+        assert!(!Arc::ptr_eq(&first, &other));
+        assert_ne!(first[3], other[3]);
+    }
 }
