@@ -108,7 +108,7 @@ impl PrimaryRays {
     /// unit direction and its `recip()`, bit for bit — the same IEEE operations in the same
     /// order — computed [`ROW_LANES`] pixels at a time in arrays, so that the compiler turns
     /// the square roots and divisions into vector instructions (a 16-wide tile's rays one by
-    /// one cost about a seventh of a metaball packet's traversal).
+    /// one cost up to a sixth of a metaball packet's traversal).
     #[inline]
     pub fn row_directions(
         &self,
