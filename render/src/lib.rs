@@ -37,6 +37,7 @@ pub mod sampling;
 pub mod scene;
 pub mod scenes;
 pub mod shade;
+pub mod srgb;
 pub mod view;
 
 pub use backend::{Accumulator, Backend, CpuBackend, DeviceTimes, FrameRays};

@@ -408,16 +408,11 @@ pub fn fresnel(cos_i: f32, n1: f32, n2: f32) -> f32 {
     0.5 * (rs * rs + rp * rp)
 }
 
-/// Linear light in `[0, 1]` to an 8-bit sRGB value (IEC 61966-2-1).
+/// Linear light in `[0, 1]` to an 8-bit sRGB value (IEC 61966-2-1), by table: exactly the
+/// formula's code ([`crate::srgb`]).
 #[inline]
 pub fn linear_to_srgb8(v: f32) -> u8 {
-    let v = v.clamp(0.0, 1.0);
-    let s = if v <= 0.003_130_8 {
-        12.92 * v
-    } else {
-        1.055 * v.powf(1.0 / 2.4) - 0.055
-    };
-    (s * 255.0 + 0.5) as u8
+    crate::srgb::encode8(v)
 }
 
 /// An 8-bit sRGB value to linear light (the inverse of [`linear_to_srgb8`] up to rounding).
