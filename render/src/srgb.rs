@@ -123,5 +123,11 @@ mod tests {
             seen[encode8(s) as usize] = true;
         }
         assert!(seen[1..].iter().all(|&s| s));
+        // From a prefix's code the walk takes at most two steps.
+        let t = tables();
+        for (p, &least) in t.by_prefix.iter().enumerate().take(t.by_prefix.len() - 1) {
+            let most = encode8(f32::from_bits(((p as u32) << 16) | 0xFFFF));
+            assert!(most - least <= 2, "prefix {p}: codes {least}..={most}");
+        }
     }
 }
