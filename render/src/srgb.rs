@@ -3,7 +3,7 @@
 //! The formula (IEC 61966-2-1: `12.92·v` below 0.0031308, else `1.055·v^(1/2.4) − 0.055`,
 //! then `⌊255·s + 0.5⌋`) costs a `powf` per channel, three per pixel of every frame. The code
 //! it gives never decreases as `v` grows, so it is fixed by the 255 least values at which it
-//! steps up ([`steps`], found once by bisection over the `f32` bit patterns with the formula
+//! steps up (`Tables::steps`, found once by bisection over the `f32` bit patterns with the formula
 //! itself); a value's code is the number of steps at or below it, counted from a table
 //! indexed by the value's top 16 bits (at most one or two steps to walk from there). The
 //! test `the_fast_code_is_the_formulas_for_every_f32_in_0_1` compares the two for every

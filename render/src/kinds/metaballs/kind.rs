@@ -110,8 +110,13 @@ impl PreparedKind for PreparedMetaballs {
         if let Some(hits) = self.primary_tile_packet(rays, rect, isovalue, t_max, counters) {
             return hits;
         }
-        let (mut tile_rays, mut inv) = (Vec::new(), Vec::new());
-        rays.tile_rays(rect, &mut tile_rays, &mut inv);
+        let (eye, width) = (rays.eye(), (x1 - x0) as usize);
+        let mut tile_rays = Vec::with_capacity(width * (y1 - y0) as usize);
+        for y in y0..y1 {
+            rays.row_directions(y, x0, width, |_, dir, _| {
+                tile_rays.push(Ray { origin: eye, dir })
+            });
+        }
         tile_rays
             .into_iter()
             .map(|ray| {

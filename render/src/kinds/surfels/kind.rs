@@ -184,18 +184,18 @@ impl PreparedKind for PreparedSurfels {
         let cache = self.options.cache;
         let (mut packet, mut hints, mut pixels) = (Vec::new(), Vec::new(), Vec::new());
         let mut hits = [None; traverse::PACKET];
+        let eye = rays.eye();
         for by in (y0..y1).step_by(SIDE as usize) {
             for bx in (x0..x1).step_by(SIDE as usize) {
                 packet.clear();
                 hints.clear();
                 pixels.clear();
+                let bx1 = (bx + SIDE).min(x1);
                 for y in by..(by + SIDE).min(y1) {
-                    let row = ((bx + SIDE).min(x1) - bx) as usize;
-                    let eye = rays.eye();
-                    rays.row_directions(y, bx, row, |_, dir, _| {
+                    rays.row_directions(y, bx, (bx1 - bx) as usize, |_, dir, _| {
                         packet.push(Ray { origin: eye, dir })
                     });
-                    for x in bx..(bx + SIDE).min(x1) {
+                    for x in bx..bx1 {
                         hints.push(if cache {
                             self.runtime.cached(x, y)
                         } else {
