@@ -148,6 +148,108 @@ fn de_casteljau(b: array<f32, CONTROL_POINTS>, n: u32, v: f32) -> Split {
     return out;
 }
 
+// bezier.rs isolated: control points negative up to some index and non-negative from it on,
+// ending positive: exactly one root in (0, 1).
+fn isolated(c: array<f32, CONTROL_POINTS>, n: u32) -> bool {
+    if (!(c[n] > 0.0)) {
+        return false;
+    }
+    var k = 0u;
+    while (k < n && c[k] < 0.0) {
+        k = k + 1u;
+    }
+    for (var i = k; i <= n; i = i + 1u) {
+        if (!(c[i] >= 0.0)) {
+            return false;
+        }
+    }
+    return true;
+}
+
+// bezier.rs isolated_root's evaluation: the Bernstein form with binomials folded into `d`, by
+// Horner's rule in v / (1 - v) or (1 - v) / v, whichever is at most 1.
+fn bernstein_at(d: array<f32, CONTROL_POINTS>, n: u32, v: f32) -> f32 {
+    let u = 1.0 - v;
+    var scale = 1.0;
+    var h: f32;
+    if (v <= 0.5) {
+        let s = v / u;
+        h = d[n];
+        for (var k = n; k > 0u; k = k - 1u) {
+            h = h * s + d[k - 1u];
+            scale = scale * u;
+        }
+    } else {
+        let r = u / v;
+        h = d[0];
+        for (var k = 1u; k <= n; k = k + 1u) {
+            h = h * r + d[k];
+            scale = scale * v;
+        }
+    }
+    return h * scale;
+}
+
+// bezier.rs isolated_root: the one root of an isolated piece by regula falsi with Anderson
+// and Björck's modification, each evaluation at least half the tolerance inside the bracket;
+// the chord's crossing once the bracket is within tol_v.
+fn isolated_root(c: array<f32, CONTROL_POINTS>, n: u32, lo: f32, hi: f32, tol_v: f32, iters: ptr<function, u32>) -> Root {
+    var d: array<f32, CONTROL_POINTS>;
+    // C(n, k) built up exactly along k.
+    var binomial = 1.0;
+    for (var k = 0u; k <= n; k = k + 1u) {
+        d[k] = c[k] * binomial;
+        binomial = binomial * f32(n - k) / f32(k + 1u);
+    }
+    let width = hi - lo;
+    let nudge = 0.5 * tol_v / width;
+    var a = 0.0;
+    var ga = c[0];
+    var b = 1.0;
+    var gb = c[n];
+    var fa = ga;
+    var fb = gb;
+    var side = 0i;
+    loop {
+        if (width * (b - a) <= tol_v) {
+            return Root(true, lo + width * (a + (b - a) * (ga / (ga - gb))));
+        }
+        if (*iters > ITERATION_CAP) {
+            return Root(false, 0.0);
+        }
+        *iters = *iters + 1u;
+        let secant = a + (b - a) * (fa / (fa - fb));
+        var x = min(max(secant, a + nudge), b - nudge);
+        if (!(a < x && x < b)) {
+            x = 0.5 * (a + b);
+            if (!(a < x && x < b)) {
+                return Root(true, lo + width * a);
+            }
+        }
+        let gx = bernstein_at(d, n, x);
+        if (gx < 0.0) {
+            if (side < 0) {
+                let m = 1.0 - gx / fa;
+                fb = fb * select(0.5, m, m > 0.0);
+            }
+            a = x;
+            ga = gx;
+            fa = gx;
+            side = -1;
+        } else {
+            if (side > 0) {
+                let m = 1.0 - gx / fb;
+                fa = fa * select(0.5, m, m > 0.0);
+            }
+            b = x;
+            gb = gx;
+            fb = gx;
+            side = 1;
+        }
+    }
+    return Root(false, 0.0);
+}
+
 // bezier.rs bezier_first_root: the smallest v in [0, 1] where the Bernstein polynomial `b` of
 // degree n reaches zero from below (b_0 ≥ 0 gives 0), to within tol_v.
 fn bezier_first_root(b: array<f32, CONTROL_POINTS>, n: u32, tol_v: f32, iters: ptr<function, u32>) -> Root {
@@ -170,6 +272,9 @@ fn bezier_first_root(b: array<f32, CONTROL_POINTS>, n: u32, tol_v: f32, iters: p
                     done = false;
                 }
             }
+        }
+        if (!done && isolated(c, n)) {
+            return isolated_root(c, n, lo, hi, tol_v, iters);
         }
         if (!done) {
             // Where the convex hull of (k/n, c_k) meets the axis: over every segment from a

@@ -103,6 +103,9 @@ pub fn bezier_first_root<R: Real>(
         if !done && c[..=n].iter().all(|&x| x < zero) {
             done = true; // the hull lies below the axis: no root here
         }
+        if !done && isolated(c, n) {
+            return isolated_root(c, n, *lo, *hi, tol_v, iters);
+        }
         if !done {
             // Where the convex hull of (k/n, c_k) meets the axis: over every segment from a
             // negative to a non-negative control point.
@@ -157,9 +160,177 @@ pub fn bezier_first_root<R: Real>(
     }
 }
 
+/// Whether the control points are negative up to some index and non-negative from it on,
+/// ending positive: one sign change and a positive end, so (Descartes' rule of signs for the
+/// Bernstein basis) exactly one root in `(0, 1)`, a simple one.
+#[inline(always)]
+fn isolated<R: Real>(c: &[R; MAX_DEGREE + 1], n: usize) -> bool {
+    let zero = R::default();
+    if !(c[n] > zero) {
+        return false;
+    }
+    let mut k = 0;
+    while k < n && c[k] < zero {
+        k += 1;
+    }
+    c[k..=n].iter().all(|&x| x >= zero)
+}
+
+/// The one root in `(0, 1)` of the Bernstein polynomial `c` ([`isolated`]), mapped to
+/// `[lo, hi]`: regula falsi with Anderson and Björck's modification narrows the bracket
+/// `g(a) < 0 ≤ g(b)` until it is within `tol_v` (of the whole `[0, 1]`), and the chord across
+/// it gives the root. Each evaluation (the Bernstein form by Horner's rule in `v / (1 - v)` or
+/// `(1 - v) / v`, whichever is at most 1: `n` multiply-adds and a division) counts as an
+/// iteration. Clipping would converge about as fast here, but each of its iterations costs
+/// two de Casteljau subdivisions and the hull's crossings over every pair of control points.
+#[inline(always)]
+fn isolated_root<R: Real>(
+    c: &[R; MAX_DEGREE + 1],
+    n: usize,
+    lo: R,
+    hi: R,
+    tol_v: R,
+    iters: &mut u32,
+) -> Option<R> {
+    let (zero, one, half) = (R::default(), R::of(1.0), R::of(0.5));
+    let mut d = [zero; MAX_DEGREE + 1];
+    for k in 0..=n {
+        d[k] = c[k] * R::of(BINOMIAL[n][k]);
+    }
+    let eval = |v: R| -> R {
+        let u = one - v;
+        let mut scale = one;
+        let h = if v <= half {
+            let s = v / u;
+            let mut h = d[n];
+            for k in (0..n).rev() {
+                h = h * s + d[k];
+                scale = scale * u;
+            }
+            h
+        } else {
+            let r = u / v;
+            let mut h = d[0];
+            for &dk in &d[1..=n] {
+                h = h * r + dk;
+                scale = scale * v;
+            }
+            h
+        };
+        h * scale
+    };
+    let width = hi - lo;
+    // Each evaluation lands at least half the tolerance inside the bracket, so a converging
+    // secant closes it with one step past the root instead of creeping up to it.
+    let nudge = half * tol_v / width;
+    // `ga`, `gb`: the polynomial at the bracket's ends; `fa`, `fb`: the values the secant
+    // uses, an end's scaled down each time it is kept.
+    let (mut a, mut ga, mut b, mut gb) = (zero, c[0], one, c[n]);
+    let (mut fa, mut fb) = (ga, gb);
+    let mut side = 0i8;
+    loop {
+        if width * (b - a) <= tol_v {
+            // The root lies in the bracket, and so does the chord's crossing: within `tol_v`
+            // of it, and far closer where the curve is nearly straight across the bracket.
+            return Some(lo + width * (a + (b - a) * (ga / (ga - gb))));
+        }
+        if *iters > ITERATION_CAP {
+            return None;
+        }
+        *iters += 1;
+        let secant = a + (b - a) * (fa / (fa - fb));
+        let mut x = secant.max(a + nudge).min(b - nudge);
+        if !(a < x && x < b) {
+            x = half * (a + b);
+            if !(a < x && x < b) {
+                return Some(lo + width * a); // the precision is exhausted
+            }
+        }
+        let gx = eval(x);
+        // Anderson–Björck: an end kept twice in a row has its value scaled down.
+        if gx < zero {
+            if side < 0 {
+                let m = one - gx / fa;
+                fb = fb * if m > zero { m } else { half };
+            }
+            (a, ga, fa, side) = (x, gx, gx, -1);
+        } else {
+            if side > 0 {
+                let m = one - gx / fb;
+                fa = fa * if m > zero { m } else { half };
+            }
+            (b, gb, fb, side) = (x, gx, gx, 1);
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+    use proptest::prelude::*;
+
+    /// The root of a Bernstein polynomial in `(0, 1)` where it turns from negative to
+    /// non-negative, by `f64` bisection on the sum of its terms `c_k C(n, k) v^k (1 - v)^(n-k)`
+    /// (binomials by their product formula; no Horner's rule, no secant).
+    fn reference_root(c: &[f64], n: usize) -> f64 {
+        let choose = |k: usize| (0..k).fold(1.0, |acc, i| acc * (n - i) as f64 / (i + 1) as f64);
+        let g = |v: f64| {
+            (0..=n)
+                .map(|k| c[k] * choose(k) * v.powi(k as i32) * (1.0 - v).powi((n - k) as i32))
+                .sum::<f64>()
+        };
+        let (mut lo, mut hi) = (0.0f64, 1.0f64);
+        for _ in 0..200 {
+            let mid = 0.5 * (lo + hi);
+            if g(mid) < 0.0 {
+                lo = mid;
+            } else {
+                hi = mid;
+            }
+        }
+        hi
+    }
+
+    /// Control points negative before index `k0`, non-negative from it, the last positive.
+    fn isolated_points() -> impl Strategy<Value = (usize, Vec<f64>)> {
+        (2usize..=MAX_DEGREE).prop_flat_map(|n| {
+            (1usize..=n).prop_flat_map(move |k0| {
+                (
+                    prop::collection::vec(-10.0f64..-0.01, k0),
+                    prop::collection::vec(0.0f64..10.0, n - k0),
+                    0.01f64..10.0,
+                )
+                    .prop_map(move |(neg, nonneg, last)| {
+                        let mut c = neg;
+                        c.extend(nonneg);
+                        c.push(last);
+                        (n, c)
+                    })
+            })
+        })
+    }
+
+    proptest! {
+        #[test]
+        fn an_isolated_root_is_the_reference_root_within_the_tolerance((n, c) in isolated_points()) {
+            let truth = reference_root(&c, n);
+            let mut points = [0.0f64; MAX_DEGREE + 1];
+            points[..=n].copy_from_slice(&c);
+            prop_assert!(isolated(&points, n));
+            let mut iters = 0;
+            let v = bezier_first_root(&points, n, 1e-10, &mut iters, &mut Vec::new()).expect("a root");
+            prop_assert!((v - truth).abs() <= 1e-10, "f64: {} against {}", v, truth);
+            prop_assert!(iters < 100, "{} iterations", iters);
+            let mut singles = [0.0f32; MAX_DEGREE + 1];
+            for k in 0..=n {
+                singles[k] = c[k] as f32;
+            }
+            let singles_truth = reference_root(&singles.map(f64::from), n);
+            let mut iters = 0;
+            let v = bezier_first_root(&singles, n, 1e-4, &mut iters, &mut Vec::new()).expect("a root");
+            prop_assert!((v as f64 - singles_truth).abs() <= 1e-4, "f32: {} against {}", v, singles_truth);
+        }
+    }
 
     #[test]
     fn bezier_clipping_finds_the_smallest_root_of_a_cubic() {
