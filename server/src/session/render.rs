@@ -24,6 +24,52 @@ use std::time::{Duration, Instant};
 /// The depth channel is this many times smaller than its frame in each direction.
 const DEPTH_FACTOR: u32 = 4;
 
+/// Input that came less than this many frame intervals ago counts as streaming in.
+const INPUT_STREAM_TICKS: f64 = 2.0;
+
+/// Most interactive frames a session may bank while it renders none.
+const FRAME_BURST: f64 = 1.5;
+
+/// The session's interactive frame rate as a token bucket: it fills at the session's frame
+/// rate up to [`FRAME_BURST`] frames, and each interactive frame takes one. Over any stretch
+/// of time a session gets at most its rate (plus the burst), and an input that arrives a
+/// little before a strict tick would (the client's input timer and the session's frames do
+/// not share a clock) does not wait for it: with a strict tick the frames drift to lag the
+/// input by most of an interval and stay there.
+#[derive(Clone, Copy, Debug)]
+struct FrameBucket {
+    frames: f64,
+    at: tokio::time::Instant,
+}
+
+impl FrameBucket {
+    fn new(now: tokio::time::Instant) -> FrameBucket {
+        FrameBucket {
+            frames: 1.0,
+            at: now,
+        }
+    }
+
+    fn level(&self, now: tokio::time::Instant, fps: f64) -> f64 {
+        (self.frames + now.saturating_duration_since(self.at).as_secs_f64() * fps).min(FRAME_BURST)
+    }
+
+    /// When the bucket holds a whole frame.
+    fn ready_at(&self, now: tokio::time::Instant, fps: f64) -> tokio::time::Instant {
+        let level = self.level(now, fps);
+        if level >= 1.0 {
+            now
+        } else {
+            now + Duration::from_secs_f64((1.0 - level) / fps)
+        }
+    }
+
+    fn take(&mut self, now: tokio::time::Instant, fps: f64) {
+        self.frames = self.level(now, fps) - 1.0;
+        self.at = now;
+    }
+}
+
 /// Where the renderer stands when it decides what to do next.
 struct Moment {
     view_changed: bool,
@@ -51,12 +97,24 @@ enum Next {
 }
 
 impl Moment {
-    /// New input renders at once; a new state at most once per tick; once input stops on a
-    /// view that does not animate, lossless still frames (refining), then nothing until
+    /// New input or a new state renders once the session's [`FrameBucket`] holds a frame
+    /// (at once unless frames came faster than the session's rate), and while input streams
+    /// in (the last came less than [`INPUT_STREAM_TICKS`] intervals ago) a new state alone
+    /// renders nothing: the next input's frame shows it. So a viewer that moves the camera of
+    /// an animated scene gets the frame rate it asked for, not input's plus the animation's,
+    /// and its input does not wait behind a frame of the animation. Once input stops on a
+    /// view that does not animate: lossless still frames (refining), then nothing until
     /// something changes.
     fn next(&self) -> Next {
-        if self.view_changed || (self.time_changed && self.now >= self.next_tick) {
+        let due = self.now >= self.next_tick;
+        let input_until = self.last_change + self.frame_interval.mul_f64(INPUT_STREAM_TICKS);
+        let streaming = self.now < input_until;
+        if due && (self.view_changed || (self.time_changed && !streaming)) {
             Next::Render(Quality::Interactive)
+        } else if self.view_changed {
+            Next::Until(self.next_tick)
+        } else if self.time_changed && streaming {
+            Next::Until(input_until.max(self.next_tick))
         } else if !self.animating
             && !self.time_changed
             && !self.shown_still
@@ -183,7 +241,7 @@ pub async fn render_loop(
     // What the last frame showed: settings version, state key, and whether it was the still.
     let mut last: Option<(u64, u128, Quality)> = None;
     let mut last_change = tokio::time::Instant::now();
-    let mut next_tick = tokio::time::Instant::now();
+    let mut bucket = FrameBucket::new(tokio::time::Instant::now());
     let mut sequence = 0u64;
     let mut seen: Option<f64> = None;
     // Effects hook: a still view keeps refining (one pass per still frame) until converged.
@@ -234,7 +292,7 @@ pub async fn render_loop(
             shown_still,
             live,
             now,
-            next_tick,
+            next_tick: bucket.ready_at(now, fps),
             last_change,
             still_delay,
             clock,
@@ -256,7 +314,7 @@ pub async fn render_loop(
             }
         };
         if quality == Quality::Interactive {
-            next_tick = now + frame_interval;
+            bucket.take(now, fps);
         }
         sequence += 1;
         last = Some((current.version, state_key, quality));
@@ -386,4 +444,121 @@ fn render_frame(
         video,
         state_time: state.step_time,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A 30 fps session whose next frame is due at `tick`, last input at `input`.
+    fn moment(
+        now: tokio::time::Instant,
+        tick: tokio::time::Instant,
+        input: tokio::time::Instant,
+    ) -> Moment {
+        Moment {
+            view_changed: false,
+            time_changed: false,
+            animating: true,
+            shown_still: false,
+            live: true,
+            now,
+            next_tick: tick,
+            last_change: input,
+            still_delay: Duration::from_millis(250),
+            clock: 10.0,
+            time_step_fps: 30.0,
+            frame_interval: Duration::from_secs_f64(1.0 / 30.0),
+        }
+    }
+
+    fn waits_until(next: Next) -> Option<tokio::time::Instant> {
+        match next {
+            Next::Until(at) => Some(at),
+            Next::Render(_) | Next::Wake => None,
+        }
+    }
+
+    #[test]
+    fn input_and_new_states_share_the_sessions_frame_rate() {
+        let interval = Duration::from_secs_f64(1.0 / 30.0);
+        let t0 = tokio::time::Instant::now();
+        let tick = t0 + interval;
+        let soon = t0 + Duration::from_millis(10);
+        // Input before the frame is due waits for it, with or without a new state.
+        for time_changed in [false, true] {
+            let early = Moment {
+                view_changed: true,
+                time_changed,
+                ..moment(soon, tick, soon)
+            };
+            assert_eq!(waits_until(early.next()), Some(tick));
+            let due = Moment {
+                view_changed: true,
+                time_changed,
+                ..moment(tick, tick, tick)
+            };
+            assert!(matches!(due.next(), Next::Render(Quality::Interactive)));
+        }
+        // A new state alone while input streams (the last 10 ms ago) waits for the next
+        // input, or renders once input has stopped for 2 intervals.
+        let quiet = t0 + interval.mul_f64(2.0);
+        for now in [soon, tick] {
+            let state = Moment {
+                time_changed: true,
+                ..moment(now, t0, t0)
+            };
+            assert_eq!(waits_until(state.next()), Some(quiet));
+        }
+        let stopped = Moment {
+            time_changed: true,
+            ..moment(quiet, t0, t0)
+        };
+        assert!(matches!(stopped.next(), Next::Render(Quality::Interactive)));
+        // Without input, a new state renders when due.
+        let animation = Moment {
+            time_changed: true,
+            ..moment(tick, tick, t0 - Duration::from_secs(1))
+        };
+        assert!(matches!(
+            animation.next(),
+            Next::Render(Quality::Interactive)
+        ));
+    }
+
+    #[test]
+    fn the_frame_bucket_holds_the_rate_and_lets_early_input_through() {
+        let fps = 30.0;
+        let interval = Duration::from_secs_f64(1.0 / fps);
+        let t0 = tokio::time::Instant::now();
+        let mut bucket = FrameBucket::new(t0);
+        // Frames as fast as they are allowed, for 3 s: about 90 of them, never more than the
+        // rate plus the burst.
+        let mut now = t0;
+        let mut frames = 0;
+        while now < t0 + Duration::from_secs(3) {
+            now = bucket.ready_at(now, fps);
+            bucket.take(now, fps);
+            frames += 1;
+        }
+        assert!(
+            (90..=92).contains(&frames),
+            "{frames} frames in 3 s at 30 fps"
+        );
+        // Input every 34 ms (a client timer a little off 30 Hz, a frame each) never waits,
+        // and neither does one that comes 5 ms early after a steady run.
+        let mut bucket = FrameBucket::new(t0);
+        let mut at = t0;
+        for _ in 0..60 {
+            assert_eq!(bucket.ready_at(at, fps), at);
+            bucket.take(at, fps);
+            at += Duration::from_millis(34);
+        }
+        let early = at - Duration::from_millis(5);
+        assert_eq!(bucket.ready_at(early, fps), early);
+        // After a frame, one right behind it waits for most of an interval.
+        bucket.take(early, fps);
+        let next = bucket.ready_at(early, fps);
+        assert!(next > early + interval.mul_f64(0.5), "{:?}", next - early);
+    }
 }
