@@ -212,7 +212,8 @@ fn isolated_root(c: array<f32, CONTROL_POINTS>, n: u32, lo: f32, hi: f32, tol_v:
     var side = 0i;
     loop {
         if (width * (b - a) <= tol_v) {
-            return Root(true, lo + width * (a + (b - a) * (ga / (ga - gb))));
+            let chord = a + (b - a) * (ga / (ga - gb));
+            return Root(true, lo + width * select(a, chord, a <= chord && chord <= b));
         }
         if (*iters > ITERATION_CAP) {
             return Root(false, 0.0);

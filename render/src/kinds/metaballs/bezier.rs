@@ -231,8 +231,11 @@ fn isolated_root<R: Real>(
     loop {
         if width * (b - a) <= tol_v {
             // The root lies in the bracket, and so does the chord's crossing: within `tol_v`
-            // of it, and far closer where the curve is nearly straight across the bracket.
-            return Some(lo + width * (a + (b - a) * (ga / (ga - gb))));
+            // of it, and far closer where the curve is nearly straight across the bracket
+            // (its lower end where rounding, or a value past `f32`'s range, puts it outside).
+            let chord = a + (b - a) * (ga / (ga - gb));
+            let v = if a <= chord && chord <= b { chord } else { a };
+            return Some(lo + width * v);
         }
         if *iters > ITERATION_CAP {
             return None;
