@@ -70,14 +70,13 @@ fn surfel_weight(r: f32) -> f32 {
 
 // Where the ray enters the sphere within [lo, hi]: (1, t) if it meets it there, else (0, 0).
 // As the CPU's `traverse::sphere_entry`: the distance to the ray's line as |oc - (oc.d) d|
-// and the sphere grown by 1e-6 of the coordinates' magnitude, so rounding never puts a
+// and the sphere grown by 1e-6 of its distance (|b| + r), so rounding never puts a
 // leaf's hit beyond the entry it prunes by.
 fn surfel_sphere_entry(o: vec3<f32>, d: vec3<f32>, c: vec3<f32>, radius: f32, lo: f32, hi: f32) -> vec2<f32> {
     let oc = o - c;
     let b = dot(d, oc);
     let off = oc - b * d;
-    let aoc = abs(oc);
-    let r = radius + 1e-6 * (max(max(aoc.x, aoc.y), aoc.z) + radius);
+    let r = radius + 1e-6 * (abs(b) + radius);
     let disc = r * r - dot(off, off);
     if (disc < 0.0) {
         return vec2<f32>(0.0, 0.0);

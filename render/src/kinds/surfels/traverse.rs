@@ -15,8 +15,8 @@ use crate::kinds::surfels::tree::{TreeNode, LEAF};
 use crate::ray::Ray;
 use glam::Vec3;
 
-/// How much [`sphere_entry`] grows a sphere, relative to the magnitude of the coordinates
-/// involved: several `f32` ulps, so that the rounding of the entry, of the ray's offset from
+/// How much [`sphere_entry`] grows a sphere, relative to the distance from the ray's origin
+/// to the sphere: several `f32` ulps, so that the rounding of the entry, of the ray's offset from
 /// the centre and of a hit's own position cannot put a hit inside a sphere outside it.
 const SPHERE_SLACK: f32 = 1e-6;
 
@@ -120,9 +120,8 @@ impl Spheres for FixedView<'_> {
 }
 
 /// Where the ray (unit direction) enters the sphere within `[t_min, t_max]`, if it meets it
-/// there; conservative under `f32` rounding: the sphere is grown by [`SPHERE_SLACK`] of the
-/// coordinates' magnitude, so a point inside it (a leaf's hit) is never reported beyond its
-/// entry.
+/// there; conservative under `f32` rounding: the sphere is grown by [`SPHERE_SLACK`] of its
+/// distance, so a point inside it (a leaf's hit) is never reported beyond its entry.
 ///
 /// The squared distance from the centre to the ray's line is `|oc − (oc·d) d|²`, not
 /// `|oc|² − (oc·d)²` (Haines et al., "Precision Improvements for Ray/Sphere Intersection",
@@ -137,7 +136,8 @@ pub fn sphere_entry(ray: &Ray, centre: Vec3, radius: f32, t_min: f32, t_max: f32
     let oc = ray.origin - centre;
     let b = ray.dir.dot(oc);
     let off = oc - b * ray.dir;
-    let r = radius + SPHERE_SLACK * (oc.abs().max_element() + radius);
+    // `|b| + r` is at least `|oc|` for every ray that can meet the sphere.
+    let r = radius + SPHERE_SLACK * (b.abs() + radius);
     let disc = r * r - off.length_squared();
     if disc < 0.0 {
         return None;
