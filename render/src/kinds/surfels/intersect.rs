@@ -12,6 +12,7 @@
 
 use crate::kinds::surfels::counters::SurfelCounters;
 use crate::kinds::surfels::kernel::weight;
+use crate::kinds::surfels::model::NEIGHBOURS;
 use crate::kinds::surfels::prepared::PreparedSurfels;
 use crate::ray::Ray;
 use glam::Vec3;
@@ -75,22 +76,16 @@ pub fn intersect_leaf(
     let mut x = ray.at(t0);
     let (iterations, epsilon) = (p.options.mls_iterations, p.options.mls_epsilon);
     let inv_h2 = 1.0 / (h * h);
+    let hood = Neighbourhood::gather(p, neighbours, c);
     for _ in 0..iterations {
         c.iterations += 1;
+        let weights = hood.weights(x, inv_h2);
         let (mut sw, mut sp, mut sn) = (0.0f32, Vec3::ZERO, Vec3::ZERO);
-        for &k in neighbours {
-            let mut fresh = false;
-            let d = p.surfel(k as usize, &mut fresh);
-            c.surfel_updates += fresh as u64;
-            // Outside the support the weight is 0: no square root for those.
-            let r2 = (x - d.centre).length_squared() * inv_h2;
-            if r2 >= 1.0 {
-                continue;
-            }
-            let w = weight(r2.sqrt());
+        // In the neighbourhood's order; a neighbour outside the support adds 0.
+        for (i, &w) in weights.iter().enumerate().take(hood.len) {
             sw += w;
-            sp += w * d.centre;
-            sn += w * d.normal;
+            sp += w * Vec3::new(hood.cx[i], hood.cy[i], hood.cz[i]);
+            sn += w * Vec3::new(hood.nx[i], hood.ny[i], hood.nz[i]);
         }
         if !(sw > 0.0) {
             return None;
@@ -123,6 +118,58 @@ pub fn intersect_leaf(
     }
     c.capped += 1;
     None
+}
+
+/// A leaf's fixed neighbourhood, deformed, as structure-of-arrays: read once per
+/// intersection, so that each MLS iteration computes every neighbour's distance and weight
+/// in one branch-free loop over [`NEIGHBOURS`] lanes (vector registers: `sqrtps` and
+/// `mulps`) and then sums the weighted centres and normals in the neighbourhood's order.
+struct Neighbourhood {
+    len: usize,
+    cx: [f32; NEIGHBOURS],
+    cy: [f32; NEIGHBOURS],
+    cz: [f32; NEIGHBOURS],
+    nx: [f32; NEIGHBOURS],
+    ny: [f32; NEIGHBOURS],
+    nz: [f32; NEIGHBOURS],
+}
+
+impl Neighbourhood {
+    #[inline(always)]
+    fn gather(p: &PreparedSurfels, row: &[u32], c: &mut SurfelCounters) -> Neighbourhood {
+        let mut n = Neighbourhood {
+            len: row.len().min(NEIGHBOURS),
+            cx: [0.0; NEIGHBOURS],
+            cy: [0.0; NEIGHBOURS],
+            cz: [0.0; NEIGHBOURS],
+            nx: [0.0; NEIGHBOURS],
+            ny: [0.0; NEIGHBOURS],
+            nz: [0.0; NEIGHBOURS],
+        };
+        for (i, &k) in row.iter().enumerate().take(NEIGHBOURS) {
+            let mut fresh = false;
+            let d = p.surfel(k as usize, &mut fresh);
+            c.surfel_updates += fresh as u64;
+            (n.cx[i], n.cy[i], n.cz[i]) = (d.centre.x, d.centre.y, d.centre.z);
+            (n.nx[i], n.ny[i], n.nz[i]) = (d.normal.x, d.normal.y, d.normal.z);
+        }
+        n
+    }
+
+    /// Eq. 2's weight of every lane at `x` (0 outside the support, and in unused lanes the
+    /// caller does not sum).
+    #[inline(always)]
+    fn weights(&self, x: Vec3, inv_h2: f32) -> [f32; NEIGHBOURS] {
+        let mut w = [0.0; NEIGHBOURS];
+        for i in 0..NEIGHBOURS {
+            let (dx, dy, dz) = (x.x - self.cx[i], x.y - self.cy[i], x.z - self.cz[i]);
+            let r2 = (dx * dx + dy * dy + dz * dz) * inv_h2;
+            // Both sides computed, then selected: no branch per neighbour.
+            let value = weight(r2.min(1.0).sqrt());
+            w[i] = if r2 < 1.0 { value } else { 0.0 };
+        }
+        w
+    }
 }
 
 /// The support radius of leaf surfel `s`'s neighbourhood weights, grown with its deformed
