@@ -161,12 +161,12 @@ impl Neighbourhood {
     #[inline(always)]
     fn weights(&self, x: Vec3, inv_h2: f32) -> [f32; NEIGHBOURS] {
         let mut w = [0.0; NEIGHBOURS];
-        for i in 0..NEIGHBOURS {
+        for (i, out) in w.iter_mut().enumerate() {
             let (dx, dy, dz) = (x.x - self.cx[i], x.y - self.cy[i], x.z - self.cz[i]);
             let r2 = (dx * dx + dy * dy + dz * dz) * inv_h2;
             // Both sides computed, then selected: no branch per neighbour.
             let value = weight(r2.min(1.0).sqrt());
-            w[i] = if r2 < 1.0 { value } else { 0.0 };
+            *out = if r2 < 1.0 { value } else { 0.0 };
         }
         w
     }
