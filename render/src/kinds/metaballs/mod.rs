@@ -33,5 +33,5 @@ pub use counters::MetaballCounters as RayCounters;
 pub use engine::{Accel, AccelKind, PrepareOptions, PreparedMetaballs};
 pub use kernel::Kernel;
 pub use roots::RootFinder;
-pub use scene::{sphere_interval, Metaball, MetaballError, MetaballScene, Shape};
+pub use scene::{Metaball, MetaballError, MetaballScene, Shape};
 pub use tree::{BuildOptions, TreeKind};

@@ -2,7 +2,6 @@
 
 use crate::geom::frame::LocalFrame;
 use crate::kinds::metaballs::kernel::Kernel;
-use crate::ray::Ray;
 use glam::{Mat3, Quat, Vec3};
 
 /// A ball's shape of support.
@@ -243,20 +242,6 @@ impl MetaballScene {
             )
         }))
     }
-}
-
-/// Where a ray enters and leaves a ball's sphere of support, if it does.
-#[inline]
-pub fn sphere_interval(ray: &Ray, center: Vec3, radius: f32) -> Option<(f32, f32)> {
-    let oc = ray.origin - center;
-    let b = oc.dot(ray.dir);
-    let c = oc.length_squared() - radius * radius;
-    let disc = b * b - c;
-    if disc <= 0.0 {
-        return None;
-    }
-    let sq = disc.sqrt();
-    Some((-b - sq, -b + sq))
 }
 
 #[cfg(test)]
