@@ -247,6 +247,7 @@ impl MetaballScene {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::ray::Ray;
 
     #[test]
     fn validation_names_the_offending_ball() {
