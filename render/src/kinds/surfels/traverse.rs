@@ -16,8 +16,9 @@ use crate::ray::Ray;
 use glam::Vec3;
 
 /// How much [`sphere_entry`] grows a sphere, relative to the distance from the ray's origin
-/// to the sphere: several `f32` ulps, so that the rounding of the entry, of the ray's offset from
-/// the centre and of a hit's own position cannot put a hit inside a sphere outside it.
+/// to the sphere: several `f32` ulps, more than the rounding of the entry, of the ray's
+/// offset from the centre and of a hit's own position, so a hit inside the sphere is never
+/// taken for one outside it.
 const SPHERE_SLACK: f32 = 1e-6;
 
 /// Deep enough for any median-split tree of `u32` surfels (depth ≤ 33, two entries a level).
