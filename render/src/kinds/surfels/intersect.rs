@@ -190,27 +190,18 @@ impl LeafHit {
             return p.model.surfels[s].colour; // unreachable: the hit deformed its leaf
         };
         let h = support(p, s, leaf.leaf_radius);
-        colour_at(p, p.model.neighbours.row(s), self.position, 1.0 / (h * h))
-    }
-}
-
-/// The weighted average colour of the neighbourhood at the converged point `x`.
-fn colour_at(p: &PreparedSurfels, neighbours: &[u32], x: Vec3, inv_h2: f32) -> Vec3 {
-    let (mut sw, mut sc) = (0.0f32, Vec3::ZERO);
-    for &k in neighbours {
-        // Every neighbour is already deformed: the iteration that converged read it.
-        let Some(d) = p.surfels[k as usize].get() else {
-            continue;
-        };
-        let r2 = (x - d.centre).length_squared() * inv_h2;
-        if r2 >= 1.0 {
-            continue;
+        // The same weights as the iteration that converged here, over its neighbours (all
+        // deformed by then), in their order.
+        let row = p.model.neighbours.row(s);
+        let hood = Neighbourhood::gather(p, row, &mut SurfelCounters::default());
+        let weights = hood.weights(self.position, 1.0 / (h * h));
+        let (mut sw, mut sc) = (0.0f32, Vec3::ZERO);
+        for (&k, &w) in row.iter().zip(&weights) {
+            sw += w;
+            sc += w * p.model.surfels[k as usize].colour;
         }
-        let w = weight(r2.sqrt());
-        sw += w;
-        sc += w * p.model.surfels[k as usize].colour;
+        sc / sw
     }
-    sc / sw
 }
 
 /// Whether `x` on surfel `s`'s surface lies outside a surface that clips it (§4.3).
