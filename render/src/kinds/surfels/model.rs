@@ -13,7 +13,7 @@
 use crate::geom::frame::LocalFrame;
 use crate::kinds::surfels::kernel::{sigma_max, weight, Rows};
 use crate::kinds::surfels::knn::Grid;
-use crate::kinds::surfels::tree::SphereTree;
+use crate::kinds::surfels::tree::{leaf_order, SphereTree};
 use glam::Vec3;
 use rayon::prelude::*;
 
@@ -92,6 +92,7 @@ pub enum SurfelError {
 /// The undeformed object, everything precomputed (§4.4).
 #[derive(Debug)]
 pub struct SurfelModel {
+    /// The set's surfels in the hierarchy's leaf order ([`leaf_order`]), not as given.
     pub surfels: Vec<Surfel>,
     pub nodes: Vec<Vec3>,
     pub node_mass: Vec<f32>,
@@ -131,6 +132,14 @@ impl SurfelModel {
         if node_body.is_empty() {
             node_body = vec![0; nodes.len()];
         }
+        // In the hierarchy's leaf order: a sphere's surfels, their neighbours and their
+        // deformed copies then share cache lines.
+        let surfels: Vec<Surfel> = {
+            let centres: Vec<Vec3> = surfels.iter().map(|s| s.centre).collect();
+            (leaf_order(&centres).into_iter())
+                .map(|i| surfels[i as usize])
+                .collect()
+        };
         let centres: Vec<Vec3> = surfels.iter().map(|s| s.centre).collect();
         let embed = embed_rows(&centres, &nodes);
         let (neighbours, support) = neighbour_rows(&centres);

@@ -62,6 +62,11 @@ pub struct SphereTree {
     pub terms: Rows<SimTerm>,
     pub level: Vec<u8>,
     pub body: Vec<u16>,
+    /// The surfels in the order the preorder meets their leaves.
+    pub leaves: Vec<u32>,
+    /// Per node, the range of [`SphereTree::leaves`] below it (a subtree's leaves are
+    /// contiguous in preorder).
+    pub leaf_range: Vec<[u32; 2]>,
 }
 
 /// The embedding the eq. 9 terms come from: per-surfel `(node, weight)` rows, the rest
@@ -116,11 +121,14 @@ impl SphereTree {
                 .collect(),
             None => vec![0; nodes.len()],
         };
+        let (leaves, leaf_range) = leaf_ranges(&nodes);
         SphereTree {
             nodes,
             terms,
             level,
             body,
+            leaves,
+            leaf_range,
         }
     }
 
@@ -131,6 +139,26 @@ impl SphereTree {
             .max()
             .unwrap_or(0)
     }
+}
+
+/// The surfels in preorder leaf order, and each node's range of that order.
+fn leaf_ranges(nodes: &[TreeNode]) -> (Vec<u32>, Vec<[u32; 2]>) {
+    let mut leaves = Vec::with_capacity(nodes.len() / 2 + 1);
+    let mut range = vec![[0u32; 2]; nodes.len()];
+    for (i, n) in nodes.iter().enumerate() {
+        if n.is_leaf() {
+            range[i] = [leaves.len() as u32, leaves.len() as u32 + 1];
+            leaves.push(n.kids[1]);
+        }
+    }
+    // Preorder: children come after their parent, so reverse order is bottom-up.
+    for i in (0..nodes.len()).rev() {
+        if !nodes[i].is_leaf() {
+            let [a, b] = nodes[i].kids.map(|k| range[k as usize]);
+            range[i] = [a[0].min(b[0]), a[1].max(b[1])];
+        }
+    }
+    (leaves, range)
 }
 
 /// Builds the subtree of `ids` into `out` (its `2n − 1` preorder slots), `base` being the
@@ -159,25 +187,7 @@ fn build_range(
         .iter()
         .map(|&i| input.leaf_radius[i as usize])
         .fold(0.0f32, f32::max);
-    let (mut lo, mut hi) = (Vec3::splat(f32::MAX), Vec3::splat(f32::MIN));
-    for p in &pts {
-        lo = lo.min(*p);
-        hi = hi.max(*p);
-    }
-    let ext = hi - lo;
-    let axis = if ext.x >= ext.y && ext.x >= ext.z {
-        0
-    } else if ext.y >= ext.z {
-        1
-    } else {
-        2
-    };
-    let half = ids.len() / 2;
-    ids.select_nth_unstable_by(half, |&a, &b| {
-        input.centres[a as usize][axis]
-            .total_cmp(&input.centres[b as usize][axis])
-            .then(a.cmp(&b))
-    });
+    let half = median_split(input.centres, ids);
     let left_len = 2 * half - 1;
     out[0] = TreeNode {
         centre: ball.centre.as_vec3(),
@@ -198,6 +208,53 @@ fn build_range(
         build_range(input, ids_l, out_l, lev_l, base + 1, next);
         build_range(input, ids_r, out_r, lev_r, base + 1 + left_len as u32, next);
     }
+}
+
+/// Splits `ids` at the median of their centres along the longest axis of the centres' box
+/// (ties by id), the lower half first; returns the lower half's length.
+fn median_split(centres: &[Vec3], ids: &mut [u32]) -> usize {
+    let (mut lo, mut hi) = (Vec3::splat(f32::MAX), Vec3::splat(f32::MIN));
+    for &i in ids.iter() {
+        lo = lo.min(centres[i as usize]);
+        hi = hi.max(centres[i as usize]);
+    }
+    let ext = hi - lo;
+    let axis = if ext.x >= ext.y && ext.x >= ext.z {
+        0
+    } else if ext.y >= ext.z {
+        1
+    } else {
+        2
+    };
+    let half = ids.len() / 2;
+    ids.select_nth_unstable_by(half, |&a, &b| {
+        centres[a as usize][axis]
+            .total_cmp(&centres[b as usize][axis])
+            .then(a.cmp(&b))
+    });
+    half
+}
+
+/// The order in which [`SphereTree::build`]'s leaves would meet `centres` (its splits
+/// without its spheres): the model stores its surfels in this order, so that the surfels
+/// under one sphere lie together in memory.
+pub fn leaf_order(centres: &[Vec3]) -> Vec<u32> {
+    fn split(centres: &[Vec3], ids: &mut [u32]) {
+        if ids.len() < 2 {
+            return;
+        }
+        let half = median_split(centres, ids);
+        let (l, r) = ids.split_at_mut(half);
+        if l.len() + r.len() >= PARALLEL_MIN {
+            rayon::join(|| split(centres, l), || split(centres, r));
+        } else {
+            split(centres, l);
+            split(centres, r);
+        }
+    }
+    let mut ids: Vec<u32> = (0..centres.len() as u32).collect();
+    split(centres, &mut ids);
+    ids
 }
 
 /// `(node, max a, max ‖b‖)` over the surfels below, sorted by node.
