@@ -1,8 +1,8 @@
 //! The surfel kind on the GPU (`surfels.wgsl`): what a deformed step uploads.
 //!
 //! How it works: the GPU does no lazy updates. On upload the CPU brings the whole step up to
-//! date — every surfel by eq. 1 and every sphere by eqs. 4, 9 and bottom-up 11, the eager
-//! refit of [`PreparedSurfels::eager_spheres`] (a step prepared eagerly or rebuilt already
+//! date — every surfel by eq. 1 and every sphere fitted to the deformed surfels below it, the
+//! eager refit of [`PreparedSurfels::eager_spheres`] (a step prepared eagerly or rebuilt already
 //! has them) — and uploads the spheres with the tree topology, the deformed surfels with
 //! what their MLS intersection reads (support, rest radius and colour), the fixed
 //! neighbourhoods and the clipping pairs. The kernel walks the spheres and runs the CPU's
@@ -10,13 +10,14 @@
 //!
 //! Cost per step on the CPU (release, this shared 2-core AMD EPYC at load average 4–5.5,
 //! so upper bounds; measured with a throwaway program over 9 steps of `surfel-impact`,
-//! 153k surfels, 306k spheres): the eager update (eqs. 1, 4, 9, 11, in the step's prepare
-//! when the auto mode picks eager, else in [`arrays`]) 41–83 ms, packing the 34.3 MB of
+//! 153k surfels, 306k spheres): the eager update (eqs. 1, 4, 9, 11 then, in the step's prepare
+//! when the auto mode picks eager, else in [`arrays`]) 41–83 ms (the refit now fits spheres
+//! to their surfels: 20–40 ms in `isoray-bench surfels`), packing the 34.3 MB of
 //! arrays 36–47 ms; the upload stage of a debug build on lavapipe (update, packing and
 //! `write_buffer` together) 149 ms. A step is packed once: later passes and frames of the
 //! same step reuse what is on the GPU (the key). After a GPU upload has deformed every
 //! surfel, the auto mode's heuristic sees a fully touched step and prepares the next
-//! steps eagerly (until its share decays below 0.6, one lazy step in about six).
+//! steps eagerly (until its share decays below 0.3, one lazy step in about twelve).
 
 use crate::backend::gpu::kind::{GpuKind, KindUpload};
 use crate::kinds::surfels::prepared::PreparedSurfels;

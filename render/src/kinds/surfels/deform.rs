@@ -233,6 +233,54 @@ pub fn sphere_around(a: (Vec3, f32), b: (Vec3, f32)) -> (Vec3, f32) {
     )
 }
 
+/// Leaf spheres as structure-of-arrays: centres and radii.
+pub struct LeafSpheres {
+    pub x: Vec<f32>,
+    pub y: Vec<f32>,
+    pub z: Vec<f32>,
+    pub r: Vec<f32>,
+}
+
+impl LeafSpheres {
+    /// The radius about `centre` that holds leaf spheres `range` (`max |centre − c| + r`),
+    /// grown by the same margins as [`sphere_around`] against the rounding of the distances.
+    /// Branch-free over the range, so it runs across vector lanes.
+    pub fn radius_about(&self, centre: Vec3, range: std::ops::Range<usize>) -> f32 {
+        let (x, y, z, r) = (
+            &self.x[range.clone()],
+            &self.y[range.clone()],
+            &self.z[range.clone()],
+            &self.r[range],
+        );
+        const LANES: usize = 8;
+        let reach = |i: usize| {
+            let (dx, dy, dz) = (x[i] - centre.x, y[i] - centre.y, z[i] - centre.z);
+            (dx * dx + dy * dy + dz * dz).sqrt() + r[i]
+        };
+        let mut most = [0.0f32; LANES];
+        let whole = x.len() / LANES * LANES;
+        for base in (0..whole).step_by(LANES) {
+            let (x, y, z, r) = (
+                &x[base..base + LANES],
+                &y[base..base + LANES],
+                &z[base..base + LANES],
+                &r[base..base + LANES],
+            );
+            for lane in 0..LANES {
+                let (dx, dy, dz) = (x[lane] - centre.x, y[lane] - centre.y, z[lane] - centre.z);
+                let d = (dx * dx + dy * dy + dz * dz).sqrt() + r[lane];
+                // Not `f32::max`: its NaN rule keeps the loop scalar.
+                most[lane] = if d > most[lane] { d } else { most[lane] };
+            }
+        }
+        for i in whole..x.len() {
+            most[0] = most[0].max(reach(i));
+        }
+        let r = most.into_iter().fold(0.0f32, f32::max);
+        r * (1.0 + MARGIN) + MARGIN * centre.abs().max_element()
+    }
+}
+
 /// Node Jacobians estimated by least squares from full node positions: for each node, the
 /// `G` minimising `Σ_k w_k ‖(u_k − u_j) − G (x_k − x_j)‖²` over its 8 nearest rest
 /// neighbours with the weights of eq. 2 (regularised where the neighbours are coplanar).
