@@ -13,7 +13,7 @@
 use crate::geom::frame::LocalFrame;
 use crate::kinds::surfels::kernel::{sigma_max, weight, Rows};
 use crate::kinds::surfels::knn::Grid;
-use crate::kinds::surfels::tree::{leaf_order, SphereTree};
+use crate::kinds::surfels::tree::{leaf_order, surfel_bodies, SphereTree};
 use glam::Vec3;
 use rayon::prelude::*;
 
@@ -136,7 +136,8 @@ impl SurfelModel {
         // deformed copies then share cache lines.
         let surfels: Vec<Surfel> = {
             let centres: Vec<Vec3> = surfels.iter().map(|s| s.centre).collect();
-            (leaf_order(&centres).into_iter())
+            let body = surfel_bodies((&embed_rows(&centres, &nodes), &nodes, &node_body));
+            (leaf_order(&centres, &body).into_iter())
                 .map(|i| surfels[i as usize])
                 .collect()
         };

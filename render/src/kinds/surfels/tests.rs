@@ -602,3 +602,55 @@ fn eager_spheres_are_close_to_the_smallest_around_their_surfels() {
     eprintln!("eager sphere over optimum: worst {worst:.4}, mean {mean:.4} over {inner} nodes");
     assert!(worst < 1.15 && mean < 1.03, "worst {worst}, mean {mean}");
 }
+
+/// The hierarchy splits between bodies, never through one: five balls, each its own body,
+/// interleaved in the input, in a row whose longest-axis median would cut the middle one;
+/// every sphere that holds surfels of several bodies holds all of each.
+#[test]
+fn no_sphere_holds_part_of_a_body_and_part_of_another() {
+    let mut rng = SplitMix64(41);
+    let (mut surfels, mut nodes, mut node_body) = (Vec::new(), Vec::new(), Vec::new());
+    for b in 0..5u16 {
+        let centre = Vec3::new(3.0 * b as f32, 0.3 * (b % 2) as f32, 0.0);
+        surfels.extend(sample::sphere(centre, 1.0, 400, Vec3::ONE, 0));
+        for p in jittered_nodes(&mut rng, -1.2, 1.2, 20) {
+            nodes.push(centre + p * 0.3);
+            node_body.push(b);
+        }
+    }
+    // Interleave the balls' surfels so that input order says nothing about bodies.
+    let n = surfels.len();
+    let surfels: Vec<Surfel> = (0..n).map(|i| surfels[(i % 5) * (n / 5) + i / 5]).collect();
+    let set = SurfelSet {
+        surfels,
+        nodes,
+        node_body,
+        ..SurfelSet::default()
+    };
+    let model = SurfelModel::new(set, usize::MAX).expect("valid");
+    let tree = &model.tree;
+    let body_of = |s: u32| (model.surfels[s as usize].centre.x / 3.0).round() as usize;
+    let total = tree.leaves.iter().fold([0usize; 5], |mut c, &s| {
+        c[body_of(s)] += 1;
+        c
+    });
+    assert_eq!(total, [400; 5]);
+    let mut mixed = 0;
+    for (i, node) in tree.nodes.iter().enumerate().filter(|(_, n)| !n.is_leaf()) {
+        let [a, b] = tree.leaf_range[i].map(|v| v as usize);
+        let mut count = [0usize; 5];
+        for &s in &tree.leaves[a..b] {
+            count[body_of(s)] += 1;
+        }
+        if count.iter().filter(|&&c| c > 0).count() > 1 {
+            mixed += 1;
+            for (k, &c) in count.iter().enumerate() {
+                assert!(
+                    c == 0 || c == total[k],
+                    "node {i} {node:?}: {c} of body {k}'s surfels"
+                );
+            }
+        }
+    }
+    assert_eq!(mixed, 4, "five bodies join in four spheres");
+}

@@ -2,9 +2,11 @@
 //! on the undeformed object (and, for the rebuild baseline, on each deformed step).
 //!
 //! How it works: top-down, each node's surfels split at the median along the longest axis of
-//! their centres' bounding box, down to one surfel per leaf; a node's sphere is the smallest
-//! sphere around its surfel centres ([`miniball`]) grown by the largest leaf radius below it,
-//! so it holds every surfel disc, not only the centres. Nodes are stored in preorder, which
+//! their centres' bounding box, down to one surfel per leaf, except that surfels of several
+//! bodies are split between whole bodies first ([`split`]), so that each body's subtree moves
+//! with the body's rigid frame; a node's sphere is the smallest sphere around its surfel
+//! centres ([`miniball`]) grown by the largest leaf radius below it, so it holds every surfel
+//! disc, not only the centres. Nodes are stored in preorder, which
 //! the median split makes computable in advance (a node of `n` surfels spans `2n − 1` slots,
 //! its left child starts right after it), so subtrees build in parallel into disjoint slices
 //! and the tree is the same on any number of threads.
@@ -76,6 +78,8 @@ pub type Embedding<'a> = (&'a Rows<(u32, f32)>, &'a [Vec3], &'a [u16]);
 struct Input<'a> {
     centres: &'a [Vec3],
     leaf_radius: &'a [f32],
+    /// Each surfel's body (empty: one body).
+    body: &'a [u16],
 }
 
 impl SphereTree {
@@ -86,9 +90,11 @@ impl SphereTree {
         if n == 0 {
             return SphereTree::default();
         }
+        let body = embed.map(surfel_bodies).unwrap_or_default();
         let input = Input {
             centres,
             leaf_radius,
+            body: &body,
         };
         let mut ids: Vec<u32> = (0..n as u32).collect();
         let blank = TreeNode {
@@ -187,7 +193,7 @@ fn build_range(
         .iter()
         .map(|&i| input.leaf_radius[i as usize])
         .fold(0.0f32, f32::max);
-    let half = median_split(input.centres, ids);
+    let half = split(input.centres, input.body, ids);
     let left_len = 2 * half - 1;
     out[0] = TreeNode {
         centre: ball.centre.as_vec3(),
@@ -210,22 +216,70 @@ fn build_range(
     }
 }
 
-/// Splits `ids` at the median of their centres along the longest axis of the centres' box
-/// (ties by id), the lower half first; returns the lower half's length.
-fn median_split(centres: &[Vec3], ids: &mut [u32]) -> usize {
+/// Each surfel's body: the body of the node with the largest weight in its embedding.
+pub fn surfel_bodies((rows, _, node_body): Embedding) -> Vec<u16> {
+    (0..rows.start.len() - 1)
+        .map(|s| {
+            let heaviest = rows.row(s).iter().max_by(|a, b| a.1.total_cmp(&b.1));
+            heaviest.map_or(0, |&(j, _)| node_body[j as usize])
+        })
+        .collect()
+}
+
+/// The longest axis of the box around `ids`' centres.
+fn longest_axis(centres: &[Vec3], ids: &[u32]) -> usize {
     let (mut lo, mut hi) = (Vec3::splat(f32::MAX), Vec3::splat(f32::MIN));
-    for &i in ids.iter() {
+    for &i in ids {
         lo = lo.min(centres[i as usize]);
         hi = hi.max(centres[i as usize]);
     }
     let ext = hi - lo;
-    let axis = if ext.x >= ext.y && ext.x >= ext.z {
+    if ext.x >= ext.y && ext.x >= ext.z {
         0
     } else if ext.y >= ext.z {
         1
     } else {
         2
-    };
+    }
+}
+
+/// Splits `ids` in two, the first part first; returns its length. Surfels of several bodies
+/// are split between bodies, never through one, so that each body has subtrees of its own
+/// that its rigid motion carries whole (40 balls thrown apart otherwise leave spheres
+/// spanning two balls); the bodies in order of their centroids along the longest axis, cut
+/// where the counts come nearest to halves. Surfels of one body split at the median along
+/// the longest axis (ties by id).
+fn split(centres: &[Vec3], body: &[u16], ids: &mut [u32]) -> usize {
+    let axis = longest_axis(centres, ids);
+    let body_of = |i: u32| body.get(i as usize).copied().unwrap_or(0);
+    let first = body_of(ids[0]);
+    if ids.iter().any(|&i| body_of(i) != first) {
+        // (body, centroid along the axis, count), ordered by centroid then body.
+        let mut bodies: Vec<(u16, f64, usize)> = Vec::new();
+        ids.sort_unstable_by_key(|&i| (body_of(i), i));
+        for &i in ids.iter() {
+            let (b, x) = (body_of(i), centres[i as usize][axis] as f64);
+            match bodies.last_mut() {
+                Some(last) if last.0 == b => (last.1, last.2) = (last.1 + x, last.2 + 1),
+                _ => bodies.push((b, x, 1)),
+            }
+        }
+        for b in &mut bodies {
+            b.1 /= b.2 as f64;
+        }
+        bodies.sort_by(|a, b| a.1.total_cmp(&b.1).then(a.0.cmp(&b.0)));
+        let mut rank = std::collections::HashMap::new();
+        let (mut best, mut below, half) = ((usize::MAX, 0), 0, ids.len() / 2);
+        for (k, b) in bodies.iter().enumerate() {
+            rank.insert(b.0, k);
+            below += b.2;
+            if k + 1 < bodies.len() && below.abs_diff(half) < best.0 {
+                best = (below.abs_diff(half), below);
+            }
+        }
+        ids.sort_unstable_by_key(|&i| (rank[&body_of(i)], i));
+        return best.1;
+    }
     let half = ids.len() / 2;
     ids.select_nth_unstable_by(half, |&a, &b| {
         centres[a as usize][axis]
@@ -235,25 +289,25 @@ fn median_split(centres: &[Vec3], ids: &mut [u32]) -> usize {
     half
 }
 
-/// The order in which [`SphereTree::build`]'s leaves would meet `centres` (its splits
-/// without its spheres): the model stores its surfels in this order, so that the surfels
-/// under one sphere lie together in memory.
-pub fn leaf_order(centres: &[Vec3]) -> Vec<u32> {
-    fn split(centres: &[Vec3], ids: &mut [u32]) {
+/// The order in which [`SphereTree::build`]'s leaves would meet `centres` of surfels in
+/// bodies `body` (its splits without its spheres): the model stores its surfels in this
+/// order, so that the surfels under one sphere lie together in memory.
+pub fn leaf_order(centres: &[Vec3], body: &[u16]) -> Vec<u32> {
+    fn halves(centres: &[Vec3], body: &[u16], ids: &mut [u32]) {
         if ids.len() < 2 {
             return;
         }
-        let half = median_split(centres, ids);
+        let half = split(centres, body, ids);
         let (l, r) = ids.split_at_mut(half);
         if l.len() + r.len() >= PARALLEL_MIN {
-            rayon::join(|| split(centres, l), || split(centres, r));
+            rayon::join(|| halves(centres, body, l), || halves(centres, body, r));
         } else {
-            split(centres, l);
-            split(centres, r);
+            halves(centres, body, l);
+            halves(centres, body, r);
         }
     }
     let mut ids: Vec<u32> = (0..centres.len() as u32).collect();
-    split(centres, &mut ids);
+    halves(centres, body, &mut ids);
     ids
 }
 
