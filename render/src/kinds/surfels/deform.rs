@@ -171,11 +171,37 @@ pub fn deform_surfel(model: &SurfelModel, u: &[Vec3], g: &[Mat3], s: usize) -> D
     }
 }
 
+/// Eq. 4 for inner sphere `node`: the moved centre.
+#[inline]
+pub fn node_centre(model: &SurfelModel, step: &StepFrame, node: usize) -> Vec3 {
+    let (frame, _, uc) = centre_shift(model, step, node);
+    frame.apply(model.tree.nodes[node].centre) + uc
+}
+
 /// Eq. 4 and eq. 9 for inner sphere `node`: the moved centre and the conservative radius.
 #[inline]
 pub fn node_sphere(model: &SurfelModel, step: &StepFrame, node: usize) -> (Vec3, f32) {
     let rest = model.tree.nodes[node];
-    let terms = model.tree.terms.row(node);
+    let (frame, rel, uc) = centre_shift(model, step, node);
+    let mut grow = 0.0f32;
+    for t in model.tree.terms.row(node) {
+        let j = t.node as usize;
+        grow += t.a * (rel.rel_u[j] - uc).length() + t.b * rel.g_norm[j];
+    }
+    let centre = frame.apply(rest.centre) + uc;
+    let radius = (rest.radius + grow) * (1.0 + MARGIN) + MARGIN * centre.abs().max_element();
+    (centre, radius)
+}
+
+/// The rigid frame and relative terms of `node`'s body, and eq. 4's displacement of its
+/// centre relative to that frame.
+#[inline]
+fn centre_shift<'a>(
+    model: &SurfelModel,
+    step: &'a StepFrame,
+    node: usize,
+) -> (&'a RigidFrame, &'a Relative, Vec3) {
+    let rest = model.tree.nodes[node];
     let body = model.tree.body[node];
     let (frame, rel) = if body == MIXED && model.bodies > 1 {
         (&step.global, &step.all)
@@ -187,19 +213,12 @@ pub fn node_sphere(model: &SurfelModel, step: &StepFrame, node: usize) -> (Vec3,
     };
     let rot = frame.rotation;
     let mut uc = Vec3::ZERO;
-    for t in terms {
+    for t in model.tree.terms.row(node) {
         let j = t.node as usize;
         let d = rot * (rest.centre - model.nodes[j]);
         uc += t.wc * (rel.rel_u[j] + rel.rel_g[j] * d);
     }
-    let mut grow = 0.0f32;
-    for t in terms {
-        let j = t.node as usize;
-        grow += t.a * (rel.rel_u[j] - uc).length() + t.b * rel.g_norm[j];
-    }
-    let centre = frame.apply(rest.centre) + uc;
-    let radius = (rest.radius + grow) * (1.0 + MARGIN) + MARGIN * centre.abs().max_element();
-    (centre, radius)
+    (frame, rel, uc)
 }
 
 /// Eq. 11: the parent radius from its children's updated spheres.

@@ -134,15 +134,21 @@ impl SurfelModel {
         }
         // In the hierarchy's leaf order: a sphere's surfels, their neighbours and their
         // deformed copies then share cache lines.
-        let surfels: Vec<Surfel> = {
+        // (A surfel's embedding row depends on its centre alone, so it is permuted with it.)
+        let (surfels, embed) = {
             let centres: Vec<Vec3> = surfels.iter().map(|s| s.centre).collect();
-            let body = surfel_bodies((&embed_rows(&centres, &nodes), &nodes, &node_body));
-            (leaf_order(&centres, &body).into_iter())
-                .map(|i| surfels[i as usize])
-                .collect()
+            let embed = embed_rows(&centres, &nodes);
+            let body = surfel_bodies((&embed, &nodes, &node_body));
+            let order = leaf_order(&centres, &body);
+            (
+                order
+                    .iter()
+                    .map(|&i| surfels[i as usize])
+                    .collect::<Vec<_>>(),
+                Rows::from_rows(order.iter().map(|&i| embed.row(i as usize).to_vec())),
+            )
         };
         let centres: Vec<Vec3> = surfels.iter().map(|s| s.centre).collect();
-        let embed = embed_rows(&centres, &nodes);
         let (neighbours, support) = neighbour_rows(&centres);
         let groups = surfels.iter().map(|s| s.group).max().unwrap_or(0) + 1;
         let clip = clip_rows(&surfels, &clip, groups);

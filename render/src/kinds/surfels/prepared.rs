@@ -13,8 +13,8 @@
 //! nearest hit, ties to the lower surfel).
 
 use crate::kinds::surfels::deform::{
-    deform_surfel, node_sphere, radius_from_children, sphere_around, DeformedSurfel, LeafSpheres,
-    StepFrame,
+    deform_surfel, node_centre, node_sphere, radius_from_children, sphere_around, DeformedSurfel,
+    LeafSpheres, StepFrame,
 };
 use crate::kinds::surfels::model::SurfelModel;
 use crate::kinds::surfels::scene::{SurfelOptions, SurfelRuntime, SurfelScene, UpdateMode};
@@ -321,7 +321,7 @@ impl PreparedSurfels {
                     // rest sphere's centre carried by the deformation, near the best for a
                     // curved sheet of surfels) and the middle of their box.
                     let [a, b] = tree.leaf_range[i].map(|v| v as usize);
-                    let moved = node_sphere(&self.model, &self.step, i).0;
+                    let moved = node_centre(&self.model, &self.step, i);
                     let middle = 0.5 * (boxes[i].0 + boxes[i].1);
                     let (r4, rm) = (
                         leaves.radius_about(moved, a..b),
