@@ -189,8 +189,7 @@ pub fn node_sphere(model: &SurfelModel, step: &StepFrame, node: usize) -> (Vec3,
         grow += t.a * (rel.rel_u[j] - uc).length() + t.b * rel.g_norm[j];
     }
     let centre = frame.apply(rest.centre) + uc;
-    let radius = (rest.radius + grow) * (1.0 + MARGIN) + MARGIN * centre.abs().max_element();
-    (centre, radius)
+    (centre, grown(centre, rest.radius + grow))
 }
 
 /// The rigid frame and relative terms of `node`'s body, and eq. 4's displacement of its
@@ -245,11 +244,14 @@ pub fn sphere_around(a: (Vec3, f32), b: (Vec3, f32)) -> (Vec3, f32) {
     }
     let r = 0.5 * (d + a.1 + b.1);
     let centre = a.0 + (b.0 - a.0) * ((r - a.1) / d);
-    // The centre's rounding moves it by a few ulps of its coordinates: cover that as well.
-    (
-        centre,
-        r * (1.0 + MARGIN) + MARGIN * centre.abs().max_element(),
-    )
+    (centre, grown(centre, r))
+}
+
+/// Radius `r` about `centre` grown against rounding: by [`MARGIN`] of itself and, since the
+/// centre's rounding moves it by a few ulps of its coordinates, of the centre's largest one.
+#[inline]
+fn grown(centre: Vec3, r: f32) -> f32 {
+    r * (1.0 + MARGIN) + MARGIN * centre.abs().max_element()
 }
 
 /// Leaf spheres as structure-of-arrays: centres and radii.
@@ -295,8 +297,7 @@ impl LeafSpheres {
         for i in whole..x.len() {
             most[0] = most[0].max(reach(i));
         }
-        let r = most.into_iter().fold(0.0f32, f32::max);
-        r * (1.0 + MARGIN) + MARGIN * centre.abs().max_element()
+        grown(centre, most.into_iter().fold(0.0f32, f32::max))
     }
 }
 

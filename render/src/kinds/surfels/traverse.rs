@@ -138,21 +138,33 @@ impl Spheres for FixedView<'_> {
 /// tightened: one pixel of `surfel-impact` at t = 5.1 differed between runs at 8 threads.
 #[inline]
 pub fn sphere_entry(ray: &Ray, centre: Vec3, radius: f32, t_min: f32, t_max: f32) -> Option<f32> {
-    let oc = ray.origin - centre;
-    let b = ray.dir.dot(oc);
-    let off = oc - b * ray.dir;
+    let (met, entry) = entry_of(
+        (ray.origin - centre).to_array(),
+        ray.dir.to_array(),
+        radius,
+        t_min,
+        t_max,
+    );
+    met.then_some(entry)
+}
+
+/// [`sphere_entry`]'s arithmetic on plain lanes, shared by the single ray and
+/// [`Lanes::entries`] (branch-free, so a loop of it vectorizes): whether the ray with origin
+/// `oc` relative to the centre and direction `d` meets the sphere within `[t_min, t_max]`,
+/// and its entry there.
+#[inline(always)]
+fn entry_of(oc: [f32; 3], d: [f32; 3], radius: f32, t_min: f32, t_max: f32) -> (bool, f32) {
+    let b = d[0] * oc[0] + d[1] * oc[1] + d[2] * oc[2];
+    let off = [oc[0] - b * d[0], oc[1] - b * d[1], oc[2] - b * d[2]];
     // `|b| + r` is at least `|oc|` for every ray that can meet the sphere.
     let r = radius + SPHERE_SLACK * (b.abs() + radius);
-    let disc = r * r - off.length_squared();
-    if disc < 0.0 {
-        return None;
-    }
+    let disc = r * r - (off[0] * off[0] + off[1] * off[1] + off[2] * off[2]);
     let sq = disc.sqrt();
     let (t0, t1) = (-b - sq, -b + sq);
-    if t1 < t_min || t0 > t_max {
-        return None;
-    }
-    Some(t0.max(t_min))
+    (
+        !(disc < 0.0) && !(t1 < t_min) && !(t0 > t_max),
+        t0.max(t_min),
+    )
 }
 
 /// A packet's rays as structure-of-arrays (lanes past the packet's rays are zero).
@@ -178,9 +190,8 @@ impl Lanes {
 
     /// [`sphere_entry`] for every lane at once, in one branch-free loop the compiler
     /// vectorizes, with lane `i`'s upper bound `t_max[i]`: `entry[i]` is its entry where the
-    /// lane's bit is set in the answer. The arithmetic is [`sphere_entry`]'s, operation for
-    /// operation, so the entries are the same bits (checked by
-    /// `lanes_give_sphere_entry_bit_for_bit`).
+    /// lane's bit is set in the answer. Both run [`entry_of`], so the entries are the same
+    /// bits (checked by `lanes_give_sphere_entry_bit_for_bit`).
     #[inline]
     fn entries(
         &self,
@@ -192,20 +203,13 @@ impl Lanes {
     ) -> u64 {
         let mut met = [false; PACKET];
         for i in 0..PACKET {
-            let (ox, oy, oz) = (
+            let oc = [
                 self.o[0][i] - centre.x,
                 self.o[1][i] - centre.y,
                 self.o[2][i] - centre.z,
-            );
-            let (dx, dy, dz) = (self.d[0][i], self.d[1][i], self.d[2][i]);
-            let b = dx * ox + dy * oy + dz * oz;
-            let (fx, fy, fz) = (ox - b * dx, oy - b * dy, oz - b * dz);
-            let r = radius + SPHERE_SLACK * (b.abs() + radius);
-            let disc = r * r - (fx * fx + fy * fy + fz * fz);
-            let sq = disc.sqrt();
-            let (t0, t1) = (-b - sq, -b + sq);
-            met[i] = !(disc < 0.0) && !(t1 < t_min) && !(t0 > t_max[i]);
-            entry[i] = t0.max(t_min);
+            ];
+            let d = [self.d[0][i], self.d[1][i], self.d[2][i]];
+            (met[i], entry[i]) = entry_of(oc, d, radius, t_min, t_max[i]);
         }
         let mut mask = 0u64;
         for (i, &m) in met.iter().enumerate() {
@@ -551,7 +555,8 @@ mod tests {
     /// rays through any part of them, grazing ones included. It fails with `|oc|² − b²` for
     /// the squared distance to the line, and with the better distance but no slack.
     /// The packet's all-lanes sphere test answers what [`sphere_entry`] answers ray by ray,
-    /// entries bit for bit, for rays that meet, graze and miss spheres near and far.
+    /// entries bit for bit, for rays that meet, graze and miss spheres near and far (the
+    /// lanes' layout and mask against the single ray's arithmetic).
     #[test]
     fn lanes_give_sphere_entry_bit_for_bit() {
         let mut rng = SplitMix64(5);
