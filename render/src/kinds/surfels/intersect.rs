@@ -79,14 +79,7 @@ pub fn intersect_leaf(
     let hood = Neighbourhood::gather(p, neighbours, c);
     for _ in 0..iterations {
         c.iterations += 1;
-        let weights = hood.weights(x, inv_h2);
-        let (mut sw, mut sp, mut sn) = (0.0f32, Vec3::ZERO, Vec3::ZERO);
-        // In the neighbourhood's order; a neighbour outside the support adds 0.
-        for (i, &w) in weights.iter().enumerate().take(hood.len) {
-            sw += w;
-            sp += w * Vec3::new(hood.cx[i], hood.cy[i], hood.cz[i]);
-            sn += w * Vec3::new(hood.nx[i], hood.ny[i], hood.nz[i]);
-        }
+        let (sw, sp, sn) = hood.sums(&hood.weights(x, inv_h2));
         if !(sw > 0.0) {
             return None;
         }
@@ -123,9 +116,10 @@ pub fn intersect_leaf(
 /// A leaf's fixed neighbourhood, deformed, as structure-of-arrays: read once per
 /// intersection, so that each MLS iteration computes every neighbour's distance and weight
 /// in one branch-free loop over [`NEIGHBOURS`] lanes (vector registers: `sqrtps` and
-/// `mulps`) and then sums the weighted centres and normals in the neighbourhood's order.
+/// `mulps`) and sums the weighted centres and normals in [`SUM_LANES`] partial sums a lane
+/// (a fixed order: the same bits on every run and every thread). Lanes past the row hold a
+/// centre so far away that its weight is 0 and a zero normal.
 struct Neighbourhood {
-    len: usize,
     cx: [f32; NEIGHBOURS],
     cy: [f32; NEIGHBOURS],
     cz: [f32; NEIGHBOURS],
@@ -134,14 +128,22 @@ struct Neighbourhood {
     nz: [f32; NEIGHBOURS],
 }
 
+/// Partial sums a weighted sum over a neighbourhood keeps (one vector register of `f32`
+/// in the portable build), added pairwise at the end.
+const SUM_LANES: usize = 4;
+const _: () = assert!(NEIGHBOURS % SUM_LANES == 0);
+
+/// A centre for lanes past a neighbourhood's row: its squared distance stays finite in
+/// `f32` (so its weight is 0, not NaN) and 0 times it is 0.
+const FAR: f32 = 1e18;
+
 impl Neighbourhood {
     #[inline(always)]
     fn gather(p: &PreparedSurfels, row: &[u32], c: &mut SurfelCounters) -> Neighbourhood {
         let mut n = Neighbourhood {
-            len: row.len().min(NEIGHBOURS),
-            cx: [0.0; NEIGHBOURS],
-            cy: [0.0; NEIGHBOURS],
-            cz: [0.0; NEIGHBOURS],
+            cx: [FAR; NEIGHBOURS],
+            cy: [FAR; NEIGHBOURS],
+            cz: [FAR; NEIGHBOURS],
             nx: [0.0; NEIGHBOURS],
             ny: [0.0; NEIGHBOURS],
             nz: [0.0; NEIGHBOURS],
@@ -156,8 +158,29 @@ impl Neighbourhood {
         n
     }
 
-    /// Eq. 2's weight of every lane at `x` (0 outside the support, and in unused lanes the
-    /// caller does not sum).
+    /// `Σ w`, `Σ w c` and `Σ w n` over the lanes, each as [`SUM_LANES`] partial sums in
+    /// one loop the compiler vectorizes, then added pairwise.
+    #[inline(always)]
+    fn sums(&self, w: &[f32; NEIGHBOURS]) -> (f32, Vec3, Vec3) {
+        let mut acc = [[0.0f32; SUM_LANES]; 7];
+        for base in (0..NEIGHBOURS).step_by(SUM_LANES) {
+            for l in 0..SUM_LANES {
+                let (i, wi) = (base + l, w[base + l]);
+                acc[0][l] += wi;
+                acc[1][l] += wi * self.cx[i];
+                acc[2][l] += wi * self.cy[i];
+                acc[3][l] += wi * self.cz[i];
+                acc[4][l] += wi * self.nx[i];
+                acc[5][l] += wi * self.ny[i];
+                acc[6][l] += wi * self.nz[i];
+            }
+        }
+        let [sw, px, py, pz, nx, ny, nz] = acc.map(|a| (a[0] + a[1]) + (a[2] + a[3]));
+        (sw, Vec3::new(px, py, pz), Vec3::new(nx, ny, nz))
+    }
+
+    /// Eq. 2's weight of every lane at `x` (0 outside the support, so 0 in lanes past the
+    /// row).
     #[inline(always)]
     fn weights(&self, x: Vec3, inv_h2: f32) -> [f32; NEIGHBOURS] {
         let mut w = [0.0; NEIGHBOURS];
