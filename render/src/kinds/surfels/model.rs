@@ -149,7 +149,8 @@ impl SurfelModel {
             )
         };
         let centres: Vec<Vec3> = surfels.iter().map(|s| s.centre).collect();
-        let (neighbours, support) = neighbour_rows(&centres);
+        let group: Vec<u16> = surfels.iter().map(|s| s.group).collect();
+        let (neighbours, support) = neighbour_rows(&centres, &group);
         let groups = surfels.iter().map(|s| s.group).max().unwrap_or(0) + 1;
         let clip = clip_rows(&surfels, &clip, groups);
         let leaf_radius: Vec<f32> = surfels
@@ -322,15 +323,37 @@ fn embed_rows(centres: &[Vec3], nodes: &[Vec3]) -> Rows<(u32, f32)> {
     Rows::from_rows(rows)
 }
 
-fn neighbour_rows(centres: &[Vec3]) -> (Rows<u32>, Vec<f32>) {
-    let grid = Grid::new(centres);
-    let k = (NEIGHBOURS - 1).min(centres.len() - 1);
+/// Each surfel's fixed MLS neighbourhood (itself and its nearest others) and support, taken
+/// from its own surface (group) only: a surface that another clips is its own MLS surface
+/// continued past the edge and cut there (§4.3), so a neighbourhood that reached across the
+/// edge into the other surface would blend the two and round the edge it is meant to keep
+/// sharp.
+fn neighbour_rows(centres: &[Vec3], group: &[u16]) -> (Rows<u32>, Vec<f32>) {
+    let groups = group.iter().copied().max().map_or(0, |g| g as usize + 1);
+    let mut members: Vec<Vec<u32>> = vec![Vec::new(); groups];
+    for (i, &g) in group.iter().enumerate() {
+        members[g as usize].push(i as u32);
+    }
+    let points: Vec<Vec<Vec3>> = members
+        .iter()
+        .map(|m| m.iter().map(|&i| centres[i as usize]).collect())
+        .collect();
+    let grids: Vec<Grid> = points.iter().map(|p| Grid::new(p)).collect();
+    // A surfel's index within its group.
+    let mut local = vec![0u32; centres.len()];
+    for m in &members {
+        for (k, &i) in m.iter().enumerate() {
+            local[i as usize] = k as u32;
+        }
+    }
     let rows: Vec<(Vec<u32>, f32)> = (0..centres.len())
         .into_par_iter()
         .map_init(Vec::new, |near, i| {
-            grid.nearest(centres[i], k, Some(i as u32), near);
+            let g = group[i] as usize;
+            let k = (NEIGHBOURS - 1).min(members[g].len() - 1);
+            grids[g].nearest(centres[i], k, Some(local[i]), near);
             let mut row = vec![i as u32];
-            row.extend(near.iter().map(|n| n.0));
+            row.extend(near.iter().map(|n| members[g][n.0 as usize]));
             let h = near.last().map_or(1e-3, |n| n.1.sqrt()).max(1e-6);
             (row, h)
         })

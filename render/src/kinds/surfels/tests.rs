@@ -505,6 +505,62 @@ fn clipped_edges_stay_sharp_at_4x_supersampling() {
     assert!(edge_analytic > 5.0 && edge_analytic < (w / 2) as f32 - 5.0);
 }
 
+/// A cube of six clipped faces seen from a corner, three faces and their edges in view:
+/// every hit lies on the cube and its normal is its face's, right up to the edges (each
+/// face's MLS neighbourhoods stay on that face). With neighbourhoods that reach across an
+/// edge into the next face, hits near the edges blend the two faces' normals (up to 45°
+/// off) and stand off the cube, so this fails.
+#[test]
+fn clipped_faces_keep_their_normals_up_to_the_edges() {
+    let (surfels, clip) = sample::cube(Vec3::ZERO, 1.0, 40, [Vec3::ONE; 6], 0);
+    let nodes = sample::lattice(Vec3::splat(-1.0), Vec3::splat(1.0), 0.5, |_| true);
+    let set = SurfelSet {
+        surfels,
+        nodes,
+        clip,
+        ..SurfelSet::default()
+    };
+    let model = Arc::new(SurfelModel::new(set, usize::MAX).expect("valid"));
+    let p = PreparedSurfels::new(SurfelScene::rest(model, SurfelOptions::default()));
+    let camera = Camera {
+        eye: Vec3::new(2.6, 2.1, 3.2),
+        target: Vec3::ZERO,
+        up: Vec3::Y,
+        fov_y_deg: 50.0,
+    };
+    let (w, h) = (120u32, 90u32);
+    let rays = camera.rays(w, h);
+    let mut c = SurfelCounters::default();
+    let (mut hits, mut near_edges) = (0, 0);
+    for y in 0..h {
+        for x in 0..w {
+            let Some(hit) = p.nearest(&rays.through_pixel(x, y), 0.0, 100.0, None, &mut c) else {
+                continue;
+            };
+            let at = hit.position;
+            let axis = at.abs().max_position();
+            let mut face = Vec3::ZERO;
+            face[axis] = at[axis].signum();
+            let off = (at[axis].abs() - 1.0).abs();
+            let angle = hit.normal.dot(face).clamp(-1.0, 1.0).acos().to_degrees();
+            assert!(
+                off < 2e-3 && angle < 2.0,
+                "pixel ({x}, {y}): hit {at} is {off} off the cube, normal {} is {angle}° off {face}",
+                hit.normal
+            );
+            hits += 1;
+            // Within two surfel spacings (0.1) of an edge: the second largest coordinate.
+            let mut sorted = at.abs().to_array();
+            sorted.sort_by(f32::total_cmp);
+            near_edges += (sorted[1] > 0.9) as usize;
+        }
+    }
+    assert!(
+        hits > 3000 && near_edges > 200,
+        "{hits} hits, {near_edges} near the edges"
+    );
+}
+
 #[test]
 fn bad_surfel_data_is_rejected_with_what_is_wrong() {
     let good = sample::sphere(Vec3::ZERO, 1.0, 50, Vec3::ONE, 0);
