@@ -5,9 +5,10 @@
 //!
 //! How it works: each surfel takes its `EMBED_NODES` nearest simulation nodes with the
 //! weights of eq. 2 (support `h` = 1.5 × the distance to the farthest of them, normalised to
-//! sum to 1); its MLS neighbourhood (§4.2.1) is itself and its 15 nearest surfels of its own group, with
-//! support the distance to the farthest; a surfel of a group that is clipped by another group
-//! (§4.3) stores the two nearest surfels of that group. The hierarchy is
+//! sum to 1); its MLS neighbourhood (§4.2.1) is itself and the 15 nearest surfels of its own
+//! group (surface), with support the distance to the farthest; a surfel of a group that is
+//! clipped by another group (§4.3) stores the two nearest surfels of that group. The
+//! hierarchy is
 //! [`crate::kinds::surfels::tree::SphereTree`].
 
 use crate::geom::frame::LocalFrame;
