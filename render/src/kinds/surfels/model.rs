@@ -8,8 +8,7 @@
 //! sum to 1); its MLS neighbourhood (§4.2.1) is itself and the 15 nearest surfels of its own
 //! group (surface), with support the distance to the farthest; a surfel of a group that is
 //! clipped by another group (§4.3) stores the two nearest surfels of that group. The
-//! hierarchy is
-//! [`crate::kinds::surfels::tree::SphereTree`].
+//! hierarchy is [`crate::kinds::surfels::tree::SphereTree`].
 
 use crate::geom::frame::LocalFrame;
 use crate::kinds::surfels::kernel::{sigma_max, weight, Rows};
