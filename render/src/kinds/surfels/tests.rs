@@ -443,27 +443,27 @@ fn the_image_with_shadows_is_the_same_on_1_2_and_8_threads() {
     assert_eq!(images[0], images[2]);
 }
 
+/// The cube [-1, 1]³ of six faces of 44 × 44 surfels (40 across, two more past each edge)
+/// clipped by one another, at rest.
+fn clipped_cube() -> PreparedSurfels {
+    let (surfels, clip) = sample::cube(Vec3::ZERO, 1.0, 40, [Vec3::ONE; 6], 0);
+    let nodes = sample::lattice(Vec3::splat(-1.0), Vec3::splat(1.0), 0.5, |_| true);
+    let set = SurfelSet {
+        surfels,
+        nodes,
+        clip,
+        ..SurfelSet::default()
+    };
+    let model = Arc::new(SurfelModel::new(set, usize::MAX).expect("valid"));
+    PreparedSurfels::new(SurfelScene::rest(model, SurfelOptions::default()))
+}
+
 #[test]
 fn clipped_edges_stay_sharp_at_4x_supersampling() {
     // One cube [-1, 1]³ of six clipped faces seen head on: the front face's right edge is
     // x = 1 at z = 1, so a pixel's coverage along a row is the share of its 2×2 samples
     // whose rays cross z = 1 at x ≤ 1. Unclipped, the faces run two spacings past the edge.
-    let (surfels, clip) = sample::cube(Vec3::ZERO, 1.0, 40, [Vec3::ONE; 6], 0);
-    let nodes = sample::lattice(Vec3::splat(-1.0), Vec3::splat(1.0), 0.5, |_| true);
-    let model = Arc::new(
-        SurfelModel::new(
-            SurfelSet {
-                surfels,
-                nodes,
-                clip,
-                ..SurfelSet::default()
-            },
-            usize::MAX,
-        )
-        .expect("valid"),
-    );
-    let scene = SurfelScene::rest(model, SurfelOptions::default());
-    let p = PreparedSurfels::new(scene);
+    let p = clipped_cube();
     let camera = Camera {
         eye: Vec3::new(0.0, 0.0, 5.0),
         target: Vec3::ZERO,
@@ -512,16 +512,7 @@ fn clipped_edges_stay_sharp_at_4x_supersampling() {
 /// off) and stand off the cube, so this fails.
 #[test]
 fn clipped_faces_keep_their_normals_up_to_the_edges() {
-    let (surfels, clip) = sample::cube(Vec3::ZERO, 1.0, 40, [Vec3::ONE; 6], 0);
-    let nodes = sample::lattice(Vec3::splat(-1.0), Vec3::splat(1.0), 0.5, |_| true);
-    let set = SurfelSet {
-        surfels,
-        nodes,
-        clip,
-        ..SurfelSet::default()
-    };
-    let model = Arc::new(SurfelModel::new(set, usize::MAX).expect("valid"));
-    let p = PreparedSurfels::new(SurfelScene::rest(model, SurfelOptions::default()));
+    let p = clipped_cube();
     let camera = Camera {
         eye: Vec3::new(2.6, 2.1, 3.2),
         target: Vec3::ZERO,
