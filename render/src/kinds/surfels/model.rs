@@ -149,10 +149,10 @@ impl SurfelModel {
             )
         };
         let centres: Vec<Vec3> = surfels.iter().map(|s| s.centre).collect();
-        let group: Vec<u16> = surfels.iter().map(|s| s.group).collect();
-        let (neighbours, support) = neighbour_rows(&centres, &group);
-        let groups = surfels.iter().map(|s| s.group).max().unwrap_or(0) + 1;
-        let clip = clip_rows(&surfels, &clip, groups);
+        let by_group = ByGroup::new(&surfels);
+        let grids = by_group.grids();
+        let (neighbours, support) = neighbour_rows(&surfels, &by_group, &grids);
+        let clip = clip_rows(&surfels, &clip, &by_group, &grids);
         let leaf_radius: Vec<f32> = surfels
             .iter()
             .map(|s| sigma_max(s.t1, s.t2) * s.radius)
@@ -176,7 +176,7 @@ impl SurfelModel {
             leaf_radius,
             orient,
             tree,
-            groups,
+            groups: (by_group.members.len() as u16).max(1),
         })
     }
 
@@ -323,37 +323,59 @@ fn embed_rows(centres: &[Vec3], nodes: &[Vec3]) -> Rows<(u32, f32)> {
     Rows::from_rows(rows)
 }
 
+/// The surfels of each group (surface) and their centres, and each surfel's index within its
+/// group: what the per-surface neighbour searches ([`neighbour_rows`], [`clip_rows`]) run on.
+struct ByGroup {
+    members: Vec<Vec<u32>>,
+    points: Vec<Vec<Vec3>>,
+    local: Vec<u32>,
+}
+
+impl ByGroup {
+    fn new(surfels: &[Surfel]) -> ByGroup {
+        let groups = surfels
+            .iter()
+            .map(|s| s.group as usize + 1)
+            .max()
+            .unwrap_or(0);
+        let mut members: Vec<Vec<u32>> = vec![Vec::new(); groups];
+        let mut local = vec![0u32; surfels.len()];
+        for (i, s) in surfels.iter().enumerate() {
+            let m = &mut members[s.group as usize];
+            local[i] = m.len() as u32;
+            m.push(i as u32);
+        }
+        let points = members
+            .iter()
+            .map(|m| m.iter().map(|&i| surfels[i as usize].centre).collect())
+            .collect();
+        ByGroup {
+            members,
+            points,
+            local,
+        }
+    }
+
+    /// A grid over each group's centres.
+    fn grids(&self) -> Vec<Grid<'_>> {
+        self.points.iter().map(|p| Grid::new(p)).collect()
+    }
+}
+
 /// Each surfel's fixed MLS neighbourhood (itself and its nearest others) and support, taken
 /// from its own surface (group) only: a surface that another clips is its own MLS surface
 /// continued past the edge and cut there (§4.3), so a neighbourhood that reached across the
 /// edge into the other surface would blend the two and round the edge it is meant to keep
 /// sharp.
-fn neighbour_rows(centres: &[Vec3], group: &[u16]) -> (Rows<u32>, Vec<f32>) {
-    let groups = group.iter().copied().max().map_or(0, |g| g as usize + 1);
-    let mut members: Vec<Vec<u32>> = vec![Vec::new(); groups];
-    for (i, &g) in group.iter().enumerate() {
-        members[g as usize].push(i as u32);
-    }
-    let points: Vec<Vec<Vec3>> = members
-        .iter()
-        .map(|m| m.iter().map(|&i| centres[i as usize]).collect())
-        .collect();
-    let grids: Vec<Grid> = points.iter().map(|p| Grid::new(p)).collect();
-    // A surfel's index within its group.
-    let mut local = vec![0u32; centres.len()];
-    for m in &members {
-        for (k, &i) in m.iter().enumerate() {
-            local[i as usize] = k as u32;
-        }
-    }
-    let rows: Vec<(Vec<u32>, f32)> = (0..centres.len())
+fn neighbour_rows(surfels: &[Surfel], by: &ByGroup, grids: &[Grid]) -> (Rows<u32>, Vec<f32>) {
+    let rows: Vec<(Vec<u32>, f32)> = (0..surfels.len())
         .into_par_iter()
         .map_init(Vec::new, |near, i| {
-            let g = group[i] as usize;
-            let k = (NEIGHBOURS - 1).min(members[g].len() - 1);
-            grids[g].nearest(centres[i], k, Some(local[i]), near);
+            let g = surfels[i].group as usize;
+            let k = (NEIGHBOURS - 1).min(by.members[g].len() - 1);
+            grids[g].nearest(surfels[i].centre, k, Some(by.local[i]), near);
             let mut row = vec![i as u32];
-            row.extend(near.iter().map(|n| members[g][n.0 as usize]));
+            row.extend(near.iter().map(|n| by.members[g][n.0 as usize]));
             let h = near.last().map_or(1e-3, |n| n.1.sqrt()).max(1e-6);
             (row, h)
         })
@@ -362,19 +384,16 @@ fn neighbour_rows(centres: &[Vec3], group: &[u16]) -> (Rows<u32>, Vec<f32>) {
     (Rows::from_rows(rows.into_iter().map(|r| r.0)), support)
 }
 
-fn clip_rows(surfels: &[Surfel], relations: &[(u16, u16)], groups: u16) -> Rows<[u32; 2]> {
+fn clip_rows(
+    surfels: &[Surfel],
+    relations: &[(u16, u16)],
+    by: &ByGroup,
+    grids: &[Grid],
+) -> Rows<[u32; 2]> {
     if relations.is_empty() {
         return Rows::from_rows(surfels.iter().map(|_| Vec::new()));
     }
-    let mut members: Vec<Vec<u32>> = vec![Vec::new(); groups as usize];
-    for (i, s) in surfels.iter().enumerate() {
-        members[s.group as usize].push(i as u32);
-    }
-    let points: Vec<Vec<Vec3>> = members
-        .iter()
-        .map(|m| m.iter().map(|&i| surfels[i as usize].centre).collect())
-        .collect();
-    let grids: Vec<Grid> = points.iter().map(|p| Grid::new(p)).collect();
+    let members = &by.members;
     let rows: Vec<Vec<[u32; 2]>> = surfels
         .par_iter()
         .map_init(Vec::new, |near, s| {
