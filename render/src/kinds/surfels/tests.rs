@@ -359,6 +359,55 @@ fn packets_give_the_single_rays_hits_on_every_demo() {
     }
 }
 
+/// One 8×8 packet on a fresh lazy step leaves every node it expanded (both children's
+/// records filled) no larger than the sphere around its children as they ended: the
+/// traversal tightens a node once its subtree is done, so what the descendants learned
+/// reaches it within the packet. Tightening only on the way down sizes a parent by its
+/// children's first (eq. 9) spheres, which the children then shrink below.
+#[test]
+fn a_packet_tightens_each_node_it_expanded_after_its_subtree() {
+    use crate::kinds::contract::PreparedKind;
+    use crate::kinds::surfels::deform::sphere_around;
+    use crate::kinds::surfels::prepared::Accel;
+    let demo = demo::build(SurfelDemoKind::Balls, 0.03, 12).expect("demo");
+    let (w, h) = (64, 48);
+    let rays = demo.camera.rays(w, h);
+    let p = prepare(
+        &demo,
+        7,
+        UpdateMode::Lazy,
+        false,
+        &Arc::new(SurfelRuntime::default()),
+    );
+    let Accel::Lazy(nodes) = &p.accel else {
+        panic!("not a lazy step");
+    };
+    let mut c = SurfelCounters::default();
+    let (x0, y0) = (w / 2 - 4, h / 2 - 4);
+    let hits = p.primary_tile(&rays, (x0, y0, x0 + 8, y0 + 8), 0.0, 1e4, &mut c);
+    assert!(hits.iter().filter(|(_, hit)| hit.is_some()).count() > 8);
+    let mut expanded = 0;
+    for node in nodes
+        .iter()
+        .filter(|n| n.kids[0] != crate::kinds::surfels::tree::LEAF)
+    {
+        let (Some(a), Some(b)) = (
+            nodes[node.kids[0] as usize].get(),
+            nodes[node.kids[1] as usize].get(),
+        ) else {
+            continue;
+        };
+        let (_, radius) = node.get().expect("an expanded node has its sphere");
+        let around = sphere_around(a, b).1;
+        assert!(
+            radius <= around,
+            "expanded node of radius {radius} > {around} around its children"
+        );
+        expanded += 1;
+    }
+    assert!(expanded > 40, "only {expanded} nodes expanded");
+}
+
 /// Shadow packets find a hit exactly for the rays the single any-hit query finds one for, on
 /// every demo, lazy and eager, rays from the visible surface towards a light above it.
 #[test]

@@ -25,7 +25,9 @@ const SPHERE_SLACK: f32 = 1e-6;
 /// ([`Lanes::entries`]) rather than ray by ray.
 const DENSE: u32 = 12;
 
-/// Deep enough for any median-split tree of `u32` surfels (depth ≤ 33, two entries a level).
+/// Deep enough for any median-split tree of `u32` surfels (depth ≤ 33; two entries a level,
+/// three in a packet's stack, which keeps a post-order marker under each expanded node's
+/// children, one of which is popped at once).
 const STACK: usize = 80;
 
 /// Where a traversal gets node spheres.
@@ -63,9 +65,10 @@ impl Spheres for LazyView<'_> {
 
     /// Eq. 11 once both children are updated (§4.4: "if a node is already visited before,
     /// update the radius using Equation 11"), and the sphere around both children where
-    /// that is tighter: the traversal calls this right after it has updated and tested both
-    /// children, so their spheres come for free; the node is written only when a sphere
-    /// actually shrinks.
+    /// that is tighter: the single ray calls this right after it has updated and tested both
+    /// children, a packet once the node's whole subtree is done (post-order), so that what
+    /// its descendants learned reaches it within the packet; the node is written only when
+    /// a sphere actually shrinks.
     #[inline]
     fn tighten(&self, n: u32, radius: f32, kids: [(Vec3, f32); 2]) {
         self.nodes[n as usize].tighten(radius, kids);
@@ -348,10 +351,10 @@ pub fn first_hit<V: Spheres>(
 pub const PACKET: usize = 64;
 
 /// [`first_hit`] for up to [`PACKET`] rays on `[0, t_max]` together (coherent camera rays):
-/// each node's sphere is read, updated and tightened once for the packet, and each ray tests
-/// it only while it is active (it met the parent and the parent's entry was not beyond its
-/// nearest hit so far). `hints` holds each ray's cached surfel (tested first, as the single
-/// ray does).
+/// each node's sphere is read and updated once for the packet (and tightened once the
+/// packet is done with its subtree), and each ray tests it only while it is active (it met
+/// the parent and the parent's entry was not beyond its nearest hit so far). `hints` holds
+/// each ray's cached surfel (tested first, as the single ray does).
 ///
 /// The answers are [`first_hit`]'s: a ray's answer is the nearest hit (ties to the lower
 /// surfel) over the leaves it tests, a leaf's hit does not depend on the order, and a ray
@@ -395,6 +398,13 @@ pub fn first_hits<V: Spheres>(
     while top > 0 {
         top -= 1;
         let (node, radius, mut mask) = stack[top];
+        if mask == 0 {
+            // Post-order: the node's subtree is done; tighten it from its children now.
+            let kids_of = v.kids(node);
+            let spheres = kids_of.map(|k| v.sphere(k, c));
+            v.tighten(node, radius, spheres);
+            continue;
+        }
         let entry = entries[top];
         for i in Bits(mask) {
             if entry[i] > limit(out, i) {
@@ -422,7 +432,14 @@ pub fn first_hits<V: Spheres>(
         }
         let spheres = kids_of.map(|k| v.sphere(k, c));
         c.sphere_tests += 2 * mask.count_ones() as u64;
-        let mut kid_entries = [[f32::INFINITY; PACKET]; 2];
+        if top + 3 > STACK {
+            continue; // unreachable: two slots a level (see STACK)
+        }
+        // The node stays below its children as a post-order marker (no rays); the
+        // children's entries go straight into the two slots above it.
+        stack[top] = (node, radius, 0);
+        let (below, above) = entries.split_at_mut(top + 2);
+        let kid_entries = [&mut below[top + 1], &mut above[0]];
         let mut kid_masks = [0u64; 2];
         let mut nearer = [0u32; 2];
         if mask.count_ones() >= DENSE {
@@ -433,7 +450,7 @@ pub fn first_hits<V: Spheres>(
                 if cone.is_some_and(|c| c.misses(kc, kr)) {
                     continue;
                 }
-                kid_masks[k] = lanes.entries(kc, kr, 0.0, &lims, &mut kid_entries[k]) & mask;
+                kid_masks[k] = lanes.entries(kc, kr, 0.0, &lims, kid_entries[k]) & mask;
             }
             for i in Bits(kid_masks[0] & kid_masks[1]) {
                 nearer[(kid_entries[1][i] < kid_entries[0][i]) as usize] += 1;
@@ -452,19 +469,29 @@ pub fn first_hits<V: Spheres>(
                 }
             }
         }
-        v.tighten(node, radius, spheres);
-        // Far first, so that the child nearer for most rays is popped first.
-        let order = if nearer[1] > nearer[0] {
-            [0, 1]
-        } else {
-            [1, 0]
-        };
-        for k in order {
-            if kid_masks[k] != 0 && top < STACK {
-                stack[top] = (kids_of[k], spheres[k].1, kid_masks[k]);
-                entries[top] = kid_entries[k];
+        top += 1;
+        let kid = |k: usize| (kids_of[k], spheres[k].1, kid_masks[k]);
+        match (kid_masks[0] != 0, kid_masks[1] != 0) {
+            // The child nearer for most rays on top, so that it is popped first.
+            (true, true) if nearer[1] > nearer[0] => {
+                (stack[top], stack[top + 1]) = (kid(0), kid(1));
+                top += 2;
+            }
+            (true, true) => {
+                entries.swap(top, top + 1);
+                (stack[top], stack[top + 1]) = (kid(1), kid(0));
+                top += 2;
+            }
+            (true, false) => {
+                stack[top] = kid(0);
                 top += 1;
             }
+            (false, true) => {
+                entries.copy_within(top + 1..top + 2, top);
+                stack[top] = kid(1);
+                top += 1;
+            }
+            (false, false) => {}
         }
     }
 }
