@@ -145,21 +145,24 @@ pub fn run(args: SurfelsArgs) -> Result<(), String> {
                 "| config | ms/frame | prepare ms | sphere tests/ray | surfel tests/ray | modes |"
             );
             println!("|---|---|---|---|---|---|");
-            let mut by_config = BTreeMap::new();
-            for (name, mode, cache) in CONFIGS {
-                if !args.configs.is_empty() && !args.configs.iter().any(|c| c == name) {
-                    continue;
+            let chosen: Vec<_> = CONFIGS
+                .into_iter()
+                .filter(|(name, ..)| {
+                    args.configs.is_empty() || args.configs.iter().any(|c| c == name)
+                })
+                .collect();
+            // Runs outermost, every configuration once in each: a slower or faster spell of
+            // a shared machine falls on all of them alike, and the ratios below compare
+            // configurations measured side by side.
+            let mut samples: Vec<Samples> = chosen.iter().map(|_| Samples::default()).collect();
+            for _ in 0..args.runs {
+                for (&(_, mode, cache), into) in chosen.iter().zip(&mut samples) {
+                    measure_run(&backend, &demo, &args, (w, h), mode, cache, into);
                 }
-                let row = measure(
-                    &backend,
-                    &demo,
-                    &args,
-                    kind.name(),
-                    (w, h),
-                    name,
-                    mode,
-                    cache,
-                );
+            }
+            let mut by_config = BTreeMap::new();
+            for (&(name, ..), samples) in chosen.iter().zip(samples) {
+                let row = samples.row(&demo, &args, kind.name(), (w, h), name);
                 println!(
                     "| {name} | {:.1} | {:.1} | {:.2} | {:.3} | {:?} |",
                     row.ms_per_frame,
@@ -174,22 +177,34 @@ pub fn run(args: SurfelsArgs) -> Result<(), String> {
                         row.ms_per_frame,
                         row.nearest_tests_per_ray,
                         row.tests_per_frame,
+                        samples.run_ms,
                     ),
                 );
                 report.rows.push(row);
             }
-            if let (Some(&(rebuild, ..)), Some(&(lazy_ms, ..)), Some(&(cache_ms, ..))) = (
+            if let (Some((rebuild, ..)), Some((lazy_ms, ..)), Some((cache_ms, ..))) = (
                 by_config.get("rebuild"),
                 by_config.get("lazy"),
                 by_config.get("lazy+cache"),
             ) {
                 println!(
-                    "speed-up over rebuild: lazy {:.2}×, lazy+cache {:.2}×",
+                    "speed-up over rebuild: lazy {:.2}×, lazy+cache {:.2}× (medians over every frame)",
                     rebuild / lazy_ms,
                     rebuild / cache_ms,
                 );
             }
-            if let (Some(&(_, plain, plain_all)), Some(&(_, cached, cached_all))) =
+            if let (Some((.., rebuild)), Some((.., cached))) =
+                (by_config.get("rebuild"), by_config.get("lazy+cache"))
+            {
+                let ratios: Vec<f64> = rebuild.iter().zip(cached).map(|(r, c)| r / c).collect();
+                let each: Vec<String> = ratios.iter().map(|r| format!("{r:.2}×")).collect();
+                println!(
+                    "lazy+cache over rebuild run by run (median frame of each, measured side by side): {} (median {:.2}×)",
+                    each.join(", "),
+                    median(ratios.clone()),
+                );
+            }
+            if let (Some(&(_, plain, plain_all, _)), Some(&(_, cached, cached_all, _))) =
                 (by_config.get("lazy"), by_config.get("lazy+cache"))
             {
                 println!(
@@ -240,16 +255,28 @@ fn parse_size(s: &str) -> Result<(u32, u32), String> {
 }
 
 #[allow(clippy::too_many_arguments)]
-fn measure(
+/// One configuration's figures, gathered over the runs.
+#[derive(Default)]
+struct Samples {
+    frame_ms: Vec<f64>,
+    prepare_ms: Vec<f64>,
+    /// The median frame of each run, in run order.
+    run_ms: Vec<f64>,
+    counters: SurfelCounters,
+    rays: u64,
+    modes: BTreeMap<String, usize>,
+}
+
+/// One run: `args.frames` steps traced in order on a fresh runtime (an empty cache).
+fn measure_run(
     backend: &CpuBackend,
     demo: &SurfelDemo,
     args: &SurfelsArgs,
-    scene: &'static str,
     (w, h): (u32, u32),
-    name: &str,
     mode: UpdateMode,
     cache: bool,
-) -> Row {
+    into: &mut Samples,
+) {
     let view = View {
         width: w,
         height: h,
@@ -260,54 +287,63 @@ fn measure(
         shadows: true,
         ..Effects::OFF
     };
-    let mut frame_ms = Vec::new();
-    let mut prepare_ms = Vec::new();
-    let mut counters = SurfelCounters::default();
-    let mut rays = 0;
-    let mut modes = BTreeMap::new();
-    for _ in 0..args.runs {
-        let runtime = Arc::new(SurfelRuntime::default());
-        for k in args.skip..args.skip + args.frames {
-            let start = Instant::now();
-            let scene = Scene {
-                geometry: Geometry::Surfels(demo.scene(
-                    k,
-                    SurfelOptions::new(mode, cache),
-                    runtime.clone(),
-                )),
-                lighting: Lighting::default(),
-            };
-            let prepared = Arc::new(scene).prepare();
-            let prep = start.elapsed().as_secs_f64() * 1e3;
-            let (_fb, frame_rays) = backend.render_effects(&prepared, &view, &effects);
-            frame_ms.push(start.elapsed().as_secs_f64() * 1e3);
-            prepare_ms.push(prep);
-            let c = frame_rays.kinds.surfels;
-            counters = add(counters, c);
-            rays += c.rays;
-            if let PreparedGeometry::Surfels(p) = prepared.geometry() {
-                *modes.entry(p.used.name().to_string()).or_insert(0) += 1;
-            }
+    let runtime = Arc::new(SurfelRuntime::default());
+    let mut run = Vec::new();
+    for k in args.skip..args.skip + args.frames {
+        let start = Instant::now();
+        let scene = Scene {
+            geometry: Geometry::Surfels(demo.scene(
+                k,
+                SurfelOptions::new(mode, cache),
+                runtime.clone(),
+            )),
+            lighting: Lighting::default(),
+        };
+        let prepared = Arc::new(scene).prepare();
+        let prep = start.elapsed().as_secs_f64() * 1e3;
+        let (_fb, frame_rays) = backend.render_effects(&prepared, &view, &effects);
+        run.push(start.elapsed().as_secs_f64() * 1e3);
+        into.prepare_ms.push(prep);
+        let c = frame_rays.kinds.surfels;
+        into.counters = add(into.counters, c);
+        into.rays += c.rays;
+        if let PreparedGeometry::Surfels(p) = prepared.geometry() {
+            *into.modes.entry(p.used.name().to_string()).or_insert(0) += 1;
         }
     }
-    Row {
-        scene,
-        surfels: demo.model.len(),
-        nodes: demo.model.nodes.len(),
-        size: format!("{w}x{h}"),
-        config: name.to_string(),
-        ms_per_frame: median(frame_ms),
-        prepare_ms: median(prepare_ms),
-        sphere_tests_per_ray: per(counters.sphere_tests, rays),
-        surfel_tests_per_ray: per(counters.surfel_tests, rays),
-        nearest_tests_per_ray: per(
-            counters.sphere_tests + counters.surfel_tests - counters.any_tests,
-            counters.rays - counters.any_rays,
-        ),
-        tests_per_frame: (counters.sphere_tests + counters.surfel_tests) as f64
-            / (args.runs * args.frames).max(1) as f64,
-        rays,
-        modes,
+    into.frame_ms.extend(&run);
+    into.run_ms.push(median(run));
+}
+
+impl Samples {
+    fn row(
+        &self,
+        demo: &SurfelDemo,
+        args: &SurfelsArgs,
+        scene: &'static str,
+        (w, h): (u32, u32),
+        name: &str,
+    ) -> Row {
+        let c = self.counters;
+        Row {
+            scene,
+            surfels: demo.model.len(),
+            nodes: demo.model.nodes.len(),
+            size: format!("{w}x{h}"),
+            config: name.to_string(),
+            ms_per_frame: median(self.frame_ms.clone()),
+            prepare_ms: median(self.prepare_ms.clone()),
+            sphere_tests_per_ray: per(c.sphere_tests, self.rays),
+            surfel_tests_per_ray: per(c.surfel_tests, self.rays),
+            nearest_tests_per_ray: per(
+                c.sphere_tests + c.surfel_tests - c.any_tests,
+                c.rays - c.any_rays,
+            ),
+            tests_per_frame: (c.sphere_tests + c.surfel_tests) as f64
+                / (args.runs * args.frames).max(1) as f64,
+            rays: self.rays,
+            modes: self.modes.clone(),
+        }
     }
 }
 

@@ -37,6 +37,7 @@ impl LeafHit {
 }
 
 /// The ray's intersection with leaf surfel `s` within `[t_min, t_max]`.
+#[inline]
 pub fn intersect_leaf(
     p: &PreparedSurfels,
     ray: &Ray,
@@ -45,72 +46,120 @@ pub fn intersect_leaf(
     t_max: f32,
     c: &mut SurfelCounters,
 ) -> Option<LeafHit> {
-    c.surfel_tests += 1;
-    let mut fresh = false;
-    let leaf = *p.surfel(s, &mut fresh);
-    c.surfel_updates += fresh as u64;
-    // The deformed ellipse: the start point.
-    let denom = leaf.normal.dot(ray.dir);
-    if denom.abs() < 1e-7 {
-        return None;
+    Leaf::new(p, s, c).hit(ray, t_min, t_max, c)
+}
+
+/// One leaf as the rays of a packet meet it: its deformed surfel and ellipse read once, its
+/// neighbourhood gathered once, when the first ray gets past the ellipse. Each ray's
+/// [`Leaf::hit`] is [`intersect_leaf`]'s answer, bit for bit (the same arithmetic on the
+/// same data).
+pub struct Leaf<'a> {
+    p: &'a PreparedSurfels,
+    s: usize,
+    centre: Vec3,
+    normal: Vec3,
+    t1: Vec3,
+    t2: Vec3,
+    leaf_radius: f32,
+    /// The ellipse's Gram matrix `(g11, g12, g22)` and its determinant.
+    gram: (f32, f32, f32, f32),
+    hood: Option<(Neighbourhood, f32)>,
+}
+
+impl<'a> Leaf<'a> {
+    #[inline]
+    pub fn new(p: &'a PreparedSurfels, s: usize, c: &mut SurfelCounters) -> Leaf<'a> {
+        let mut fresh = false;
+        let leaf = *p.surfel(s, &mut fresh);
+        c.surfel_updates += fresh as u64;
+        let (g11, g12, g22) = (
+            leaf.t1.length_squared(),
+            leaf.t1.dot(leaf.t2),
+            leaf.t2.length_squared(),
+        );
+        Leaf {
+            p,
+            s,
+            centre: leaf.centre,
+            normal: leaf.normal,
+            t1: leaf.t1,
+            t2: leaf.t2,
+            leaf_radius: leaf.leaf_radius,
+            gram: (g11, g12, g22, g11 * g22 - g12 * g12),
+            hood: None,
+        }
     }
-    let t0 = leaf.normal.dot(leaf.centre - ray.origin) / denom;
-    let q = ray.at(t0) - leaf.centre;
-    let (g11, g12, g22) = (
-        leaf.t1.length_squared(),
-        leaf.t1.dot(leaf.t2),
-        leaf.t2.length_squared(),
-    );
-    let det = g11 * g22 - g12 * g12;
-    if !(det > 0.0) {
-        return None;
-    }
-    let (r1, r2) = (leaf.t1.dot(q), leaf.t2.dot(q));
-    let (a, b) = ((g22 * r1 - g12 * r2) / det, (g11 * r2 - g12 * r1) / det);
-    let radius = p.model.surfels[s].radius;
-    if a * a + b * b > radius * radius {
-        return None;
-    }
-    let h = support(p, s, leaf.leaf_radius);
-    let neighbours = p.model.neighbours.row(s);
-    let mut x = ray.at(t0);
-    let (iterations, epsilon) = (p.options.mls_iterations, p.options.mls_epsilon);
-    let inv_h2 = 1.0 / (h * h);
-    let hood = Neighbourhood::gather(p, neighbours, c);
-    for _ in 0..iterations {
-        c.iterations += 1;
-        let (sw, sp, sn) = hood.sums(&hood.weights(x, inv_h2));
-        if !(sw > 0.0) {
+
+    /// The ray's intersection with this leaf within `[t_min, t_max]`.
+    pub fn hit(
+        &mut self,
+        ray: &Ray,
+        t_min: f32,
+        t_max: f32,
+        c: &mut SurfelCounters,
+    ) -> Option<LeafHit> {
+        c.surfel_tests += 1;
+        let (p, s) = (self.p, self.s);
+        // The deformed ellipse: the start point.
+        let denom = self.normal.dot(ray.dir);
+        if denom.abs() < 1e-7 {
             return None;
         }
-        let avg = sp / sw;
-        let n = sn.normalize_or_zero();
-        if n == Vec3::ZERO {
+        let t0 = self.normal.dot(self.centre - ray.origin) / denom;
+        let q = ray.at(t0) - self.centre;
+        let (g11, g12, g22, det) = self.gram;
+        if !(det > 0.0) {
             return None;
         }
-        if n.dot(x - avg).abs() < epsilon * h {
-            let t = (x - ray.origin).dot(ray.dir);
-            if !(t >= t_min && t <= t_max) || clipped(p, s, x, c) {
+        let (r1, r2) = (self.t1.dot(q), self.t2.dot(q));
+        let (a, b) = ((g22 * r1 - g12 * r2) / det, (g11 * r2 - g12 * r1) / det);
+        let radius = p.model.surfels[s].radius;
+        if a * a + b * b > radius * radius {
+            return None;
+        }
+        let (hood, h) = self.hood.get_or_insert_with(|| {
+            let h = support(p, s, self.leaf_radius);
+            (Neighbourhood::gather(p, p.model.neighbours.row(s), c), h)
+        });
+        let h = *h;
+        let mut x = ray.at(t0);
+        let (iterations, epsilon) = (p.options.mls_iterations, p.options.mls_epsilon);
+        let inv_h2 = 1.0 / (h * h);
+        for _ in 0..iterations {
+            c.iterations += 1;
+            let (sw, sp, sn) = hood.sums(&hood.weights(x, inv_h2));
+            if !(sw > 0.0) {
                 return None;
             }
-            return Some(LeafHit {
-                t,
-                position: x,
-                normal: n,
-                surfel: s as u32,
-            });
+            let avg = sp / sw;
+            let n = sn.normalize_or_zero();
+            if n == Vec3::ZERO {
+                return None;
+            }
+            if n.dot(x - avg).abs() < epsilon * h {
+                let t = (x - ray.origin).dot(ray.dir);
+                if !(t >= t_min && t <= t_max) || clipped(p, s, x, c) {
+                    return None;
+                }
+                return Some(LeafHit {
+                    t,
+                    position: x,
+                    normal: n,
+                    surfel: s as u32,
+                });
+            }
+            let dn = n.dot(ray.dir);
+            if dn.abs() < 1e-7 {
+                return None;
+            }
+            x = ray.at(n.dot(avg - ray.origin) / dn);
+            if (x - self.centre).length_squared() > self.leaf_radius * self.leaf_radius {
+                return None;
+            }
         }
-        let dn = n.dot(ray.dir);
-        if dn.abs() < 1e-7 {
-            return None;
-        }
-        x = ray.at(n.dot(avg - ray.origin) / dn);
-        if (x - leaf.centre).length_squared() > leaf.leaf_radius * leaf.leaf_radius {
-            return None;
-        }
+        c.capped += 1;
+        None
     }
-    c.capped += 1;
-    None
 }
 
 /// A leaf's fixed neighbourhood, deformed, as structure-of-arrays: read once per

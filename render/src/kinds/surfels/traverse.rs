@@ -9,7 +9,7 @@
 
 use crate::kinds::surfels::counters::SurfelCounters;
 use crate::kinds::surfels::deform::node_sphere;
-use crate::kinds::surfels::intersect::{intersect_leaf, LeafHit};
+use crate::kinds::surfels::intersect::{intersect_leaf, Leaf, LeafHit};
 use crate::kinds::surfels::prepared::{LazyNode, PreparedSurfels};
 use crate::kinds::surfels::tree::{TreeNode, LEAF};
 use crate::ray::Ray;
@@ -416,12 +416,13 @@ pub fn first_hits<V: Spheres>(
         }
         let kids_of = v.kids(node);
         if kids_of[0] == LEAF {
+            let mut leaf = Leaf::new(p, kids_of[1] as usize, c);
             for i in Bits(mask) {
                 if Some(kids_of[1]) == hints[i] {
                     continue;
                 }
                 let lim = limit(out, i);
-                let h = intersect_leaf(p, &rays[i], kids_of[1] as usize, 0.0, lim, c);
+                let h = leaf.hit(&rays[i], 0.0, lim, c);
                 if let Some(h) = h {
                     if out[i].is_none_or(|b| h.before(&b)) {
                         out[i] = Some(h);
@@ -551,8 +552,9 @@ pub fn any_hits<V: Spheres>(
         }
         let [a, b] = v.kids(node);
         if a == LEAF {
+            let mut leaf = Leaf::new(p, b as usize, c);
             for i in Bits(inside) {
-                if let Some(h) = intersect_leaf(p, &rays[i], b as usize, t_min, t_max[i], c) {
+                if let Some(h) = leaf.hit(&rays[i], t_min, t_max[i], c) {
                     out[i] = Some(h.t);
                     done |= 1 << i;
                 }
