@@ -43,7 +43,8 @@ static NEXT_ID: AtomicU64 = AtomicU64::new(1);
 
 /// One sphere of a lazy step, with the node's children alongside so that a traversal reads
 /// one 24-byte record per node: empty until a ray first touches it, then its eq. 4 centre
-/// and eq. 9 radius; once both children are updated, the smallest sphere around them where
+/// and eq. 9 radius (the sphere around its children for a small subtree,
+/// `traverse::SMALL_SUBTREE`); once both children are updated, the smallest sphere around them where
 /// that is tighter (eq. 11's bound with the parent's centre free to move,
 /// [`sphere_around`]); a leaf's is its deformed surfel's sphere.
 ///
