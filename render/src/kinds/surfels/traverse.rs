@@ -243,6 +243,11 @@ impl Cone {
     }
 }
 
+/// Lanes [`Lanes::entries`] skips together when none of them is active: a row of an 8×8
+/// camera packet (two vector registers in the portable build).
+const BLOCK: usize = 8;
+const BLOCK_MASK: u64 = (1 << BLOCK) - 1;
+
 /// A packet's rays as structure-of-arrays (lanes past the packet's rays are zero).
 struct Lanes {
     o: [[f32; PACKET]; 3],
@@ -264,10 +269,13 @@ impl Lanes {
         l
     }
 
-    /// [`sphere_entry`] for every lane at once, in one branch-free loop the compiler
+    /// [`sphere_entry`] for the lanes at once, in one branch-free loop the compiler
     /// vectorizes, with lane `i`'s upper bound `t_max[i]`: `entry[i]` is its entry where the
-    /// lane's bit is set in the answer. Both run [`entry_of`], so the entries are the same
-    /// bits (checked by `lanes_give_sphere_entry_bit_for_bit`).
+    /// lane's bit is set in the answer. Blocks of [`BLOCK`] lanes none of which is `active`
+    /// are skipped (no bit set, entries left as they were): on `surfel-impact` that takes
+    /// camera packets from 3.17 to 3.03 G instructions and shadow packets from 1.53 to
+    /// 1.41 G (callgrind). Both run [`entry_of`], so the entries are the same bits (checked
+    /// by `lanes_give_sphere_entry_bit_for_bit`).
     #[inline]
     fn entries(
         &self,
@@ -276,20 +284,30 @@ impl Lanes {
         t_min: f32,
         t_max: &[f32; PACKET],
         entry: &mut [f32; PACKET],
+        active: u64,
     ) -> u64 {
-        let mut met = [false; PACKET];
-        for i in 0..PACKET {
-            let oc = [
-                self.o[0][i] - centre.x,
-                self.o[1][i] - centre.y,
-                self.o[2][i] - centre.z,
-            ];
-            let d = [self.d[0][i], self.d[1][i], self.d[2][i]];
-            (met[i], entry[i]) = entry_of(oc, d, radius, t_min, t_max[i]);
-        }
         let mut mask = 0u64;
-        for (i, &m) in met.iter().enumerate() {
-            mask |= (m as u64) << i;
+        for block in 0..PACKET / BLOCK {
+            if (active >> (block * BLOCK)) & BLOCK_MASK == 0 {
+                continue;
+            }
+            let mut met = [false; BLOCK];
+            // Indexed, not `iter_mut`: this form is the one the compiler vectorizes
+            // (callgrind: camera packets 3.03 G instructions against 4.14 G).
+            #[allow(clippy::needless_range_loop)]
+            for l in 0..BLOCK {
+                let i = block * BLOCK + l;
+                let oc = [
+                    self.o[0][i] - centre.x,
+                    self.o[1][i] - centre.y,
+                    self.o[2][i] - centre.z,
+                ];
+                let d = [self.d[0][i], self.d[1][i], self.d[2][i]];
+                (met[l], entry[i]) = entry_of(oc, d, radius, t_min, t_max[i]);
+            }
+            for (l, &m) in met.iter().enumerate() {
+                mask |= (m as u64) << (block * BLOCK + l);
+            }
         }
         mask
     }
@@ -468,7 +486,7 @@ pub fn first_hits<V: Spheres>(
                 if cone.is_some_and(|c| c.misses(kc, kr)) {
                     continue;
                 }
-                kid_masks[k] = lanes.entries(kc, kr, 0.0, &lims, kid_entries[k]) & mask;
+                kid_masks[k] = lanes.entries(kc, kr, 0.0, &lims, kid_entries[k], mask) & mask;
             }
             for i in Bits(kid_masks[0] & kid_masks[1]) {
                 nearer[(kid_entries[1][i] < kid_entries[0][i]) as usize] += 1;
@@ -556,7 +574,7 @@ pub fn any_hits<V: Spheres>(
         c.sphere_tests += mask.count_ones() as u64;
         let mut inside = 0u64;
         if mask.count_ones() >= DENSE {
-            inside = lanes.entries(sc, sr, t_min, &lims, &mut scratch) & mask;
+            inside = lanes.entries(sc, sr, t_min, &lims, &mut scratch, mask) & mask;
         } else {
             for i in Bits(mask) {
                 if sphere_entry(&rays[i], sc, sr, t_min, t_max[i]).is_some() {
@@ -687,9 +705,17 @@ mod tests {
             let t_min = if rng.next_f32() < 0.5 { 0.0 } else { 0.1 };
             let t_max: [f32; PACKET] = std::array::from_fn(|_| 6.0 * rng.next_f32());
             let mut entry = [0f32; PACKET];
-            let mask = lanes.entries(centre, radius, t_min, &t_max, &mut entry);
+            // Every lane active, or some: a block of lanes with none active may be skipped
+            // (no bit set there), and every active lane is answered.
+            let active = if rng.next_f32() < 0.5 {
+                u64::MAX
+            } else {
+                rng.next_u64() & rng.next_u64()
+            };
+            let mask = lanes.entries(centre, radius, t_min, &t_max, &mut entry, active) & active;
             for (i, ray) in rays.iter().enumerate() {
-                let one = sphere_entry(ray, centre, radius, t_min, t_max[i]);
+                let one = sphere_entry(ray, centre, radius, t_min, t_max[i])
+                    .filter(|_| active >> i & 1 == 1);
                 let lane = (mask >> i & 1 == 1).then_some(entry[i]);
                 assert_eq!(
                     one.map(f32::to_bits),
@@ -699,7 +725,7 @@ mod tests {
                 met += one.is_some() as usize;
             }
         }
-        assert!(met > 20_000, "{met} rays met their sphere");
+        assert!(met > 12_000, "{met} active rays met their sphere");
     }
 
     /// The packet cone drops only spheres no ray of the packet meets: camera-like packets
