@@ -84,6 +84,9 @@ struct Row {
     tests_per_frame: f64,
     rays: u64,
     modes: BTreeMap<String, usize>,
+    /// Share of the surfels a frame deformed (median over frames; every one for eager and
+    /// rebuild): what auto mode's heuristic reads from the previous step.
+    touched: f64,
 }
 
 #[derive(Serialize)]
@@ -142,9 +145,9 @@ pub fn run(args: SurfelsArgs) -> Result<(), String> {
             let (w, h) = parse_size(size)?;
             println!("\n{size}, shadows on: ms/frame (median), prepare ms, tests per ray (primary + shadow)");
             println!(
-                "| config | ms/frame | prepare ms | sphere tests/ray | surfel tests/ray | modes |"
+                "| config | ms/frame | prepare ms | sphere tests/ray | surfel tests/ray | surfels deformed | modes |"
             );
-            println!("|---|---|---|---|---|---|");
+            println!("|---|---|---|---|---|---|---|");
             let chosen: Vec<_> = CONFIGS
                 .into_iter()
                 .filter(|(name, ..)| {
@@ -164,11 +167,12 @@ pub fn run(args: SurfelsArgs) -> Result<(), String> {
             for (&(name, ..), samples) in chosen.iter().zip(samples) {
                 let row = samples.row(&demo, &args, kind.name(), (w, h), name);
                 println!(
-                    "| {name} | {:.1} | {:.1} | {:.2} | {:.3} | {:?} |",
+                    "| {name} | {:.1} | {:.1} | {:.2} | {:.3} | {:.0}% | {:?} |",
                     row.ms_per_frame,
                     row.prepare_ms,
                     row.sphere_tests_per_ray,
                     row.surfel_tests_per_ray,
+                    100.0 * row.touched,
                     row.modes
                 );
                 by_config.insert(
@@ -265,6 +269,7 @@ struct Samples {
     counters: SurfelCounters,
     rays: u64,
     modes: BTreeMap<String, usize>,
+    touched: Vec<f64>,
 }
 
 /// One run: `args.frames` steps traced in order on a fresh runtime (an empty cache).
@@ -309,6 +314,8 @@ fn measure_run(
         into.rays += c.rays;
         if let PreparedGeometry::Surfels(p) = prepared.geometry() {
             *into.modes.entry(p.used.name().to_string()).or_insert(0) += 1;
+            into.touched
+                .push(p.touched_surfels() as f64 / p.surfels.len().max(1) as f64);
         }
     }
     into.frame_ms.extend(&run);
@@ -343,6 +350,7 @@ impl Samples {
                 / (args.runs * args.frames).max(1) as f64,
             rays: self.rays,
             modes: self.modes.clone(),
+            touched: median(self.touched.clone()),
         }
     }
 }

@@ -32,10 +32,13 @@ use std::time::Instant;
 /// rebuild: eq. 9's bounds would be too loose to prune anything (the documented fallback).
 pub const LOOSE_GRADIENT: f32 = 4.0;
 pub const LOOSE_MOVE: f32 = 2.0;
-/// Auto mode refits eagerly when the previous step touched more than this share of surfels
-/// (since the refit fits spheres to their surfels, an eager frame of `surfel-impact`, which
-/// touches about half of its surfels, beats a lazy one: 47 sphere tests a ray against 82).
-pub const EAGER_SHARE: f32 = 0.3;
+/// Auto mode refits eagerly when the previous step touched more than this share of surfels.
+/// `isoray-bench surfels` at 512×384 with shadows (lazy against eager ms a frame, surfels a
+/// lazy frame deforms): `surfel-impact` 115.7 against 125.1 (54%), `surfel-heads` 48.0
+/// against 58.1 (67%), `surfel-balls` at full detail about even (126–131 against 127, 72%,
+/// two runs); the refit's tighter tree (45 sphere tests a ray against 61 on
+/// `surfel-impact`) pays for deforming every surfel only when a frame touches most of them.
+pub const EAGER_SHARE: f32 = 0.7;
 /// A [`LazyNode`]'s radius before the node is updated (above every positive `f32`'s bits).
 const EMPTY: u32 = u32::MAX;
 /// The next [`PreparedSurfels::id`].
