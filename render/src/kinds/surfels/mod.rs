@@ -21,4 +21,6 @@ pub mod sim;
 #[cfg(test)]
 mod tests;
 pub mod traverse;
+#[cfg(test)]
+mod traverse_tests;
 pub mod tree;

@@ -193,7 +193,7 @@ fn entry_of(oc: [f32; 3], d: [f32; 3], radius: f32, t_min: f32, t_max: f32) -> (
 /// its sine up, and a sphere is dropped only when it clears the cone by a relative margin
 /// ten times [`SPHERE_SLACK`], so every sphere a ray's [`sphere_entry`] meets is kept.
 #[derive(Clone, Copy, Debug)]
-struct Cone {
+pub(super) struct Cone {
     apex: Vec3,
     axis: Vec3,
     cos: f32,
@@ -203,7 +203,7 @@ struct Cone {
 impl Cone {
     /// The cone around `rays` (unit directions), if they share an origin and fit in a cone
     /// narrower than a half space.
-    fn around(rays: &[Ray]) -> Option<Cone> {
+    pub(super) fn around(rays: &[Ray]) -> Option<Cone> {
         let apex = rays.first()?.origin;
         if rays.iter().any(|r| r.origin != apex) {
             return None;
@@ -231,7 +231,7 @@ impl Cone {
     /// with `d` and `e` the centre's offsets along and across the axis. A centre behind
     /// the apex is dropped only when the whole sphere is (the rays run forward of it).
     #[inline]
-    fn misses(&self, centre: Vec3, radius: f32) -> bool {
+    pub(super) fn misses(&self, centre: Vec3, radius: f32) -> bool {
         let v = centre - self.apex;
         let d = v.dot(self.axis);
         let e = (v - d * self.axis).length();
@@ -249,13 +249,13 @@ const BLOCK: usize = 8;
 const BLOCK_MASK: u64 = (1 << BLOCK) - 1;
 
 /// A packet's rays as structure-of-arrays (lanes past the packet's rays are zero).
-struct Lanes {
+pub(super) struct Lanes {
     o: [[f32; PACKET]; 3],
     d: [[f32; PACKET]; 3],
 }
 
 impl Lanes {
-    fn new(rays: &[Ray]) -> Lanes {
+    pub(super) fn new(rays: &[Ray]) -> Lanes {
         let mut l = Lanes {
             o: [[0.0; PACKET]; 3],
             d: [[0.0; PACKET]; 3],
@@ -277,7 +277,7 @@ impl Lanes {
     /// 1.41 G (callgrind). Both run [`entry_of`], so the entries are the same bits (checked
     /// by `lanes_give_sphere_entry_bit_for_bit`).
     #[inline]
-    fn entries(
+    pub(super) fn entries(
         &self,
         centre: Vec3,
         radius: f32,
@@ -667,141 +667,4 @@ pub fn any_hit<V: Spheres>(
         }
     }
     None
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::geom::rng::SplitMix64;
-
-    /// No point inside a sphere lies before the entry [`sphere_entry`] reports, for small
-    /// spheres far from the ray's origin (a leaf of a large object seen from its camera) and
-    /// rays through any part of them, grazing ones included. It fails with `|oc|² − b²` for
-    /// the squared distance to the line, and with the better distance but no slack.
-    /// The packet's all-lanes sphere test answers what [`sphere_entry`] answers ray by ray,
-    /// entries bit for bit, for rays that meet, graze and miss spheres near and far (the
-    /// lanes' layout and mask against the single ray's arithmetic).
-    #[test]
-    fn lanes_give_sphere_entry_bit_for_bit() {
-        let mut rng = SplitMix64(5);
-        let mut met = 0;
-        for _ in 0..2000 {
-            let centre = rng.in_unit_ball() * 3.0;
-            let radius = 2f32.powf(-8.0 * rng.next_f32());
-            // Half aimed at the sphere's neighbourhood (some graze it), half anywhere.
-            let rays: Vec<Ray> = (0..PACKET)
-                .map(|i| {
-                    let origin = rng.in_unit_ball() * 4.0;
-                    let aim = centre + rng.in_unit_ball() * (1.2 * radius);
-                    let dir = if i % 2 == 0 {
-                        aim - origin
-                    } else {
-                        rng.in_unit_ball()
-                    };
-                    Ray::new(origin, dir)
-                })
-                .collect();
-            let lanes = Lanes::new(&rays);
-            let t_min = if rng.next_f32() < 0.5 { 0.0 } else { 0.1 };
-            let t_max: [f32; PACKET] = std::array::from_fn(|_| 6.0 * rng.next_f32());
-            let mut entry = [0f32; PACKET];
-            // Every lane active, or some: a block of lanes with none active may be skipped
-            // (no bit set there), and every active lane is answered.
-            let active = if rng.next_f32() < 0.5 {
-                u64::MAX
-            } else {
-                rng.next_u64() & rng.next_u64()
-            };
-            let mask = lanes.entries(centre, radius, t_min, &t_max, &mut entry, active) & active;
-            for (i, ray) in rays.iter().enumerate() {
-                let one = sphere_entry(ray, centre, radius, t_min, t_max[i])
-                    .filter(|_| active >> i & 1 == 1);
-                let lane = (mask >> i & 1 == 1).then_some(entry[i]);
-                assert_eq!(
-                    one.map(f32::to_bits),
-                    lane.map(f32::to_bits),
-                    "ray {i}: {ray:?}"
-                );
-                met += one.is_some() as usize;
-            }
-        }
-        assert!(met > 12_000, "{met} active rays met their sphere");
-    }
-
-    /// The packet cone drops only spheres no ray of the packet meets: camera-like packets
-    /// (one origin, a narrow bundle, down to a 1920-wide image's 8×8 pixels) against
-    /// spheres scattered around and along the bundle's rim, near and far, small and large.
-    /// It fails with neither the half-angle's outward rounding nor the margin (either one
-    /// covers these spheres, which graze a corner ray within a few ulps of its distance);
-    /// and it must drop a good share, or it would be no use.
-    #[test]
-    fn the_packet_cone_keeps_every_sphere_a_ray_meets() {
-        let mut rng = SplitMix64(23);
-        let (mut dropped, mut spheres) = (0, 0);
-        for _ in 0..400 {
-            let origin = rng.in_unit_ball() * 5.0;
-            let axis = rng.in_unit_ball().normalize_or(Vec3::Z);
-            let (u, v) = (axis.any_orthonormal_vector(), axis.any_orthonormal_vector());
-            let v = axis.cross(u).normalize_or(v);
-            let spread = 10f32.powf(-1.0 - 2.5 * rng.next_f32());
-            let rays: Vec<Ray> = (0..PACKET)
-                .map(|i| {
-                    let (x, y) = ((i % 8) as f32 / 7.0 - 0.5, (i / 8) as f32 / 7.0 - 0.5);
-                    Ray::new(origin, axis + (x * u + y * v) * spread)
-                })
-                .collect();
-            let cone = Cone::around(&rays).expect("one origin, a narrow bundle");
-            for _ in 0..200 {
-                let t = 10f32.powf(2.0 * rng.next_f32() - 0.5);
-                let radius = t * spread * 10f32.powf(-2.0 * rng.next_f32());
-                let centre = if rng.next_f32() < 0.5 {
-                    // Along a random ray, nudged sideways by about the sphere's size.
-                    let ray = rays[(rng.next_f32() * PACKET as f32) as usize % PACKET];
-                    ray.at(t) + rng.in_unit_ball() * (3.0 * radius + t * spread)
-                } else {
-                    // Grazing a corner ray from outside the bundle, within a few ulps.
-                    let ray = rays[[0, 7, 56, 63][(rng.next_f32() * 4.0) as usize % 4]];
-                    let away = ray.dir - axis * axis.dot(ray.dir);
-                    let out = (away - ray.dir * ray.dir.dot(away)).normalize_or(u);
-                    let gap = radius + t * 3e-6 * (2.0 * rng.next_f32() - 1.0);
-                    ray.at(t) + out * gap
-                };
-                let met = rays
-                    .iter()
-                    .any(|r| sphere_entry(r, centre, radius, 0.0, f32::INFINITY).is_some());
-                let misses = cone.misses(centre, radius);
-                assert!(
-                    !(met && misses),
-                    "a met sphere dropped: {centre} r {radius}"
-                );
-                spheres += 1;
-                dropped += misses as usize;
-            }
-        }
-        assert!(dropped > spheres / 10, "{dropped} of {spheres} dropped");
-    }
-
-    #[test]
-    fn no_point_inside_a_sphere_lies_before_its_entry() {
-        let mut rng = SplitMix64(11);
-        let mut near_the_rim = 0;
-        for _ in 0..200_000 {
-            let distance = 10f32.powf(3.0 * rng.next_f32());
-            let radius = distance * 10f32.powf(-1.0 - 3.0 * rng.next_f32());
-            let origin = rng.in_unit_ball() * distance;
-            let centre = origin + rng.in_unit_ball().normalize_or(Vec3::X) * distance;
-            // Inside the sphere, as a leaf's hit is inside its (margin-grown) leaf sphere.
-            let v = rng.in_unit_ball();
-            let point = centre + v * (radius / (1.0 + 1e-5));
-            near_the_rim += (v.length() > 0.99) as usize;
-            let ray = Ray::new(origin, point - origin);
-            let t = (point - origin).dot(ray.dir);
-            let entry = sphere_entry(&ray, centre, radius, 0.0, f32::INFINITY);
-            assert!(
-                entry.is_some_and(|e| e <= t),
-                "entry {entry:?} beyond the point at {t}: sphere {centre} r {radius}, {ray:?}"
-            );
-        }
-        assert!(near_the_rim > 1000, "{near_the_rim} points near the rim");
-    }
 }
