@@ -35,7 +35,7 @@ const STACK: usize = 80;
 /// (`isoray-bench surfels`'s tightness table, `surfel-impact`), the sphere around the
 /// children 1.0–1.1 times, and a ray that enters the node fills its children anyway. On
 /// `surfel-impact` (lazy, 512×384, shadows) 16 takes a ray from 65.2 to 61.2 sphere tests
-/// and camera packets from 3.45 to 3.34 G instructions (callgrind); 4 and 8 save less, 32
+/// and camera packets from 3.45 to 3.17 G instructions (callgrind); 4 and 8 save less, 32
 /// no more.
 const SMALL_SUBTREE: u32 = 16;
 
