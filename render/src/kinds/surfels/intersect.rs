@@ -63,6 +63,7 @@ pub struct Leaf<'a> {
     leaf_radius: f32,
     /// The ellipse's Gram matrix `(g11, g12, g22)` and its determinant.
     gram: (f32, f32, f32, f32),
+    /// The neighbourhood and its weights' support radius `h`, once a ray needs them.
     hood: Option<(Neighbourhood, f32)>,
 }
 
