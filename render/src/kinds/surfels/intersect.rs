@@ -107,6 +107,16 @@ impl<'a> Leaf<'a> {
             return None;
         }
         let t0 = self.normal.dot(self.centre - ray.origin) / denom;
+        // The iteration starts only from an ellipse point on the segment: a ray leaving
+        // the surface (a shadow ray) meets the planes of the surfels around its start
+        // behind it, and their iterations would converge there, before `t_min`. Skipping
+        // them before the gather takes a third of the shadow packets' instructions off
+        // (`surfel-impact`, callgrind) and only ever drops such hits behind the start
+        // (no pixel changed on the demos but two specks of self-shadow on `surfel-balls`).
+        // It depends on the ray and the leaf alone, so every traversal still agrees.
+        if !(t0 >= t_min) {
+            return None;
+        }
         let q = ray.at(t0) - self.centre;
         let (g11, g12, g22, det) = self.gram;
         if !(det > 0.0) {

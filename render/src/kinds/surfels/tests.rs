@@ -601,6 +601,42 @@ fn clipped_faces_keep_their_normals_up_to_the_edges() {
     );
 }
 
+/// A shadow ray leaving a flat face gathers no neighbourhood and runs no MLS iteration on
+/// the leaves around its start: their ellipses lie behind it (`t0 < t_min`), so each is
+/// passed over after the plane test. Without that rule every such ray iterated on several
+/// leaves only to converge behind its start. A ray from inside still meets the face where
+/// it is.
+#[test]
+fn a_ray_leaving_a_flat_face_skips_the_leaves_behind_its_start() {
+    use crate::kinds::contract::PreparedKind;
+    let p = clipped_cube();
+    let mut rng = SplitMix64(5);
+    let (mut leaving, mut inside) = (SurfelCounters::default(), SurfelCounters::default());
+    for _ in 0..64 {
+        let (x, z) = (rng.range(-0.8, 0.8), rng.range(-0.8, 0.8));
+        let dir = Vec3::new(rng.range(-0.5, 0.5), 1.0, rng.range(-0.5, 0.5)).normalize();
+        let out = Ray::new(Vec3::new(x, 1.0 + 1e-3, z), dir);
+        assert!(p.any_hit(&out, 0.0, 10.0, 0.0, &mut leaving).is_none());
+        let from_inside = Ray::new(Vec3::new(x, 0.9, z), dir);
+        let hit = p
+            .nearest(&from_inside, 0.0, 10.0, None, &mut inside)
+            .expect("the top face is met from inside");
+        let want = 0.1 / dir.y;
+        assert!(
+            (hit.t - want).abs() < 2e-3,
+            "from ({x}, 0.9, {z}) along {dir}: t {} against {want}",
+            hit.t
+        );
+    }
+    assert!(
+        leaving.surfel_tests > 64 && leaving.iterations == 0,
+        "leaving rays: {} leaf tests, {} MLS iterations",
+        leaving.surfel_tests,
+        leaving.iterations
+    );
+    assert!(inside.iterations >= 64);
+}
+
 #[test]
 fn bad_surfel_data_is_rejected_with_what_is_wrong() {
     let good = sample::sphere(Vec3::ZERO, 1.0, 50, Vec3::ONE, 0);
