@@ -184,6 +184,8 @@ impl PreparedKind for PreparedSurfels {
         let cache = self.options.cache;
         let (mut packet, mut hints, mut pixels) = (Vec::new(), Vec::new(), Vec::new());
         let mut hits = [None; traverse::PACKET];
+        let mut entries: Box<traverse::Entries> =
+            Box::new([[0.0; traverse::PACKET]; traverse::STACK]);
         let eye = rays.eye();
         for by in (y0..y1).step_by(SIDE as usize) {
             for bx in (x0..x1).step_by(SIDE as usize) {
@@ -208,11 +210,13 @@ impl PreparedKind for PreparedSurfels {
                 match &self.accel {
                     Accel::Lazy(nodes) => {
                         let v = LazyView { p: self, nodes };
-                        traverse::first_hits(&v, self, &packet, t_max, &hints, &mut hits, c);
+                        let out = (&mut hits[..], &mut *entries);
+                        traverse::first_hits(&v, self, &packet, t_max, &hints, out, c);
                     }
                     Accel::Fixed(nodes) => {
                         let v = FixedView(nodes);
-                        traverse::first_hits(&v, self, &packet, t_max, &hints, &mut hits, c);
+                        let out = (&mut hits[..], &mut *entries);
+                        traverse::first_hits(&v, self, &packet, t_max, &hints, out, c);
                     }
                 }
                 for (k, &(x, y)) in pixels.iter().enumerate() {
