@@ -143,6 +143,11 @@ fn surfel_intersect(o: vec3<f32>, d: vec3<f32>, s: u32, lo: f32, hi: f32) -> KHi
         return miss;
     }
     let t0 = dot(leaf.normal, leaf.centre - o) / denom;
+    // Only from an ellipse point on the segment, as on the CPU (intersect.rs): a shadow
+    // ray's own start leaves are passed over.
+    if (!(t0 >= lo)) {
+        return miss;
+    }
     let q = (o + t0 * d) - leaf.centre;
     let g11 = dot(leaf.t1, leaf.t1);
     let g12 = dot(leaf.t1, leaf.t2);
