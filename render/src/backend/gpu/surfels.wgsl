@@ -143,8 +143,8 @@ fn surfel_intersect(o: vec3<f32>, d: vec3<f32>, s: u32, lo: f32, hi: f32) -> KHi
         return miss;
     }
     let t0 = dot(leaf.normal, leaf.centre - o) / denom;
-    // Only from an ellipse point on the segment, as on the CPU (intersect.rs): a shadow
-    // ray's own start leaves are passed over.
+    // Only from an ellipse point on the segment, as on the CPU (intersect.rs): the leaves
+    // around a shadow ray's start are passed over.
     if (!(t0 >= lo)) {
         return miss;
     }

@@ -207,16 +207,15 @@ impl PreparedKind for PreparedSurfels {
                     }
                 }
                 c.rays += packet.len() as u64;
+                let found = (&mut hits[..], &mut *entries);
                 match &self.accel {
                     Accel::Lazy(nodes) => {
                         let v = LazyView { p: self, nodes };
-                        let out = (&mut hits[..], &mut *entries);
-                        traverse::first_hits(&v, self, &packet, t_max, &hints, out, c);
+                        traverse::first_hits(&v, self, &packet, t_max, &hints, found, c);
                     }
                     Accel::Fixed(nodes) => {
                         let v = FixedView(nodes);
-                        let out = (&mut hits[..], &mut *entries);
-                        traverse::first_hits(&v, self, &packet, t_max, &hints, out, c);
+                        traverse::first_hits(&v, self, &packet, t_max, &hints, found, c);
                     }
                 }
                 for (k, &(x, y)) in pixels.iter().enumerate() {
