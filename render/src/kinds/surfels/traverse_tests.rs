@@ -1,5 +1,6 @@
 //! Tests of the sphere traversal's building blocks: the sphere entry's rounding, the
-//! packet's lanes against the single ray, and the camera packet's cone.
+//! packet's lanes against the single ray, the camera packet's cone, and the per-pixel
+//! cache's harmlessness.
 
 use super::traverse::*;
 use crate::geom::rng::SplitMix64;
@@ -135,4 +136,67 @@ fn no_point_inside_a_sphere_lies_before_its_entry() {
         );
     }
     assert!(near_the_rim > 1000, "{near_the_rim} points near the rim");
+}
+
+/// Depth bits and surfel per pixel of a frame through the packets, lazy, with or without
+/// the cache.
+fn frame(
+    demo: &crate::kinds::surfels::demo::SurfelDemo,
+    cache: bool,
+    rt: &std::sync::Arc<crate::kinds::surfels::scene::SurfelRuntime>,
+    (w, h): (u32, u32),
+) -> Vec<Option<(u32, u32)>> {
+    use crate::kinds::contract::PreparedKind;
+    use crate::kinds::surfels::prepared::PreparedSurfels;
+    use crate::kinds::surfels::scene::{SurfelOptions, UpdateMode};
+    let options = SurfelOptions::new(UpdateMode::Lazy, cache);
+    let p = PreparedSurfels::new(demo.scene(5, options, rt.clone()));
+    let mut c = Default::default();
+    let got = p.primary_tile(&demo.camera.rays(w, h), (0, 0, w, h), 0.0, 1e4, &mut c);
+    let image = got
+        .iter()
+        .map(|(_, hit)| hit.map(|h| (h.t.to_bits(), h.primitive)));
+    image.collect()
+}
+
+/// A per-pixel cache (§4.2.2) holding any surfels at all (stale, of another object, out of
+/// range) changes no pixel, through the packets and ray by ray: a cached surfel is only a
+/// first guess at the hit.
+#[test]
+fn a_cache_of_random_surfels_keeps_the_image() {
+    use crate::kinds::surfels::demo::{self, SurfelDemoKind};
+    use crate::kinds::surfels::prepared::PreparedSurfels;
+    use crate::kinds::surfels::scene::{SurfelOptions, SurfelRuntime, UpdateMode};
+    for kind in SurfelDemoKind::ALL {
+        let demo = demo::build(kind, 0.05, 8).expect("demo");
+        let size = (64, 48);
+        let plain = frame(&demo, false, &Default::default(), size);
+        assert!(
+            plain.iter().filter(|h| h.is_some()).count() > 100,
+            "{kind:?}"
+        );
+        let rt = std::sync::Arc::new(SurfelRuntime::default());
+        let surfels = demo.model.len() as u64;
+        let mut rng = SplitMix64(11);
+        let mut random = || (rng.next_u64() % (surfels + surfels / 8)) as u32;
+        for y in 0..size.1 {
+            for x in 0..size.0 {
+                rt.remember(x, y, Some(random()));
+            }
+        }
+        assert_eq!(frame(&demo, true, &rt, size), plain, "{kind:?} packets");
+        let options = SurfelOptions::new(UpdateMode::Lazy, true);
+        let p = PreparedSurfels::new(demo.scene(5, options, rt.clone()));
+        let rays = demo.camera.rays(size.0, size.1);
+        let mut c = Default::default();
+        for (k, want) in plain.iter().enumerate() {
+            let ray = rays.through_pixel(k as u32 % size.0, k as u32 / size.0);
+            let got = p.nearest(&ray, 0.0, 1e4, Some(random()), &mut c);
+            assert_eq!(
+                got.map(|h| (h.t.to_bits(), h.surfel)),
+                *want,
+                "{kind:?} pixel {k}"
+            );
+        }
+    }
 }
