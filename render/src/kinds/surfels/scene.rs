@@ -64,9 +64,9 @@ impl Default for SurfelOptions {
             mode: UpdateMode::Auto,
             // Off unless asked for (`isoray-bench surfels` measures it): the traversal
             // already visits the nearer child first, so the bound a cached hit gives saves
-            // under 2% of tests even as an oracle, and testing the cached leaf first costs
-            // a ray more than that (`surfel-impact` at 512×384: lazy 100.1 ms a frame,
-            // lazy + cache 106.8).
+            // under 2% of tests even as an oracle, and side by side it saves no time
+            // either (`surfel-impact` at 512×384, one thread: lazy 191.5 ms a frame, lazy
+            // + cache 191.8).
             cache: false,
             mls_iterations: MLS_ITERATIONS,
             mls_epsilon: MLS_EPSILON,
