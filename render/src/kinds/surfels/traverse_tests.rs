@@ -1,6 +1,6 @@
 //! Tests of the sphere traversal's building blocks: the sphere entry's rounding, the
-//! packet's lanes against the single ray, the camera packet's cone, and the per-pixel
-//! cache's harmlessness.
+//! packet's lanes against the single ray, the camera packet's cone and front-to-back order,
+//! and the per-pixel cache's harmlessness.
 
 use super::traverse::*;
 use crate::geom::rng::SplitMix64;
@@ -198,5 +198,43 @@ fn a_cache_of_random_surfels_keeps_the_image() {
                 "{kind:?} pixel {k}"
             );
         }
+    }
+}
+
+/// A camera packet visits the child nearer for most of its rays first, so it tests about as
+/// many spheres as rays traced one at a time, each visiting its own nearer child first (1.01
+/// to 1.04 times as many on the demos here). Only the counts show the order, not the image:
+/// with the vote reversed (the farther child first) the packets gave the same hits with 1.24
+/// times as many tests on `surfel-balls` here, and 1.7 times as many sphere and surfel tests
+/// on `surfel-impact` at 512×384 (lazy).
+#[test]
+fn packets_test_about_as_many_spheres_as_single_rays() {
+    use crate::kinds::contract::PreparedKind;
+    use crate::kinds::surfels::counters::SurfelCounters;
+    use crate::kinds::surfels::demo::{self, SurfelDemoKind};
+    use crate::kinds::surfels::prepared::PreparedSurfels;
+    use crate::kinds::surfels::scene::{SurfelOptions, UpdateMode};
+    let (w, h) = (96, 72);
+    for kind in SurfelDemoKind::ALL {
+        let demo = demo::build(kind, 0.1, 8).expect("demo");
+        // Eager: fixed spheres, so both traversals see the same tree.
+        let options = SurfelOptions::new(UpdateMode::Eager, false);
+        let p = PreparedSurfels::new(demo.scene(5, options, Default::default()));
+        let rays = demo.camera.rays(w, h);
+        let mut packets = SurfelCounters::default();
+        let _ = p.primary_tile(&rays, (0, 0, w, h), 0.0, 1e4, &mut packets);
+        let mut single = SurfelCounters::default();
+        for y in 0..h {
+            for x in 0..w {
+                let _ = p.nearest(&rays.through_pixel(x, y), 0.0, 1e4, None, &mut single);
+            }
+        }
+        let ratio = packets.sphere_tests as f64 / single.sphere_tests as f64;
+        assert!(
+            ratio < 1.15,
+            "{kind:?}: packets {} sphere tests, single rays {}",
+            packets.sphere_tests,
+            single.sphere_tests
+        );
     }
 }
