@@ -253,7 +253,7 @@ fn a_lazy_steps_eager_spheres_are_an_eager_steps_tree_and_hold_every_surfel() {
     }
 }
 
-fn prepare(
+pub(super) fn prepare(
     demo: &demo::SurfelDemo,
     step: usize,
     mode: UpdateMode,

@@ -2,10 +2,16 @@
 //! packet's lanes against the single ray, the camera packet's cone and front-to-back order,
 //! and the per-pixel cache's harmlessness.
 
+use super::tests::prepare;
 use super::traverse::*;
 use crate::geom::rng::SplitMix64;
+use crate::kinds::contract::PreparedKind;
+use crate::kinds::surfels::counters::SurfelCounters;
+use crate::kinds::surfels::demo::{self, SurfelDemo, SurfelDemoKind};
+use crate::kinds::surfels::scene::{SurfelRuntime, UpdateMode};
 use crate::ray::Ray;
 use glam::Vec3;
+use std::sync::Arc;
 
 /// The packet's all-lanes sphere test answers what [`sphere_entry`] answers ray by ray,
 /// entries bit for bit, for rays that meet, graze and miss spheres near and far (the
@@ -141,16 +147,12 @@ fn no_point_inside_a_sphere_lies_before_its_entry() {
 /// Depth bits and surfel per pixel of a frame through the packets, lazy, with or without
 /// the cache.
 fn frame(
-    demo: &crate::kinds::surfels::demo::SurfelDemo,
+    demo: &SurfelDemo,
     cache: bool,
-    rt: &std::sync::Arc<crate::kinds::surfels::scene::SurfelRuntime>,
+    rt: &Arc<SurfelRuntime>,
     (w, h): (u32, u32),
 ) -> Vec<Option<(u32, u32)>> {
-    use crate::kinds::contract::PreparedKind;
-    use crate::kinds::surfels::prepared::PreparedSurfels;
-    use crate::kinds::surfels::scene::{SurfelOptions, UpdateMode};
-    let options = SurfelOptions::new(UpdateMode::Lazy, cache);
-    let p = PreparedSurfels::new(demo.scene(5, options, rt.clone()));
+    let p = prepare(demo, 5, UpdateMode::Lazy, cache, rt);
     let mut c = Default::default();
     let got = p.primary_tile(&demo.camera.rays(w, h), (0, 0, w, h), 0.0, 1e4, &mut c);
     let image = got
@@ -164,9 +166,6 @@ fn frame(
 /// first guess at the hit.
 #[test]
 fn a_cache_of_random_surfels_keeps_the_image() {
-    use crate::kinds::surfels::demo::{self, SurfelDemoKind};
-    use crate::kinds::surfels::prepared::PreparedSurfels;
-    use crate::kinds::surfels::scene::{SurfelOptions, SurfelRuntime, UpdateMode};
     for kind in SurfelDemoKind::ALL {
         let demo = demo::build(kind, 0.05, 8).expect("demo");
         let size = (64, 48);
@@ -175,7 +174,7 @@ fn a_cache_of_random_surfels_keeps_the_image() {
             plain.iter().filter(|h| h.is_some()).count() > 100,
             "{kind:?}"
         );
-        let rt = std::sync::Arc::new(SurfelRuntime::default());
+        let rt = Arc::new(SurfelRuntime::default());
         let surfels = demo.model.len() as u64;
         let mut rng = SplitMix64(11);
         let mut random = || (rng.next_u64() % (surfels + surfels / 8)) as u32;
@@ -185,8 +184,7 @@ fn a_cache_of_random_surfels_keeps_the_image() {
             }
         }
         assert_eq!(frame(&demo, true, &rt, size), plain, "{kind:?} packets");
-        let options = SurfelOptions::new(UpdateMode::Lazy, true);
-        let p = PreparedSurfels::new(demo.scene(5, options, rt.clone()));
+        let p = prepare(&demo, 5, UpdateMode::Lazy, true, &rt);
         let rays = demo.camera.rays(size.0, size.1);
         let mut c = Default::default();
         for (k, want) in plain.iter().enumerate() {
@@ -209,17 +207,11 @@ fn a_cache_of_random_surfels_keeps_the_image() {
 /// on `surfel-impact` at 512×384 (lazy).
 #[test]
 fn packets_test_about_as_many_spheres_as_single_rays() {
-    use crate::kinds::contract::PreparedKind;
-    use crate::kinds::surfels::counters::SurfelCounters;
-    use crate::kinds::surfels::demo::{self, SurfelDemoKind};
-    use crate::kinds::surfels::prepared::PreparedSurfels;
-    use crate::kinds::surfels::scene::{SurfelOptions, UpdateMode};
     let (w, h) = (96, 72);
     for kind in SurfelDemoKind::ALL {
         let demo = demo::build(kind, 0.1, 8).expect("demo");
         // Eager: fixed spheres, so both traversals see the same tree.
-        let options = SurfelOptions::new(UpdateMode::Eager, false);
-        let p = PreparedSurfels::new(demo.scene(5, options, Default::default()));
+        let p = prepare(&demo, 5, UpdateMode::Eager, false, &Default::default());
         let rays = demo.camera.rays(w, h);
         let mut packets = SurfelCounters::default();
         let _ = p.primary_tile(&rays, (0, 0, w, h), 0.0, 1e4, &mut packets);
