@@ -2,15 +2,15 @@
 # Runs every fuzz target for SECONDS (default 600) one after another with cargo-fuzz
 # (nightly; `cargo install cargo-fuzz` once), from seeds written by NumPy and meshio
 # (seeds.py; ISORAY_PYTHON names a Python with both). A crash stops the run and leaves the
-# input in fuzz/artifacts/<target>/; copy it to tests/fixtures/fuzz/<target>/ so the
-# ordinary suite (tests/tests/fuzz_regressions) replays it forever.
+# input in fuzz/artifacts/<target>/: turn it into a regression test of the code it broke,
+# next to that code's other tests, so the ordinary suite replays it forever.
 #   fuzz/run.sh [SECONDS] [TARGET...]
 set -euo pipefail
 cd "$(dirname "$0")"
 seconds=${1:-600}
 shift || true
 targets=("$@")
-[ ${#targets[@]} -gt 0 ] || targets=(ws_message npy_step raw_step tet_mesh vtk_file)
+[ ${#targets[@]} -gt 0 ] || targets=(ws_message npy_step raw_step tet_mesh vtk_file surfel_file surfel_scene surfel_step)
 "${ISORAY_PYTHON:-python3}" seeds.py corpus
 for t in "${targets[@]}"; do
   echo "== $t for ${seconds}s"

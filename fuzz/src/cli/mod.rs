@@ -1,5 +1,8 @@
-//! The server binary's VTK readers, by path: the very source `isoray push` runs.
+//! The server binary's file readers, by path: the very source `isoray push` runs (VTK for
+//! tet meshes; point clouds and meshes for surfel scenes).
 
+#[path = "../../../server/src/cli/surfel_files.rs"]
+pub mod surfel_files;
 #[path = "../../../server/src/cli/vtk_grid.rs"]
 pub mod vtk_grid;
 #[path = "../../../server/src/cli/vtk_legacy.rs"]
