@@ -133,6 +133,37 @@ put("surfel_step", "npy-f4", bytes([28]) + npy(pos.astype("<f4")))
 put("surfel_step", "npy-f8", bytes([28]) + npy(pos.astype("<f8")))
 put("surfel_step", "raw-f4", bytes([29]) + raw(pos.astype("<f4"), 1))
 
+# Scene descriptions (`POST /v1/scenes`) of every kind: the README's lighting example (every
+# light kind, transparent, refractive and reflective materials, groups, floor, clip box, an
+# extra isosurface, every effect), a volume with occlusion, and a tet and a surfel scene.
+lighting = {
+    "lights": [{"kind": "sphere", "position": [3, 6, 4], "radius": 1.2, "intensity": 60},
+               {"kind": "point", "position": [-3, 4, 2], "color": [1, 0.9, 0.8], "intensity": 10},
+               {"to_light": [0.4, 0.8, 0.45], "intensity": 0.3}],
+    "materials": [{"diffuse": [1, 1, 1]},
+                  {"opacity": 0.1, "ior": 1.5, "specular": 0.8, "shininess": 200},
+                  {"reflectivity": 0.85}, {"emission": [2, 2, 2]}],
+    "groups": [{"first": 0, "count": 3, "material": 1}, {"first": 3, "count": 2, "material": 2}],
+    "floor": {"height": -1.5, "checker": 1.0},
+    "clip_box": {"min": [0, -10, 0], "max": [10, 10, 10]},
+    "isosurfaces": [{"isovalue": 0.2, "material": 1}],
+    "effects": {"shadows": True, "soft_shadows": True, "reflections": True, "refraction": True,
+                "transparency": True, "depth": 3, "light_samples": 4},
+}
+camera = {"eye": [0, 1.5, 7.5], "target": [0, 0, 0], "up": [0, 1, 0], "fov_y_deg": 45}
+for name, spec in (
+    ("metaballs-all", {"kind": "metaballs", "camera": camera, "isovalue": 0.5,
+                       "isovalue_slider": [0.1, 1.5], "lighting": lighting,
+                       "metaballs": {"radius": 1.0, "strength": 1.0}}),
+    ("metaballs-volume", {"kind": "metaballs", "lighting": {
+        "volume": {"density": 0.5}, "occlusion_distance": 2,
+        "effects": {"transparency": True, "ambient_occlusion": True, "ao_samples": 4}}}),
+    ("tets", {"kind": "tets", "isovalue": 0.0, "isovalue_slider": [-1, 1], "lighting": lighting}),
+    ("surfels", {"kind": "surfels", "camera": camera, "lighting": lighting,
+                 "surfels": {"points": {"positions": verts.tolist()}, "nodes": nodes}}),
+):
+    put("scene_spec", name, json.dumps(spec).encode())
+
 for i, m in enumerate([
     {"type": "camera", "input_id": 7, "eye": [0, 0, 5], "target": [0, 0, 0], "up": [0, 1, 0]},
     {"type": "isovalue", "input_id": 1, "value": 0.5},

@@ -56,6 +56,12 @@ pub fn fuzz_step(data: &[u8], ingest: Ingest) {
     let _ = ingest(body, &limits, target);
 }
 
+/// One render pool of one thread for every execution of a process.
+fn backend() -> &'static isoray_render::CpuBackend {
+    static BACKEND: std::sync::OnceLock<isoray_render::CpuBackend> = std::sync::OnceLock::new();
+    BACKEND.get_or_init(|| isoray_render::CpuBackend::new(1).expect("a render pool"))
+}
+
 /// The most surfels a fuzzed mesh is sampled into (the API's default is 20,000: seconds an
 /// execution), and the nodes laid around a file's object (`isoray push` lays 450).
 const FUZZ_MESH_SURFELS: u64 = 256;
@@ -116,8 +122,7 @@ pub fn surfel_spec_of(input: cli::surfel_files::SurfelInput) -> isoray_protocol:
 pub fn exercise_surfels(spec: &isoray_protocol::api::SurfelSpec, scale: f32, seed: u64) {
     use isoray_render::geom::rng::SplitMix64;
     use isoray_render::scene::Geometry;
-    use isoray_render::{Camera, CpuBackend, Scene, View};
-    static BACKEND: std::sync::OnceLock<CpuBackend> = std::sync::OnceLock::new();
+    use isoray_render::{Camera, Scene, View};
     let Ok(setup) = isoray_server::kinds::surfels::setup::setup_from_spec(Some(spec)) else {
         return;
     };
@@ -133,7 +138,7 @@ pub fn exercise_surfels(spec: &isoray_protocol::api::SurfelSpec, scale: f32, see
         .flat_map(|p| (*p + rng.in_unit_ball() * (scale * size)).to_array())
         .flat_map(f32::to_le_bytes)
         .collect();
-    let backend = BACKEND.get_or_init(|| CpuBackend::new(1).expect("a render pool"));
+    let backend = backend();
     let centre = 0.5 * (lo + hi);
     let view = View {
         width: 8,
@@ -186,4 +191,40 @@ pub fn fuzz_surfel_step(data: &[u8]) {
         ingest_raw
     };
     let _ = ingest(body, &limits, target);
+}
+
+/// What the server builds of a created scene, traced once: the kind's first state (seven
+/// metaballs in a row, the tet scene before its mesh, the surfel object at rest) lit, shaded
+/// and with the effects of the validated description, seen from its camera at 8×8.
+pub fn render_setup(setup: &isoray_server::kinds::SceneSetup) {
+    use isoray_render::scene::Geometry;
+    use isoray_render::{Scene, View};
+    use isoray_server::kinds::{metaballs, KindSetup};
+    let rows: Vec<u8> = (0..7)
+        .flat_map(|i| [i as f32 * 0.6 - 1.8, 0.0, 0.0, 1.0])
+        .flat_map(f32::to_le_bytes)
+        .collect();
+    let geometry = match &setup.kind {
+        KindSetup::Metaballs(d) => Geometry::Metaballs(metaballs::setup::scene(
+            d,
+            Some((4, &rows)),
+            setup.slider.0.min(setup.isovalue).max(1e-3),
+        )),
+        KindSetup::Tets(t) => Geometry::Tets(t.scene(None)),
+        KindSetup::Surfels(s) => Geometry::Surfels(s.scene(None)),
+    };
+    let scene = Scene {
+        geometry,
+        lighting: setup.lighting.clone(),
+    };
+    if scene.validate(usize::MAX).is_err() {
+        return;
+    }
+    let view = View {
+        width: 8,
+        height: 8,
+        camera: setup.camera,
+        isovalue: setup.isovalue,
+    };
+    let _ = backend().render(&std::sync::Arc::new(scene).prepare(), &view);
 }
