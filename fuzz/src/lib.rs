@@ -31,7 +31,6 @@ pub type Ingest = fn(
 /// tet scene of `byte >> 1` vertices), the rest is the body.
 pub fn fuzz_step(data: &[u8], ingest: Ingest) {
     use isoray_server::kinds::StepLayout;
-    use isoray_server::store::ingest::{IngestLimits, Target};
     let Some((&which, body)) = data.split_first() else {
         return;
     };
@@ -42,6 +41,12 @@ pub fn fuzz_step(data: &[u8], ingest: Ingest) {
             vertices: Some(u64::from(which >> 1)),
         }
     };
+    ingest_step(body, layout, ingest);
+}
+
+/// Ingests `body` as a step of `layout` with `ingest`, under small limits, into a scratch file.
+fn ingest_step(body: &[u8], layout: isoray_server::kinds::StepLayout, ingest: Ingest) {
+    use isoray_server::store::ingest::{IngestLimits, Target};
     let limits = IngestLimits {
         layout,
         max_rows: 4096,
@@ -168,29 +173,19 @@ pub fn exercise_surfels(spec: &isoray_protocol::api::SurfelSpec, scale: f32, see
 /// for a scene of `byte >> 1` nodes, through the step ingest the server runs.
 pub fn fuzz_surfel_step(data: &[u8]) {
     use isoray_server::kinds::StepLayout;
-    use isoray_server::store::ingest::{ingest_npy, ingest_raw, IngestLimits, Target};
+    use isoray_server::store::ingest::{ingest_npy, ingest_raw};
     let Some((&which, body)) = data.split_first() else {
         return;
     };
-    let limits = IngestLimits {
-        layout: StepLayout::Surfels {
-            nodes: u64::from(which >> 1),
-        },
-        max_rows: 4096,
-        max_step_bytes: 1 << 20,
+    let layout = StepLayout::Surfels {
+        nodes: u64::from(which >> 1),
     };
-    let target = Target {
-        temp_path: scratch_file(&[], ".step"),
-        index: 0,
-        time: 0.0,
-    };
-    let body = isoray_server::body::BodyReader::from_bytes(bytes::Bytes::copy_from_slice(body));
     let ingest: Ingest = if which & 1 == 0 {
         ingest_npy
     } else {
         ingest_raw
     };
-    let _ = ingest(body, &limits, target);
+    ingest_step(body, layout, ingest);
 }
 
 /// What the server builds of a created scene, traced once: the kind's first state (seven
