@@ -8,7 +8,8 @@
 //! The modules:
 //! - [`kernel`]: the falloffs `f` (Wyvill, degree four, `(1-s)^α`, the tutorial's).
 //! - [`roots`]: the root finders along one ray (marching, projections + secant, Bézier
-//!   clipping, sphere tracing), generic over `f32` and `f64`.
+//!   clipping, sphere tracing), generic over `f32` and `f64`; `one_ball`, Bézier clipping's
+//!   closed form for a section where one ball alone is active.
 //! - [`tree`]: the BVH with split metaballs and the Fitted BVH (fitted-bvh-metaballs.txt).
 //! - [`engine`]: a state prepared for tracing: per-ball data, the acceleration structure, and
 //!   the traversal modes (brute force, sorted active list, BVH, FBVH).
@@ -20,6 +21,7 @@ pub mod counters;
 pub mod engine;
 pub mod kernel;
 pub mod kind;
+mod one_ball;
 pub mod pdb;
 pub mod real;
 pub mod reference;

@@ -22,6 +22,7 @@
 //!   the same by linearity and cheaper. The convex hull of the control points clips the
 //!   parameter range; when it shrinks by less than 20% the curve is split in half by de
 //!   Casteljau and the nearer half is searched first, so the first root comes out first.
+//!   A section where one ball alone is active is solved in closed form instead (`one_ball`).
 //! - [`RootFinder::SphereTracing`]: per section, step `(T - F)/L` with `L = Σ |q_i|·L_k/R_i`
 //!   the Lipschitz bound of the active balls (`L_k` the kernel's steepest slope), never less
 //!   than the tolerance, and bisect the last step.
@@ -36,6 +37,7 @@ use crate::kinds::metaballs::bezier::{bezier_first_root, power_to_bernstein};
 pub use crate::kinds::metaballs::bezier::{HalfStack, ITERATION_CAP, MAX_DEGREE};
 use crate::kinds::metaballs::counters::MetaballCounters;
 use crate::kinds::metaballs::kernel::MAX_W_DEGREE;
+use crate::kinds::metaballs::one_ball;
 pub use crate::kinds::metaballs::real::Real;
 
 /// Marching's default step, a fraction of the smallest active radius: the tutorial's 1/4 loses
@@ -718,6 +720,14 @@ fn bezier_section<R: Real, const W: usize>(
     iters: &mut u32,
     halves: &mut HalfStack<R>,
 ) -> Option<R> {
+    if let [i] = active {
+        let one = &balls[*i as usize];
+        let term = (one.a, one.tc, one.s_min, one.q);
+        let kernel = (&p.kernel.c, p.kernel.degree);
+        if let Ok(t) = one_ball::first_root(kernel, p.isovalue, term, a, b, iters) {
+            return t;
+        }
+    }
     let w_degree = if W == 0 { p.kernel.degree } else { W };
     bezier_section_of(w_degree, p, balls, active, a, b, iters, halves)
 }
