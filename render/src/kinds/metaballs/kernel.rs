@@ -10,6 +10,8 @@
 //! - the tutorial's `g(r) = r⁴ - r² + 0.25` (metaballs-tutorial.txt §III) with its support
 //!   `0.707` scaled to `R`, i.e. `r_tut² = s/2`: `s²/4 - s/2 + 1/4 = w²/4`.
 
+use crate::kinds::metaballs::real::Real;
+
 /// Highest power of `w` any kernel uses (`Power { alpha: 4 }`).
 pub const MAX_W_DEGREE: usize = 4;
 
@@ -160,6 +162,46 @@ impl Kernel {
             }
         }
         hi as f32
+    }
+}
+
+/// A kernel as `Σ c_k w^k`, in the finder's precision.
+#[derive(Clone, Copy, Debug)]
+pub struct KernelPoly<R> {
+    pub c: [R; MAX_W_DEGREE + 1],
+    pub degree: usize,
+}
+
+impl<R: Real> KernelPoly<R> {
+    pub fn new(kernel: Kernel) -> Self {
+        let c64 = kernel.w_coefficients();
+        let mut c = [R::default(); MAX_W_DEGREE + 1];
+        for (d, s) in c.iter_mut().zip(c64) {
+            *d = R::of(s);
+        }
+        KernelPoly {
+            c,
+            degree: kernel.w_degree(),
+        }
+    }
+
+    #[inline]
+    pub fn at_w(&self, w: R) -> R {
+        self.at_w_of::<0>(w)
+    }
+
+    /// [`KernelPoly::at_w`] with the degree `W` a constant the loop unrolls to (0: the
+    /// kernel's own degree, read at run time); the same Horner steps either way.
+    #[inline(always)]
+    pub(crate) fn at_w_of<const W: usize>(&self, w: R) -> R {
+        let degree = if W == 0 { self.degree } else { W };
+        let mut acc = self.c[degree];
+        let mut k = degree;
+        while k > 0 {
+            k -= 1;
+            acc = acc * w + self.c[k];
+        }
+        acc
     }
 }
 

@@ -6,7 +6,8 @@
 //! `s = |M (p - p_i)|²`, `M` the inverse of its rotated, scaled frame (ibid. §3.3); its
 //! `radius` is then the largest semi-axis, so the sphere of radius `R_i` still bounds it.
 //! The modules:
-//! - [`kernel`]: the falloffs `f` (Wyvill, degree four, `(1-s)^α`, the tutorial's).
+//! - [`kernel`]: the falloffs `f` (Wyvill, degree four, `(1-s)^α`, the tutorial's), and
+//!   `KernelPoly`, a kernel's coefficients in a root finder's precision.
 //! - [`roots`]: the root finders along one ray (marching, projections + secant, Bézier
 //!   clipping, sphere tracing), generic over `f32` and `f64`; `one_ball`, Bézier clipping's
 //!   closed form for a section where one ball alone is active.

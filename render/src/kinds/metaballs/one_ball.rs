@@ -12,7 +12,7 @@
 //! 640×480); on Pool and Molecule almost none do (overlapping balls), and they keep the
 //! Bézier search.
 
-use crate::kinds::metaballs::kernel::MAX_W_DEGREE;
+use crate::kinds::metaballs::kernel::{KernelPoly, MAX_W_DEGREE};
 use crate::kinds::metaballs::real::Real;
 
 /// Newton steps at most (the iterates stop falling after 4–6 in `f32`).
@@ -20,13 +20,13 @@ const NEWTON_CAP: u32 = 40;
 
 /// The first `t` in `[lo, hi]` (a section that the ball's support covers) with
 /// `q·K(1 − s(t)) ≥ T`, `s(t) = a (t − tc)² + s_min` (`ball = (a, tc, s_min, q)`, the roots'
-/// `RayBall`), `K(w) = Σ kernel[j] wʲ` (`j ≤ degree`), or `None` when there is none;
+/// `RayBall`), `K` the kernel `k`, or `None` when there is none;
 /// `Err(())` when the term is not a rising convex function of `w` (a negative strength, or a
 /// negated kernel as the way-out search uses), and the caller searches the section as any
 /// other. `iters` counts Newton's steps.
 #[inline]
 pub(crate) fn first_root<R: Real>(
-    (kernel, degree): (&[R; MAX_W_DEGREE + 1], usize),
+    k: &KernelPoly<R>,
     isovalue: R,
     (a, tc, s_min, q): (R, R, R, R),
     lo: R,
@@ -34,11 +34,11 @@ pub(crate) fn first_root<R: Real>(
     iters: &mut u32,
 ) -> Result<Option<R>, ()> {
     let zero = R::default();
-    let degree = degree.min(MAX_W_DEGREE);
+    let degree = k.degree;
     // q·K as a polynomial in w: every coefficient must be >= 0 (rising and convex on w >= 0).
     let mut c = [zero; MAX_W_DEGREE + 1];
     for (j, cj) in c.iter_mut().enumerate().take(degree + 1) {
-        *cj = q * kernel[j];
+        *cj = q * k.c[j];
         if *cj < zero {
             return Err(());
         }
@@ -100,11 +100,6 @@ mod tests {
     use crate::geom::rng::SplitMix64;
     use crate::kinds::metaballs::kernel::Kernel;
 
-    /// A kernel's coefficients in `f32` and its degree.
-    fn coefficients(kernel: Kernel) -> ([f32; MAX_W_DEGREE + 1], usize) {
-        (kernel.w_coefficients().map(|c| c as f32), kernel.w_degree())
-    }
-
     /// The field of one ball along the ray in `f64`, straight from the geometry: the kernel's
     /// own `value_f64` at `|o + t d − p|² / R²`.
     fn field(
@@ -128,7 +123,7 @@ mod tests {
         let (mut hits, mut misses, mut starts_inside, mut grazed) = (0, 0, 0, 0);
         for case in 0..20_000 {
             let kernel = Kernel::ALL[case % Kernel::ALL.len()];
-            let (c, degree) = coefficients(kernel);
+            let k = KernelPoly::<f32>::new(kernel);
             let r = rng.range(0.2, 3.0) as f64;
             let q = rng.range(0.3, 2.0) as f64;
             let iso = rng.range(0.05, 0.9) as f64 * q * kernel.value_f64(0.0);
@@ -169,8 +164,7 @@ mod tests {
                 continue;
             }
             let mut iters = 0;
-            let got =
-                first_root((&c, degree), iso as f32, ball, lo, hi, &mut iters).expect("q > 0");
+            let got = first_root(&k, iso as f32, ball, lo, hi, &mut iters).expect("q > 0");
             // Reference: the first sample at or above T on a fine grid, then bisection.
             let geom = (o, d, p, r);
             let f = |t: f64| field(kernel, q, geom, t) - iso;
@@ -231,20 +225,15 @@ mod tests {
     /// section search.
     #[test]
     fn a_falling_term_is_left_to_the_section_search() {
-        let (c, degree) = coefficients(Kernel::Wyvill);
+        let k = KernelPoly::<f32>::new(Kernel::Wyvill);
         let ball = (1.0, 1.0, 0.0, -1.0);
-        assert_eq!(
-            first_root((&c, degree), 0.3, ball, 0.0, 2.0, &mut 0),
-            Err(())
-        );
-        let negated = c.map(|c| -c);
+        assert_eq!(first_root(&k, 0.3, ball, 0.0, 2.0, &mut 0), Err(()));
+        let mut negated = k;
+        negated.c = k.c.map(|c| -c);
         let ball = (1.0, 1.0, 0.0, 1.0);
-        assert_eq!(
-            first_root((&negated, degree), -0.3, ball, 0.0, 2.0, &mut 0),
-            Err(())
-        );
+        assert_eq!(first_root(&negated, -0.3, ball, 0.0, 2.0, &mut 0), Err(()));
         // The same ball with a positive strength: entry where (1 − s)²(5/9 + 4/9(1 − s)) = 0.3.
-        let t = first_root((&c, degree), 0.3, ball, 0.0, 2.0, &mut 0);
+        let t = first_root(&k, 0.3, ball, 0.0, 2.0, &mut 0);
         let Ok(Some(t)) = t else {
             panic!("{t:?}: the ray through the centre enters the ball");
         };

@@ -36,7 +36,7 @@
 use crate::kinds::metaballs::bezier::{bezier_first_root, power_to_bernstein};
 pub use crate::kinds::metaballs::bezier::{HalfStack, ITERATION_CAP, MAX_DEGREE};
 use crate::kinds::metaballs::counters::MetaballCounters;
-use crate::kinds::metaballs::kernel::MAX_W_DEGREE;
+pub use crate::kinds::metaballs::kernel::KernelPoly;
 use crate::kinds::metaballs::one_ball;
 pub use crate::kinds::metaballs::real::Real;
 
@@ -167,46 +167,6 @@ impl<R: Real> RayBall<R> {
     #[inline]
     pub fn projection(&self) -> R {
         self.tc
-    }
-}
-
-/// A kernel as `Σ c_k w^k`, in the finder's precision.
-#[derive(Clone, Copy, Debug)]
-pub struct KernelPoly<R> {
-    pub c: [R; MAX_W_DEGREE + 1],
-    pub degree: usize,
-}
-
-impl<R: Real> KernelPoly<R> {
-    pub fn new(kernel: crate::kinds::metaballs::kernel::Kernel) -> Self {
-        let c64 = kernel.w_coefficients();
-        let mut c = [R::default(); MAX_W_DEGREE + 1];
-        for (d, s) in c.iter_mut().zip(c64) {
-            *d = R::of(s);
-        }
-        KernelPoly {
-            c,
-            degree: kernel.w_degree(),
-        }
-    }
-
-    #[inline]
-    pub fn at_w(&self, w: R) -> R {
-        self.at_w_of::<0>(w)
-    }
-
-    /// [`KernelPoly::at_w`] with the degree `W` a constant the loop unrolls to (0: the
-    /// kernel's own degree, read at run time); the same Horner steps either way.
-    #[inline(always)]
-    fn at_w_of<const W: usize>(&self, w: R) -> R {
-        let degree = if W == 0 { self.degree } else { W };
-        let mut acc = self.c[degree];
-        let mut k = degree;
-        while k > 0 {
-            k -= 1;
-            acc = acc * w + self.c[k];
-        }
-        acc
     }
 }
 
@@ -723,8 +683,7 @@ fn bezier_section<R: Real, const W: usize>(
     if let [i] = active {
         let one = &balls[*i as usize];
         let term = (one.a, one.tc, one.s_min, one.q);
-        let kernel = (&p.kernel.c, p.kernel.degree);
-        if let Ok(t) = one_ball::first_root(kernel, p.isovalue, term, a, b, iters) {
+        if let Ok(t) = one_ball::first_root(&p.kernel, p.isovalue, term, a, b, iters) {
             return t;
         }
     }
