@@ -37,8 +37,28 @@ use crate::camera::PrimaryRays;
 use crate::geom::aabb::Aabb;
 use crate::geom::tile::{aabb_corners, TileGrid};
 use crate::kinds::metaballs::counters::MetaballCounters;
+use crate::kinds::metaballs::tree::Tree;
 use crate::ray::{Hit, Ray};
 use glam::Vec3;
+use std::cell::RefCell;
+
+/// A packet's buffers, kept per thread so that a tile allocates only the list it returns.
+#[derive(Default)]
+struct TileBuffers {
+    tile_rays: Vec<Ray>,
+    inv: Vec<Vec3>,
+    hits: Vec<Option<Hit>>,
+    done: Vec<bool>,
+    /// (node, first active ray) still to visit.
+    stack: Vec<(u32, u32)>,
+    /// A leaf's balls less those outside the cover's pyramid.
+    culled: Vec<u32>,
+    soa: SharedOriginBalls,
+}
+
+thread_local! {
+    static TILE: RefCell<TileBuffers> = RefCell::new(TileBuffers::default());
+}
 
 /// Whether box `a` comes before box `b` along every ray from `origin` that crosses both: the
 /// side of a separating plane (a Fitted BVH's siblings are split at one) the origin lies on;
@@ -98,8 +118,34 @@ impl PreparedMetaballs {
             width: x1 - x0,
             height: y1 - y0,
         };
-        let (mut tile_rays, mut inv) = (Vec::new(), Vec::new());
-        rays.tile_rays((x0, y0, x1, y1), &mut tile_rays, &mut inv);
+        TILE.with(|tile_cell| {
+            let mut tile_guard = tile_cell.borrow_mut();
+            self.primary_tile_packet_in(&mut tile_guard, tree, tile, isovalue, t_max, counters)
+        })
+    }
+
+    /// [`PreparedMetaballs::primary_tile_packet`] on `tile` with the thread's tile buffers.
+    fn primary_tile_packet_in(
+        &self,
+        buffers: &mut TileBuffers,
+        tree: &Tree,
+        tile: TileGrid,
+        isovalue: f32,
+        t_max: f32,
+        counters: &mut MetaballCounters,
+    ) -> Option<Vec<(Ray, Option<Hit>)>> {
+        let TileBuffers {
+            tile_rays,
+            inv,
+            hits,
+            done,
+            stack,
+            culled,
+            soa,
+        } = buffers;
+        let rays = &tile.rays;
+        let (x0, y0) = (tile.x0, tile.y0);
+        rays.tile_rays((x0, y0, x0 + tile.width, y0 + tile.height), tile_rays, inv);
         let n = tile_rays.len();
         let width = tile.width as usize;
         let origin = tile_rays[0].origin;
@@ -108,15 +154,16 @@ impl PreparedMetaballs {
         }
         let params = self.params(isovalue);
         let finder = self.options.finder;
-        let mut hits: Vec<Option<Hit>> = vec![None; n];
-        let mut done = vec![false; n];
+        hits.clear();
+        hits.resize(n, None);
+        done.clear();
+        done.resize(n, false);
         counters.rays += n as u64;
         SCRATCH.with(|cell| {
             let mut guard = cell.borrow_mut();
             let (gathered, scratch, _) = &mut *guard;
-            let mut stack: Vec<(u32, u32)> = vec![(0, 0)];
-            let mut culled: Vec<u32> = Vec::new();
-            let mut soa = SharedOriginBalls::default();
+            stack.clear();
+            stack.push((0, 0));
             while let Some((i, from)) = stack.pop() {
                 let node = &tree.nodes[i as usize];
                 if node.is_leaf() && node.count == 0 {
@@ -203,6 +250,12 @@ impl PreparedMetaballs {
                 stack.push((near_child, fa as u32));
             }
         });
-        Some(tile_rays.into_iter().zip(hits).collect())
+        Some(
+            tile_rays
+                .iter()
+                .copied()
+                .zip(hits.iter().copied())
+                .collect(),
+        )
     }
 }
