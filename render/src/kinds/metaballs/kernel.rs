@@ -166,7 +166,7 @@ impl Kernel {
 }
 
 /// A kernel as `Σ c_k w^k`, in the finder's precision.
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub struct KernelPoly<R> {
     pub c: [R; MAX_W_DEGREE + 1],
     pub degree: usize,

@@ -221,7 +221,15 @@ pub struct Scratch<R: Real> {
     active: Vec<u32>,
     samples: Vec<R>,
     domains: Vec<(R, R)>,
+    section: SectionScratch<R>,
+}
+
+/// What a section search may keep between sections: Bézier clipping's pending halves and the
+/// closed form's last ball level.
+#[derive(Debug, Default)]
+pub struct SectionScratch<R> {
     halves: HalfStack<R>,
+    level: one_ball::LevelMemo<R>,
 }
 
 #[inline]
@@ -371,7 +379,15 @@ fn walk_sections<R: Real, const W: usize, S>(
     section: S,
 ) -> Found<R>
 where
-    S: Fn(&FindParams<R>, &[RayBall<R>], &[u32], R, R, &mut u32, &mut HalfStack<R>) -> Option<R>,
+    S: Fn(
+        &FindParams<R>,
+        &[RayBall<R>],
+        &[u32],
+        R,
+        R,
+        &mut u32,
+        &mut SectionScratch<R>,
+    ) -> Option<R>,
 {
     if !stretch_may_reach::<R, W>(p, balls, lo, hi) {
         return Found::default();
@@ -417,7 +433,7 @@ where
             continue;
         }
         let mut iters = 0;
-        let hit = section(p, balls, active, t, next, &mut iters, &mut scratch.halves);
+        let hit = section(p, balls, active, t, next, &mut iters, &mut scratch.section);
         found.iterations += iters;
         found.capped |= iters >= ITERATION_CAP;
         if hit.is_some() {
@@ -441,7 +457,7 @@ fn march_section<R: Real>(
     a: R,
     b: R,
     iters: &mut u32,
-    _: &mut HalfStack<R>,
+    _: &mut SectionScratch<R>,
 ) -> Option<R> {
     let mut step = R::of(f64::INFINITY);
     for &i in active {
@@ -478,7 +494,7 @@ fn trace_section<R: Real>(
     a: R,
     b: R,
     iters: &mut u32,
-    _: &mut HalfStack<R>,
+    _: &mut SectionScratch<R>,
 ) -> Option<R> {
     let mut lipschitz = R::default();
     for &i in active {
@@ -678,17 +694,18 @@ fn bezier_section<R: Real, const W: usize>(
     a: R,
     b: R,
     iters: &mut u32,
-    halves: &mut HalfStack<R>,
+    scratch: &mut SectionScratch<R>,
 ) -> Option<R> {
     if let [i] = active {
         let one = &balls[*i as usize];
         let term = (one.a, one.tc, one.s_min, one.q);
-        if let Ok(t) = one_ball::first_root(&p.kernel, p.isovalue, term, a, b, iters) {
+        let memo = &mut scratch.level;
+        if let Ok(t) = one_ball::first_root(&p.kernel, p.isovalue, term, a, b, iters, memo) {
             return t;
         }
     }
     let w_degree = if W == 0 { p.kernel.degree } else { W };
-    bezier_section_of(w_degree, p, balls, active, a, b, iters, halves)
+    bezier_section_of(w_degree, p, balls, active, a, b, iters, &mut scratch.halves)
 }
 
 /// [`bezier_section`] for a kernel of `w`-degree `w_degree` (`p.kernel.degree`).
