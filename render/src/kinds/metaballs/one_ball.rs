@@ -24,7 +24,7 @@ const NEWTON_CAP: u32 = 40;
 #[derive(Clone, Copy, Debug, Default)]
 pub(crate) struct LevelMemo<R> {
     key: Option<(R, R, KernelPoly<R>)>,
-    w: R,
+    w: Option<R>,
 }
 
 /// The first `t` in `[lo, hi]` (a section that the ball's support covers) with
@@ -52,11 +52,11 @@ pub(crate) fn first_root<R: Real>(
             w
         }
     };
+    let Some(w) = w else {
+        return Ok(None); // even the centre stays below T
+    };
     let zero = R::default();
     let one = R::of(1.0);
-    if w > one {
-        return Ok(None); // even the centre stays below T
-    }
     let s_t = one - w;
     let reach = (s_t - s_min) / a;
     if !(reach >= zero) {
@@ -72,9 +72,9 @@ pub(crate) fn first_root<R: Real>(
 }
 
 /// The smallest `w` in `[0, 1]` with `q·K(w) ≥ T` (`w = 1 − s_T`, where the ray meets the
-/// ball's isosurface), a value above 1 when even the centre stays below `T`; `Err(())` when
-/// `q·K` is not rising and convex in `w` (a coefficient below 0).
-fn level<R: Real>(k: &KernelPoly<R>, isovalue: R, q: R, iters: &mut u32) -> Result<R, ()> {
+/// ball's isosurface), `None` when even the centre stays below `T`; `Err(())` when `q·K` is
+/// not rising and convex in `w` (a coefficient below 0).
+fn level<R: Real>(k: &KernelPoly<R>, isovalue: R, q: R, iters: &mut u32) -> Result<Option<R>, ()> {
     let zero = R::default();
     let degree = k.degree;
     // q·K as a polynomial in w: every coefficient must be >= 0 (rising and convex on w >= 0).
@@ -102,11 +102,11 @@ fn level<R: Real>(k: &KernelPoly<R>, isovalue: R, q: R, iters: &mut u32) -> Resu
     let one = R::of(1.0);
     if !(value(one) >= isovalue) {
         *iters += 1;
-        return Ok(R::of(2.0)); // even the centre stays below T
+        return Ok(None); // even the centre stays below T
     }
     // w_T: the smallest w with q·K(w) >= T, from above.
     if value(zero) >= isovalue {
-        return Ok(zero);
+        return Ok(Some(zero));
     }
     let mut w = one;
     let mut steps = 0;
@@ -123,7 +123,7 @@ fn level<R: Real>(k: &KernelPoly<R>, isovalue: R, q: R, iters: &mut u32) -> Resu
         }
         w = next.max(zero);
     }
-    Ok(w)
+    Ok(Some(w))
 }
 
 #[cfg(test)]
