@@ -227,7 +227,7 @@ pub struct Scratch<R: Real> {
 /// What a section search may keep between sections: Bézier clipping's pending halves and the
 /// closed form's last ball level.
 #[derive(Debug, Default)]
-pub struct SectionScratch<R> {
+struct SectionScratch<R> {
     halves: HalfStack<R>,
     level: one_ball::LevelMemo<R>,
 }
