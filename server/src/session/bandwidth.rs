@@ -36,6 +36,11 @@ const BANDWIDTH_MIN_SAMPLES: usize = 6;
 /// Correlation of service time with frame size below which size is not what limits.
 const BANDWIDTH_MIN_CORRELATION: f64 = 0.7;
 
+/// Most a fit's transfer time of the mean frame may be, as a share of the mean service time:
+/// 1 for a link without latency and without noise; above it, the fit's latency would be
+/// negative.
+const BANDWIDTH_MAX_TRANSFER_SHARE: f64 = 1.5;
+
 impl Bandwidth {
     pub fn sent(&mut self, sequence: u64, bytes: usize, at: Instant) {
         // Bounded: the renderer keeps at most FRAME_WINDOW frames unacknowledged.
@@ -100,7 +105,15 @@ impl Bandwidth {
             return None;
         }
         let correlation = cov / (var_b * var_s).sqrt();
-        (correlation >= BANDWIDTH_MIN_CORRELATION).then(|| var_b / cov)
+        if correlation < BANDWIDTH_MIN_CORRELATION {
+            return None;
+        }
+        // A link serves a frame in `L + b / B` with `L >= 0`, so the mean frame's transfer time
+        // cannot exceed the mean service time. A steep slope through small, noisy service
+        // times (a busy machine on loopback) breaks that: its line would cross zero service
+        // time at a positive frame size. Such a fit is noise, not a link.
+        let bytes_per_s = var_b / cov;
+        (mean_b / bytes_per_s <= BANDWIDTH_MAX_TRANSFER_SHARE * mean_s).then_some(bytes_per_s)
     }
 }
 #[cfg(test)]
@@ -133,6 +146,19 @@ mod tests {
             bw.acked(i + 1, at);
         }
         assert_eq!(bw.estimate(), None);
+
+        // Service times of 1 to 3 ms that happen to grow with size (a busy machine on
+        // loopback): the line through them would serve a 0-byte frame in negative time.
+        let mut noise = Bandwidth::default();
+        let mut at = t0;
+        for i in 0..10u64 {
+            let bytes = 5_000 + (i as usize % 6) * 500;
+            noise.sent(i + 1, bytes, at);
+            at += Duration::from_micros(1_000 + (i % 6) * 400);
+            noise.acked(i + 1, at);
+            at += Duration::from_millis(30);
+        }
+        assert_eq!(noise.estimate(), None);
         // Two seconds later the old samples are gone.
         bw.sent(11, 1_000, at + Duration::from_secs(3));
         bw.acked(11, at + Duration::from_secs(3));
