@@ -3,7 +3,6 @@
 //! packets (boxes of the Fitted BVH) and the tet packets (boxes and isopolygons).
 
 use crate::camera::PrimaryRays;
-use crate::geom::aabb::Aabb;
 use glam::Vec3;
 
 /// The pixels of a tile: `width × height` from `(x0, y0)` of a camera's image.
@@ -43,6 +42,22 @@ impl TileGrid {
             hi_x = hi_x.max(x);
             hi_y = hi_y.max(y);
         }
+        self.rect_around([lo_x, lo_y, hi_x, hi_y])
+    }
+
+    /// [`TileGrid::cover`] of the box `lo..hi` (its eight corners), projected at once
+    /// ([`PrimaryRays::box_on_image`]).
+    #[inline]
+    pub fn cover_box(&self, lo: Vec3, hi: Vec3) -> Cover {
+        match self.rays.box_on_image(lo, hi) {
+            Some(bounds) => self.rect_around(bounds),
+            None => Cover::Unknown,
+        }
+    }
+
+    /// The tile's pixels within `[lo_x, hi_x] × [lo_y, hi_y]` widened by one pixel.
+    #[inline]
+    fn rect_around(&self, [lo_x, lo_y, hi_x, hi_y]: [f32; 4]) -> Cover {
         let (x0, y0) = (self.x0 as f32, self.y0 as f32);
         let (x1, y1) = (x0 + self.width as f32 - 1.0, y0 + self.height as f32 - 1.0);
         let (lo_x, lo_y) = ((lo_x - 1.0).max(x0), (lo_y - 1.0).max(y0));
@@ -119,12 +134,6 @@ pub fn box_corners(lo: Vec3, hi: Vec3) -> impl Iterator<Item = Vec3> {
     })
 }
 
-/// The eight corners of `b`.
-#[inline]
-pub fn aabb_corners(b: &Aabb) -> impl Iterator<Item = Vec3> {
-    box_corners(b.min, b.max)
-}
-
 impl Cover {
     /// Ray indices (row-major in a tile `width` wide) in the cover, from `from` on; all of
     /// `from..n` when there is no bound.
@@ -195,6 +204,23 @@ mod tests {
         }
     }
 
+    /// The tile's pixels (row-major indices) whose rays meet the box `lo..hi` (slab test).
+    fn pixels_meeting(g: &TileGrid, lo: Vec3, hi: Vec3) -> Vec<usize> {
+        let mut out = Vec::new();
+        for y in 0..g.height {
+            for x in 0..g.width {
+                let ray = g.rays.through_pixel(g.x0 + x, g.y0 + y);
+                let inv = ray.dir.recip();
+                let (t0, t1) = ((lo - ray.origin) * inv, (hi - ray.origin) * inv);
+                let (near, far) = (t0.min(t1).max_element(), t0.max(t1).min_element());
+                if near <= far && far > 0.0 {
+                    out.push((y * g.width + x) as usize);
+                }
+            }
+        }
+        out
+    }
+
     /// Every pixel of the tile whose ray meets a small box lies in the box's cover, and a
     /// box behind the eye has no bound.
     #[test]
@@ -203,6 +229,11 @@ mod tests {
         let (lo, hi) = (Vec3::new(-0.2, -0.1, -0.3), Vec3::new(0.1, 0.25, 0.2));
         let cover = g.cover(box_corners(lo, hi));
         assert!(matches!(cover, Cover::Rect { .. }), "{cover:?}");
+        assert_eq!(
+            g.cover_box(lo, hi),
+            cover,
+            "the box's cover from its corners at once"
+        );
         let inside: Vec<usize> = cover.rays(g.width, 0, 256).collect();
         let mut visited = Vec::new();
         cover.visit(16, 0, 256, |i| {
@@ -210,20 +241,10 @@ mod tests {
             false
         });
         assert_eq!(inside, visited, "both walks give the same rays");
-        let mut hit = 0;
-        for y in 0..16 {
-            for x in 0..16 {
-                let ray = g.rays.through_pixel(16 + x, 16 + y);
-                let inv = ray.dir.recip();
-                let t0 = (lo - ray.origin) * inv;
-                let t1 = (hi - ray.origin) * inv;
-                let near = t0.min(t1).max_element();
-                let far = t0.max(t1).min_element();
-                if near <= far && far > 0.0 {
-                    hit += 1;
-                    assert!(inside.contains(&((y * 16 + x) as usize)), "pixel {x},{y}");
-                }
-            }
+        let meeting = pixels_meeting(&g, lo, hi);
+        let hit = meeting.len();
+        for i in meeting {
+            assert!(inside.contains(&i), "pixel {i}");
         }
         assert!(
             hit > 0 && inside.len() < 256,
@@ -235,11 +256,55 @@ mod tests {
             Vec3::splat(1.0) + 6.0 * Vec3::Z,
         ));
         assert_eq!(behind, Cover::Unknown);
+        let behind_box = g.cover_box(Vec3::new(-1.0, -1.0, 6.0), Vec3::splat(1.0) + 6.0 * Vec3::Z);
+        assert_eq!(behind_box, Cover::Unknown);
         let aside = g.cover(box_corners(
             Vec3::new(3.0, 3.0, -0.1),
             Vec3::new(3.1, 3.1, 0.1),
         ));
         assert_eq!(aside, Cover::Empty);
+        let aside_box = g.cover_box(Vec3::new(3.0, 3.0, -0.1), Vec3::new(3.1, 3.1, 0.1));
+        assert_eq!(aside_box, Cover::Empty);
+    }
+
+    /// A box's cover projected corner by corner and all at once agree on random boxes
+    /// around the tile, and every pixel whose ray meets the box lies in the latter (slab
+    /// test per pixel ray): the packets' culling by `cover_box` is as conservative as by
+    /// `cover`.
+    #[test]
+    fn the_box_cover_holds_every_pixel_whose_ray_meets_the_box() {
+        let g = grid();
+        let mut rng = crate::geom::rng::SplitMix64(5);
+        let (mut same, mut rects, mut hits) = (0, 0, 0);
+        for _ in 0..3000 {
+            let centre = Vec3::new(
+                rng.range(-1.0, 1.0),
+                rng.range(-1.0, 1.0),
+                rng.range(-3.0, 6.0),
+            );
+            let half = Vec3::new(
+                rng.range(0.0, 0.4),
+                rng.range(0.0, 0.4),
+                rng.range(0.0, 0.4),
+            );
+            let (lo, hi) = (centre - half, centre + half);
+            let cover = g.cover_box(lo, hi);
+            same += (cover == g.cover(box_corners(lo, hi))) as usize;
+            let inside: Vec<usize> = cover.rays(g.width, 0, 256).collect();
+            rects += matches!(cover, Cover::Rect { .. }) as usize;
+            if cover == Cover::Unknown {
+                continue;
+            }
+            for i in pixels_meeting(&g, lo, hi) {
+                hits += 1;
+                assert!(inside.contains(&i), "pixel {i} of box {lo} {hi}");
+            }
+        }
+        assert!(same >= 2990, "{same} of 3000 covers the same both ways");
+        assert!(
+            rects > 300 && hits > 1000,
+            "{rects} rectangles, {hits} pixel hits"
+        );
     }
 
     /// A sphere the cover's pyramid excludes meets no ray of the cover's pixels (distance from

@@ -26,7 +26,7 @@
 //! Every test is conservative and the per-ray arithmetic is the single-ray path's, so a
 //! packet returns, ray for ray, exactly what [`super::traverse`] returns.
 
-use crate::geom::tile::{box_corners, Cover, TileGrid};
+use crate::geom::tile::{Cover, TileGrid};
 use crate::kinds::tets::bvh::{Bvh, Node};
 use crate::kinds::tets::counters::TetCounters;
 use crate::kinds::tets::march::{extract, FrustumTest, PolygonFromOrigin};
@@ -226,7 +226,7 @@ impl Walker for PacketWalk<'_, '_> {
         let cover = match &self.packet.grid {
             Some(grid) => {
                 self.c.frustum_box_tests += 1;
-                grid.cover(box_corners(node.lo.xyz(), node.hi.xyz()))
+                grid.cover_box(node.lo.xyz(), node.hi.xyz())
             }
             None => Cover::Unknown,
         };

@@ -35,7 +35,7 @@ use super::soa::SharedOriginBalls;
 use super::{Accel, PreparedMetaballs, SCRATCH};
 use crate::camera::PrimaryRays;
 use crate::geom::aabb::Aabb;
-use crate::geom::tile::{aabb_corners, TileGrid};
+use crate::geom::tile::TileGrid;
 use crate::kinds::metaballs::counters::MetaballCounters;
 use crate::kinds::metaballs::tree::Tree;
 use crate::ray::{Hit, Ray};
@@ -170,7 +170,7 @@ impl PreparedMetaballs {
                     continue;
                 }
                 counters.node_traversals += 1;
-                let cover = tile.cover(aabb_corners(&node.bounds));
+                let cover = tile.cover_box(node.bounds.min, node.bounds.max);
                 if node.is_leaf() {
                     // The leaf's balls less those outside the pyramid of the cover's rays.
                     let leaf = tree.leaf_balls(node);
