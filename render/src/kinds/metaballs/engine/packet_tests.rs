@@ -217,33 +217,54 @@ fn shadow_packets_match_single_rays_on_every_demo() {
 
 /// The structure-of-arrays gather of a packet leaf gives, for every ray from the shared
 /// origin, the balls the single ray's gather gives, field for field to the bit: every demo's
-/// spheres, rays from its camera through a grid over the image, a range cutting some balls.
+/// spheres, rays from its camera through a grid over the image, a range cutting some balls;
+/// all the balls at once (the vector pass) and the first 84 in runs of 1, 3 and 7 (the one
+/// scalar pass for leaves with few balls).
 #[test]
 fn the_shared_origin_gather_is_the_single_rays_bit_for_bit() {
     use super::soa::SharedOriginBalls;
-    let mut compared = 0usize;
+    let (mut compared, mut in_small_runs) = (0usize, 0usize);
     for (demo, prepared, m) in demos() {
         let all: Vec<u32> = (0..m.balls.len() as u32).collect();
         let rays = prepared.primary_rays(&demo.default_camera(), WIDTH, HEIGHT);
         let origin = rays.through_pixel(0, 0).origin;
-        let mut soa = SharedOriginBalls::default();
-        if !soa.load(&m.balls, origin, &all) {
-            continue; // ellipsoids: the packet gathers as single rays do
-        }
-        for y in (0..HEIGHT).step_by(3) {
-            for x in (0..WIDTH).step_by(3) {
-                let ray = rays.through_pixel(x, y);
-                let (lo, hi) = (0.0, 2.0 * (demo.default_camera().target - origin).length());
-                let (mut single, mut shared) = (Vec::new(), Vec::new());
-                for &b in &all {
-                    m.gather(&ray, b, true, lo, hi, &mut single);
+        let runs = [all.len(), 1, 3, 7];
+        for (r, run) in runs.into_iter().enumerate() {
+            // Runs of few balls from the first 84 balls (enough runs, quick).
+            let pool = if r == 0 {
+                &all[..]
+            } else {
+                &all[..all.len().min(84)]
+            };
+            for balls in pool.chunks(run.max(1)) {
+                let mut soa = SharedOriginBalls::default();
+                if !soa.load(&m.balls, origin, balls) {
+                    continue; // ellipsoids: the packet gathers as single rays do
                 }
-                soa.gather(&m.balls, ray.dir, lo, hi, &mut shared);
-                compared += assert_same_balls(&single, &shared, || format!("{demo:?} {x},{y}"));
+                for y in (0..HEIGHT).step_by(3) {
+                    for x in (0..WIDTH).step_by(3) {
+                        let ray = rays.through_pixel(x, y);
+                        let reach = (demo.default_camera().target - origin).length();
+                        let (lo, hi) = (0.0, 2.0 * reach);
+                        let (mut single, mut shared) = (Vec::new(), Vec::new());
+                        for &b in balls {
+                            m.gather(&ray, b, true, lo, hi, &mut single);
+                        }
+                        soa.gather(&m.balls, ray.dir, lo, hi, &mut shared);
+                        let at = || format!("{demo:?} {x},{y}, runs of {run}");
+                        let n = assert_same_balls(&single, &shared, at);
+                        compared += n;
+                        in_small_runs += if r > 0 { n } else { 0 };
+                    }
+                }
             }
         }
     }
     assert!(compared > 1000, "{compared} gathered balls compared");
+    assert!(
+        in_small_runs > 1000,
+        "{in_small_runs} gathered from runs of few balls"
+    );
 }
 
 /// The shadow packets' structure-of-arrays gather ([`super::soa::LeafSpheres`]) appends, for
