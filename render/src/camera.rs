@@ -170,7 +170,7 @@ impl PrimaryRays {
     pub fn pixel_of(&self, point: Vec3) -> Option<(f32, f32)> {
         let v = point - self.eye;
         let depth = v.dot(self.forward);
-        if !(depth > 0.0 && depth * depth > 1e-12 * v.length_squared()) {
+        if !in_front(depth, v.length_squared()) {
             return None;
         }
         // Scaled so its component along `forward` is 1, like every unnormalised pixel ray.
@@ -188,10 +188,10 @@ impl PrimaryRays {
     /// three other corners: the 24 products once, then per corner four sums of three, a
     /// division and two multiply-subtracts, over arrays (packed SSE sums and products in the
     /// portable release build, checked in the assembly; the eight divisions stay scalar). A
-    /// node's cover on `scattered-1k` takes about 175 instructions against 770. The coordinates can differ
-    /// from `pixel_of`'s by rounding (the
-    /// test `a_boxs_corners_land_where_pixel_of_puts_them` bounds it), far below the pixel a
-    /// cover is widened by.
+    /// node's cover on `scattered-1k` takes about 175 instructions against 770. The
+    /// coordinates can differ from `pixel_of`'s by rounding (the test
+    /// `a_boxs_corners_land_where_pixel_of_puts_them` bounds it), far below the pixel a cover
+    /// is widened by.
     pub fn box_on_image(&self, lo: Vec3, hi: Vec3) -> Option<[f32; 4]> {
         let sides = [(lo - self.eye).to_array(), (hi - self.eye).to_array()];
         let (f, r, d) = (
@@ -226,12 +226,12 @@ impl PrimaryRays {
             ny[corner] = a[2] + b[2] + c[2];
             length_squared[corner] = a[3] + b[3] + c[3];
         }
-        let mut in_front = true;
+        let mut all_in_front = true;
         for corner in 0..8 {
             let depth = depth[corner];
-            in_front &= depth > 0.0 && depth * depth > 1e-12 * length_squared[corner];
+            all_in_front &= in_front(depth, length_squared[corner]);
         }
-        if !in_front {
+        if !all_in_front {
             return None;
         }
         let mut out = [
@@ -265,6 +265,13 @@ impl PrimaryRays {
             self.forward,
         ]
     }
+}
+
+/// Whether a point at `depth` along the view axis and squared distance `length_squared` from
+/// the eye lies far enough in front of it to project ([`PrimaryRays::pixel_of`]).
+#[inline(always)]
+fn in_front(depth: f32, length_squared: f32) -> bool {
+    depth > 0.0 && depth * depth > 1e-12 * length_squared
 }
 
 #[cfg(test)]

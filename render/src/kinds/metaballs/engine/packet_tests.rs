@@ -228,6 +228,8 @@ fn the_shared_origin_gather_is_the_single_rays_bit_for_bit() {
         let all: Vec<u32> = (0..m.balls.len() as u32).collect();
         let rays = prepared.primary_rays(&demo.default_camera(), WIDTH, HEIGHT);
         let origin = rays.through_pixel(0, 0).origin;
+        let reach = (demo.default_camera().target - origin).length();
+        let (lo, hi) = (0.0, 2.0 * reach);
         let runs = [all.len(), 1, 3, 7];
         for (r, run) in runs.into_iter().enumerate() {
             // Runs of few balls from the first 84 balls (enough runs, quick).
@@ -244,8 +246,6 @@ fn the_shared_origin_gather_is_the_single_rays_bit_for_bit() {
                 for y in (0..HEIGHT).step_by(3) {
                     for x in (0..WIDTH).step_by(3) {
                         let ray = rays.through_pixel(x, y);
-                        let reach = (demo.default_camera().target - origin).length();
-                        let (lo, hi) = (0.0, 2.0 * reach);
                         let (mut single, mut shared) = (Vec::new(), Vec::new());
                         for &b in balls {
                             m.gather(&ray, b, true, lo, hi, &mut single);
