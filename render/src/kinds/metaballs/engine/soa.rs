@@ -147,7 +147,8 @@ impl SharedOriginBalls {
 }
 
 /// `a = |g|²`, `tc = −e·g / a` and `s_min = |e + tc g|²` for `g = dir / R` (`r = 1 / R`) and the
-/// origin `e` in the ball's unit frame: [`RayBall::along`]'s operations in its order.
+/// origin `e` in the ball's unit frame: [`RayBall::along`]'s operations in its order. Every
+/// gather of this file runs it in its vector loop (the origin shared or per ray).
 #[inline(always)]
 fn along_shared(dir: Vec3, r: f32, (ex, ey, ez): (f32, f32, f32)) -> (f32, f32, f32) {
     let (gx, gy, gz) = (dir.x * r, dir.y * r, dir.z * r);
@@ -232,32 +233,19 @@ impl LeafSpheres {
         let (a_out, tc_out, s_out) = (&mut self.a[..n], &mut self.tc[..n], &mut self.s_min[..n]);
         for k in 0..n {
             let r = inv_r[k];
-            let (ex, ey, ez) = (
+            let e = (
                 (origin.x - cx[k]) * r,
                 (origin.y - cy[k]) * r,
                 (origin.z - cz[k]) * r,
             );
-            let (gx, gy, gz) = (dir.x * r, dir.y * r, dir.z * r);
-            let a = gx * gx + gy * gy + gz * gz;
-            let tc = -(ex * gx + ey * gy + ez * gz) / a;
-            let (qx, qy, qz) = (ex + tc * gx, ey + tc * gy, ez + tc * gz);
-            a_out[k] = a;
-            tc_out[k] = tc;
-            s_out[k] = qx * qx + qy * qy + qz * qz;
+            (a_out[k], tc_out[k], s_out[k]) = along_shared(dir, r, e);
         }
         for k in 0..n {
-            let (a, s_min) = (self.a[k], self.s_min[k]);
-            if !(a > 0.0) || !(s_min < 1.0) {
-                continue;
+            let (a, tc, s_min) = (self.a[k], self.tc[k], self.s_min[k]);
+            if let Some(span) = support_span(a, tc, s_min, lo, hi) {
+                let i = self.ids[k];
+                out.push(records[i as usize].seen(i, (span.0, span.1, a, tc, s_min), true));
             }
-            let tc = self.tc[k];
-            let half = ((1.0 - s_min) / a).sqrt();
-            let (t0, t1) = (tc - half, tc + half);
-            if t1 < lo || t0 > hi {
-                continue;
-            }
-            let i = self.ids[k];
-            out.push(records[i as usize].seen(i, (t0, t1, a, tc, s_min), true));
         }
     }
 }
@@ -326,29 +314,16 @@ impl TreeSpheres {
             let (mut a_of, mut tc_of, mut s_of) = ([0f32; LANES], [0f32; LANES], [0f32; LANES]);
             for k in 0..len {
                 let r = inv_r[k];
-                let (ex, ey, ez) = ((o.x - cx[k]) * r, (o.y - cy[k]) * r, (o.z - cz[k]) * r);
-                let (gx, gy, gz) = (d.x * r, d.y * r, d.z * r);
-                let a = gx * gx + gy * gy + gz * gz;
-                let tc = -(ex * gx + ey * gy + ez * gz) / a;
-                let (qx, qy, qz) = (ex + tc * gx, ey + tc * gy, ez + tc * gz);
-                a_of[k] = a;
-                tc_of[k] = tc;
-                s_of[k] = qx * qx + qy * qy + qz * qz;
+                let e = ((o.x - cx[k]) * r, (o.y - cy[k]) * r, (o.z - cz[k]) * r);
+                (a_of[k], tc_of[k], s_of[k]) = along_shared(d, r, e);
             }
             for k in 0..len {
-                let (a, s_min) = (a_of[k], s_of[k]);
-                if !(a > 0.0) || !(s_min < 1.0) {
-                    continue;
+                let (a, tc, s_min) = (a_of[k], tc_of[k], s_of[k]);
+                if let Some(span) = support_span(a, tc, s_min, lo, hi) {
+                    let i = ids[start + k];
+                    let owner = !owners_only || start + k < owned;
+                    out.push(records[i as usize].seen(i, (span.0, span.1, a, tc, s_min), owner));
                 }
-                let tc = tc_of[k];
-                let half = ((1.0 - s_min) / a).sqrt();
-                let (t0, t1) = (tc - half, tc + half);
-                if t1 < lo || t0 > hi {
-                    continue;
-                }
-                let i = ids[start + k];
-                let owner = !owners_only || start + k < owned;
-                out.push(records[i as usize].seen(i, (t0, t1, a, tc, s_min), owner));
             }
             start += len;
         }
