@@ -453,7 +453,10 @@ impl<'a> Tracer<'a> {
             } else {
                 1.0
             };
-            color += direct(material, albedo, normal, view, &sample, visibility);
+            // A recording pass only notes the shadow rays; its colours are dropped.
+            if !self.batch.is_recording() {
+                color += direct(material, albedo, normal, view, &sample, visibility);
+            }
         }
         color
     }

@@ -30,6 +30,12 @@ pub struct ShadowQuery {
 }
 
 impl ShadowBatch {
+    /// Whether shading is the first pass, which only notes the shadow rays.
+    #[inline]
+    pub fn is_recording(&self) -> bool {
+        matches!(self, ShadowBatch::Record(_))
+    }
+
     /// The answer for a shadow ray: `None` when no batch runs (trace it), "not blocked" while
     /// recording (it is noted), and the traced answer when replaying (an answer recorded for
     /// another ray, never the case by construction, is not used).
