@@ -104,6 +104,8 @@ pub struct Tracer<'a> {
     given: Option<Option<Hit>>,
     /// Hard shadow rays of a tile's camera rays traced together ([`Tracer::primaries_from`]).
     batch: batch::ShadowBatch,
+    /// The terms of the colours shaded while the batch notes shadow rays.
+    terms: Vec<batch::Term>,
     /// The point light the next shadow ray goes to (`None`: directional), for the batch.
     shadow_light: Option<Vec3>,
 }
@@ -120,6 +122,7 @@ impl<'a> Tracer<'a> {
             hits: Vec::new(),
             given: None,
             batch: batch::ShadowBatch::Off,
+            terms: Vec::new(),
             shadow_light: None,
         }
     }
@@ -164,37 +167,41 @@ impl<'a> Tracer<'a> {
 
     /// [`Tracer::primary_from`] for each camera ray of a tile (`hits` from the kind's tile
     /// query, `pixels` their pixels) in order. Where the camera rays spawn only hard shadow
-    /// rays, a first shading pass records those, they are traced together
-    /// ([`batch::trace_shadows`]), and the second pass takes their answers in the order it
-    /// asks; the image is [`Tracer::primary`]'s.
+    /// rays, shading notes those as unblocked with the terms of each colour, they are traced
+    /// together ([`batch::trace_shadows`]), and the colours with a blocked light are summed
+    /// again without it ([`batch::resolve`]); the image is [`Tracer::primary`]'s.
     pub fn primaries_from(
         &mut self,
         hits: &[(Ray, Option<Hit>)],
         pixels: &[(u32, u32)],
         pass: u32,
     ) -> Vec<(Vec3, f32)> {
-        let shade = |tracer: &mut Self| -> Vec<(Vec3, f32)> {
-            (hits.iter().zip(pixels))
-                .map(|(&(ray, hit), &(x, y))| {
-                    tracer.primary_from(&ray, hit, &mut PixelRng::new(x, y, pass))
-                })
-                .collect()
-        };
-        if self.batches_shadows() {
-            let counts = self.counts;
+        let batched = self.batches_shadows();
+        if batched {
             self.batch = batch::ShadowBatch::Record(Vec::new());
-            shade(self);
-            // The recording pass traced nothing (its shadow rays were only noted).
-            self.counts = counts;
-            if let batch::ShadowBatch::Record(queries) = std::mem::take(&mut self.batch) {
-                let answers =
-                    batch::trace_shadows(self.scene, self.isovalue, &queries, &mut self.counters);
-                self.batch =
-                    batch::ShadowBatch::Replay(queries.into_iter().zip(answers).collect(), 0);
+            self.terms.clear();
+        }
+        let mut spans = Vec::with_capacity(if batched { hits.len() } else { 0 });
+        let mut out: Vec<(Vec3, f32)> = (hits.iter().zip(pixels))
+            .map(|(&(ray, hit), &(x, y))| {
+                let start = self.terms.len();
+                let shaded = self.primary_from(&ray, hit, &mut PixelRng::new(x, y, pass));
+                if batched {
+                    spans.push(start..self.terms.len());
+                }
+                shaded
+            })
+            .collect();
+        if let batch::ShadowBatch::Record(queries) = std::mem::take(&mut self.batch) {
+            let blocked =
+                batch::trace_shadows(self.scene, self.isovalue, &queries, &mut self.counters);
+            for (pixel, span) in out.iter_mut().zip(spans) {
+                let terms = &self.terms[span];
+                if batch::any_blocked(terms, &blocked) {
+                    pixel.0 = batch::resolve(terms, &blocked);
+                }
             }
         }
-        let out = shade(self);
-        self.batch = batch::ShadowBatch::Off;
         out
     }
 
@@ -381,6 +388,9 @@ impl<'a> Tracer<'a> {
         let above = hit.position + normal * eps;
         let mut color = material.emission;
         if material.receives_light() {
+            if self.batch.is_recording() {
+                self.terms.push(batch::Term::Emission(color));
+            }
             color += self.local(&material, hit, normal, view, above, rng);
         }
 
@@ -438,6 +448,10 @@ impl<'a> Tracer<'a> {
             }
             ambient *= open / ao as f32;
         }
+        let recording = self.batch.is_recording();
+        if recording {
+            self.terms.push(batch::Term::Ambient(ambient));
+        }
         let mut color = ambient;
         for k in 0..self.lighting.lights.len() {
             let light = self.lighting.lights[k];
@@ -448,15 +462,18 @@ impl<'a> Tracer<'a> {
             if normal.dot(sample.to_light) <= 0.0 {
                 continue;
             }
+            let noted = self.batch.noted();
             let visibility = if self.plan.shadows {
                 self.visibility(&light, sample.to_light, sample.distance, above, rng)
             } else {
                 1.0
             };
-            // A recording pass only notes the shadow rays; its colours are dropped.
-            if !self.batch.is_recording() {
-                color += direct(material, albedo, normal, view, &sample, visibility);
+            let term = direct(material, albedo, normal, view, &sample, visibility);
+            if recording {
+                let waits = (self.batch.noted() > noted).then_some(noted);
+                self.terms.push(batch::Term::Light(waits, term));
             }
+            color += term;
         }
         color
     }

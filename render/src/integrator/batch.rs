@@ -1,24 +1,24 @@
 //! Hard shadow rays of a tile traced together: where a tile's camera rays spawn nothing but
-//! hard shadow rays, a first shading pass records them ([`ShadowBatch::Record`]), they are
-//! traced as packets towards each light ([`trace_shadows`], through
-//! [`PreparedScene::any_hits_towards`]), and the second pass takes their answers in the
-//! order it asks ([`ShadowBatch::Replay`]). The image is the pixel-by-pixel one (checked by
-//! the CPU backend's `effects_frames_from_tile_hits_are_the_pixel_by_pixel_frames`).
+//! hard shadow rays, one shading pass takes every shadow ray as unblocked and notes it
+//! ([`ShadowBatch::Record`]) along with the terms of each pixel's colour ([`Term`]); the
+//! rays are traced as packets towards each light ([`trace_shadows`], through
+//! [`PreparedScene::any_hits_towards`]), and a pixel with a blocked shadow ray has its
+//! colour summed again from its terms without that light ([`resolve`]), in the order
+//! shading sums them. The image is the pixel-by-pixel one (checked by the CPU backend's
+//! `effects_frames_from_tile_hits_are_the_pixel_by_pixel_frames`).
 
 use crate::kinds::counters::SceneCounters;
 use crate::ray::{Ray, INSIDE_EPS};
 use crate::scene::PreparedScene;
 use glam::Vec3;
 
-/// The shadow rays of a tile: recorded by a first shading pass, traced together (as packets
-/// towards each light where the kind has them), answered in order by the second pass.
+/// The shadow rays of a tile, noted by its shading pass and traced together afterwards (as
+/// packets towards each light where the kind has them).
 #[derive(Debug, Default)]
 pub enum ShadowBatch {
     #[default]
     Off,
     Record(Vec<ShadowQuery>),
-    /// The answers and the next one to give.
-    Replay(Vec<(ShadowQuery, bool)>, usize),
 }
 
 /// One shadow ray over `[0, t_max]` towards `light` (a point, or `None`: directional).
@@ -30,15 +30,23 @@ pub struct ShadowQuery {
 }
 
 impl ShadowBatch {
-    /// Whether shading is the first pass, which only notes the shadow rays.
+    /// Whether shading notes its shadow rays instead of tracing them.
     #[inline]
     pub fn is_recording(&self) -> bool {
         matches!(self, ShadowBatch::Record(_))
     }
 
+    /// How many shadow rays have been noted.
+    #[inline]
+    pub fn noted(&self) -> usize {
+        match self {
+            ShadowBatch::Off => 0,
+            ShadowBatch::Record(queries) => queries.len(),
+        }
+    }
+
     /// The answer for a shadow ray: `None` when no batch runs (trace it), "not blocked" while
-    /// recording (it is noted), and the traced answer when replaying (an answer recorded for
-    /// another ray, never the case by construction, is not used).
+    /// recording (it is noted, and [`resolve`] corrects the colour if it is blocked).
     pub fn answer(&mut self, query: ShadowQuery) -> Option<bool> {
         match self {
             ShadowBatch::Off => None,
@@ -46,13 +54,47 @@ impl ShadowBatch {
                 queries.push(query);
                 Some(false)
             }
-            ShadowBatch::Replay(answers, next) => {
-                let answer = answers.get(*next).filter(|(q, _)| *q == query).map(|a| a.1);
-                *next += 1;
-                answer
+        }
+    }
+}
+
+/// A term of a lit surface's colour while its shadow rays are noted, in the order shading
+/// adds them: `emission + (ambient + light₁ + light₂ + …)`.
+#[derive(Clone, Copy, Debug)]
+pub enum Term {
+    Emission(Vec3),
+    Ambient(Vec3),
+    /// A light's direct term as if unblocked, and the noted shadow ray it waits on (`None`:
+    /// its visibility was known without one).
+    Light(Option<usize>, Vec3),
+}
+
+/// Whether a pixel's colour needs [`resolve`]: one of its lights waits on a blocked ray.
+pub fn any_blocked(terms: &[Term], blocked: &[bool]) -> bool {
+    terms
+        .iter()
+        .any(|t| matches!(t, Term::Light(Some(q), _) if blocked[*q]))
+}
+
+/// A lit surface's colour from its `terms` with the `blocked` shadow rays' lights adding
+/// nothing: the pixel-by-pixel shading's sums in its order (a blocked light's term is zero
+/// there too, [`crate::shade::direct`] of visibility 0).
+pub fn resolve(terms: &[Term], blocked: &[bool]) -> Vec3 {
+    let (mut emission, mut local) = (Vec3::ZERO, Vec3::ZERO);
+    for t in terms {
+        match *t {
+            Term::Emission(e) => emission = e,
+            Term::Ambient(a) => local = a,
+            Term::Light(q, value) => {
+                local += if q.is_some_and(|q| blocked[q]) {
+                    Vec3::ZERO
+                } else {
+                    value
+                };
             }
         }
     }
+    emission + local
 }
 
 /// Whether each shadow ray is blocked by the isosurface at `isovalue`: rays towards one light
