@@ -281,9 +281,15 @@ pub fn run(args: MetaballsArgs) -> Result<(), String> {
         let floor = demo.isovalue_slider().0;
         let n = state.primitive_count();
         for &mode in &modes {
-            let options = PrepareOptions::fitted(floor)
-                .with_accel(mode.accel(floor))
-                .with_finder(finder);
+            // The binary walk for every tree mode: the table compares the paper's two
+            // structures node for node (Table 3's traversals); the four-wide walk single rays
+            // take by default is measured in the packet table's single-ray rows.
+            let options = PrepareOptions {
+                wide: false,
+                ..PrepareOptions::fitted(floor)
+                    .with_accel(mode.accel(floor))
+                    .with_finder(finder)
+            };
             let (row, _) = measure(&state, demo, mode.name(), options, mode.row_stride(n), runs);
             eprintln!(
                 "{:>15} {:<22} build {:>8.2} ms  render {:>9.1} ms",

@@ -15,7 +15,7 @@
 use crate::kinds::metaballs::counters::MetaballCounters;
 use crate::kinds::metaballs::roots::{self, FindParams, KernelPoly, RayBall, RootFinder, Scratch};
 use crate::kinds::metaballs::scene::{MetaballScene, Shape};
-use crate::kinds::metaballs::tree::{BuildOptions, Tree, TreeBall, TreeKind, TreeStats};
+use crate::kinds::metaballs::tree::{BuildOptions, Tree, TreeBall, TreeKind, TreeStats, Wide};
 use crate::ray::{Hit, Ray};
 use glam::Mat3;
 use std::cell::RefCell;
@@ -67,6 +67,11 @@ pub struct PrepareOptions {
     /// Trace a tile of primary rays as one packet through the Fitted BVH (the default;
     /// same hits ray for ray), or every ray alone (for comparison).
     pub packets: bool,
+    /// Single rays that stop at the first leaf with a root (first hits, shadow and way-out
+    /// queries) walk the Fitted BVH four boxes at a time ([`Wide`]: the same leaves, ranges
+    /// and order as the binary walk; the default), or the binary tree node by node (the
+    /// paper's Table 3 counts its node traversals).
+    pub wide: bool,
 }
 
 impl PrepareOptions {
@@ -79,6 +84,7 @@ impl PrepareOptions {
             step: RootFinder::BezierClipping.default_step(),
             refine_f64: false,
             packets: true,
+            wide: true,
         }
     }
 
@@ -113,6 +119,9 @@ pub struct PreparedMetaballs {
     nested: bool,
     /// The main tree's leaf lists as structure-of-arrays (scenes of spheres only).
     spheres: Option<soa::TreeSpheres>,
+    /// The main tree four boxes at a time, for single rays that stop at the first leaf with
+    /// a root (a nested Fitted BVH only).
+    wide: Option<Wide>,
     /// The balls' mean support radius: the length a shadow packet's spread is measured in.
     mean_radius: f32,
 }
@@ -162,6 +171,10 @@ impl PreparedMetaballs {
             Accel::Tree(tree) => soa::TreeSpheres::build(&balls, tree),
             Accel::BruteForce | Accel::ActiveList => None,
         };
+        let wide = match &accel {
+            Accel::Tree(tree) if nested && options.wide => Wide::build(tree),
+            _ => None,
+        };
         let mean_radius = if scene.balls.is_empty() {
             0.0
         } else {
@@ -179,6 +192,7 @@ impl PreparedMetaballs {
             fallback: OnceLock::new(),
             nested,
             spheres,
+            wide,
         }
     }
 
@@ -346,6 +360,7 @@ impl PreparedMetaballs {
                 params,
                 finder,
                 tree.kind == TreeKind::Fitted,
+                true,
                 gathered,
                 scratch,
                 stack,

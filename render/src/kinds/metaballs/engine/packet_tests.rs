@@ -366,7 +366,7 @@ fn the_tree_leaf_gather_is_the_ball_by_ball_gather_bit_for_bit() {
     );
 }
 
-/// Shadow rays whose start points spread over more than 16 mean ball radii are not traced as a
+/// Shadow rays whose start points spread over more than 8 mean ball radii are not traced as a
 /// packet (the kind answers `None` and the caller traces them one by one); within it they are.
 #[test]
 fn spread_out_shadow_rays_fall_back_to_single_rays() {
@@ -386,11 +386,11 @@ fn spread_out_shadow_rays_fall_back_to_single_rays() {
     };
     let isovalue = demo.default_isovalue();
     let mut c = MetaballCounters::default();
-    let (near, near_max) = from(15.9);
+    let (near, near_max) = from(7.9);
     assert!(m.shadow_packet_pays(&near, 0.0));
     let packet = m.any_hits_towards(&near, 0.0, &near_max, Some(light), isovalue, &mut c);
     assert!(packet.is_some(), "a coherent pair is a packet");
-    let (far, far_max) = from(16.1);
+    let (far, far_max) = from(8.1);
     assert!(!m.shadow_packet_pays(&far, 0.0));
     let packet = m.any_hits_towards(&far, 0.0, &far_max, Some(light), isovalue, &mut c);
     assert!(packet.is_none(), "a spread pair is traced ray by ray");

@@ -15,7 +15,7 @@ use super::{Accel, PreparedMetaballs};
 use crate::kinds::contract::crossings_one_by_one;
 use crate::kinds::metaballs::counters::MetaballCounters;
 use crate::kinds::metaballs::roots::{self, RayBall, RootFinder, Scratch};
-use crate::kinds::metaballs::tree::TreeKind;
+use crate::kinds::metaballs::tree::{Node, TreeKind};
 use crate::ray::{surface_offset, Hit, Ray, INSIDE_EPS};
 use std::cell::RefCell;
 
@@ -72,69 +72,77 @@ impl PreparedMetaballs {
             let mut guard = cell.borrow_mut();
             let (leaf_balls, gathered, scratch, stack) = &mut *guard;
             let mut node_traversals = counters.node_traversals;
-            tree.walk(
-                ray.origin,
-                ray.dir.recip(),
-                t_min,
-                t_max,
-                true,
-                stack,
-                &mut node_traversals,
-                |node, near, far, _| {
-                    if state.t >= far {
-                        return None;
+            let leaf = |node: &Node, near: f32, far: f32, _: Option<f32>| {
+                if state.t >= far {
+                    return None;
+                }
+                leaf_balls.clear();
+                let leaf = tree.leaf_balls(node);
+                let range = (near.max(state.t), far);
+                match spheres {
+                    Some(soa) => {
+                        let (first, all) = (node.first as usize, (leaf.len(), false));
+                        soa.gather(&self.balls, leaf, first, all, ray, range, leaf_balls);
                     }
-                    leaf_balls.clear();
-                    let leaf = tree.leaf_balls(node);
-                    let range = (near.max(state.t), far);
-                    match spheres {
-                        Some(soa) => {
-                            let (first, all) = (node.first as usize, (leaf.len(), false));
-                            soa.gather(&self.balls, leaf, first, all, ray, range, leaf_balls);
-                        }
-                        None => {
-                            for &b in leaf {
-                                self.gather(ray, b, true, range.0, range.1, leaf_balls);
-                            }
+                    None => {
+                        for &b in leaf {
+                            self.gather(ray, b, true, range.0, range.1, leaf_balls);
                         }
                     }
-                    while out.len() < enough {
-                        let lo = near.max(state.t);
-                        if !(lo < far) {
-                            break;
-                        }
-                        // The balls a fresh query from `lo` would gather, in the same order.
-                        gathered.clear();
-                        gathered.extend(leaf_balls.iter().filter(|b| !(b.t1 < lo)));
-                        if gathered.is_empty() {
-                            break;
-                        }
-                        let (params, leaf_finder) = if state.inside {
-                            (&exit, RootFinder::BezierClipping)
-                        } else {
-                            (&entry, finder)
-                        };
-                        let Some(t) =
-                            roots::find_first(leaf_finder, params, gathered, lo, far, scratch)
-                                .counted(counters, gathered.len())
-                        else {
-                            break;
-                        };
-                        if !state.inside && !(t > state.t + INSIDE_EPS) {
-                            // The stretch started inside: its way out is the next crossing.
-                            state.inside = true;
-                            continue;
-                        }
-                        let hit = self.hit_at(ray, t, gathered);
-                        counters.hits += 1;
-                        state.inside = hit.normal.dot(ray.dir) < 0.0;
-                        state.t = hit.t + surface_offset(hit.position);
-                        out.push(hit);
+                }
+                while out.len() < enough {
+                    let lo = near.max(state.t);
+                    if !(lo < far) {
+                        break;
                     }
-                    // Stop the walk once enough crossings are found.
-                    (out.len() >= enough).then_some(state.t)
-                },
-            );
+                    // The balls a fresh query from `lo` would gather, in the same order.
+                    gathered.clear();
+                    gathered.extend(leaf_balls.iter().filter(|b| !(b.t1 < lo)));
+                    if gathered.is_empty() {
+                        break;
+                    }
+                    let (params, leaf_finder) = if state.inside {
+                        (&exit, RootFinder::BezierClipping)
+                    } else {
+                        (&entry, finder)
+                    };
+                    let Some(t) =
+                        roots::find_first(leaf_finder, params, gathered, lo, far, scratch)
+                            .counted(counters, gathered.len())
+                    else {
+                        break;
+                    };
+                    if !state.inside && !(t > state.t + INSIDE_EPS) {
+                        // The stretch started inside: its way out is the next crossing.
+                        state.inside = true;
+                        continue;
+                    }
+                    let hit = self.hit_at(ray, t, gathered);
+                    counters.hits += 1;
+                    state.inside = hit.normal.dot(ray.dir) < 0.0;
+                    state.t = hit.t + surface_offset(hit.position);
+                    out.push(hit);
+                }
+                // Stop the walk once enough crossings are found.
+                (out.len() >= enough).then_some(state.t)
+            };
+            let inv_dir = ray.dir.recip();
+            match self.wide_of(tree) {
+                Some(w) => {
+                    let walk = (ray.origin, inv_dir, t_min, t_max);
+                    w.walk_first(tree, walk, stack, &mut node_traversals, leaf)
+                }
+                None => tree.walk(
+                    ray.origin,
+                    inv_dir,
+                    t_min,
+                    t_max,
+                    true,
+                    stack,
+                    &mut node_traversals,
+                    leaf,
+                ),
+            };
             counters.node_traversals = node_traversals;
         });
     }

@@ -19,7 +19,7 @@
 use super::{build_fallback, Accel, AccelKind, PreparedMetaballs, SCRATCH};
 use crate::kinds::metaballs::counters::MetaballCounters;
 use crate::kinds::metaballs::roots::{self, FindParams, KernelPoly, RayBall, RootFinder, Scratch};
-use crate::kinds::metaballs::tree::{BuildOptions, Tree, TreeKind};
+use crate::kinds::metaballs::tree::{BuildOptions, Node, Tree, TreeKind, Wide};
 use crate::ray::{Hit, Ray};
 
 impl PreparedMetaballs {
@@ -91,7 +91,7 @@ impl PreparedMetaballs {
             let (gathered, scratch, stack) = &mut *guard;
             match accel {
                 Accel::Tree(tree) => self.leaf_walk(
-                    tree, ray, t_min, t_max, &params, finder, true, gathered, scratch, stack,
+                    tree, ray, t_min, t_max, &params, finder, true, true, gathered, scratch, stack,
                     counters,
                 ),
                 _ => self.trace(
@@ -133,6 +133,7 @@ impl PreparedMetaballs {
                         &params,
                         RootFinder::BezierClipping,
                         first_leaf,
+                        true,
                         gathered,
                         scratch,
                         stack,
@@ -164,7 +165,9 @@ impl PreparedMetaballs {
     /// search. `first_leaf`: the first leaf with a root answers (the Fitted BVH's disjoint
     /// leaves, or any hit at all); otherwise the nearest root over every leaf (the BVH's
     /// overlapping leaves, searched only where an owner covers the ray). On return `gathered`
-    /// holds the balls of the search that produced the answer.
+    /// holds the balls of the search that produced the answer. `wide`: with `first_leaf`, walk
+    /// the four-wide view of the main tree where it has one ([`Wide`]: the same leaves with
+    /// the same ranges in the same order, fewer nodes popped).
     #[allow(clippy::too_many_arguments)]
     #[inline]
     pub(super) fn leaf_walk(
@@ -176,6 +179,7 @@ impl PreparedMetaballs {
         params: &FindParams<f32>,
         finder: RootFinder,
         first_leaf: bool,
+        wide: bool,
         gathered: &mut Vec<RayBall<f32>>,
         scratch: &mut Scratch<f32>,
         stack: &mut Vec<(u32, f32, f32)>,
@@ -190,55 +194,52 @@ impl PreparedMetaballs {
         let mut best_balls: Vec<RayBall<f32>> = Vec::new();
         let mut node_traversals = counters.node_traversals;
         let spheres = self.spheres_of(tree);
-        let best = tree.walk(
-            ray.origin,
-            inv_dir,
-            t_min,
-            t_max,
-            first_leaf,
-            stack,
-            &mut node_traversals,
-            |node, near, far, best| {
-                let leaf = tree.leaf_balls(node);
-                let t = match spheres {
-                    Some(soa) => {
-                        gathered.clear();
-                        let owners = (node.owned as usize, leaf_params.owners_only);
-                        let first = node.first as usize;
-                        soa.gather(&self.balls, leaf, first, owners, ray, (near, far), gathered);
-                        search_gathered(
-                            &leaf_params,
-                            finder,
-                            near,
-                            far,
-                            gathered,
-                            scratch,
-                            counters,
-                        )
-                    }
-                    None => self.search_leaf(
-                        leaf,
-                        node.owned as usize,
-                        ray,
-                        near,
-                        far,
-                        &leaf_params,
-                        finder,
-                        gathered,
-                        scratch,
-                        counters,
-                    ),
-                }?;
-                if first_leaf {
-                    return Some(t);
+        let leaf = |node: &Node, near: f32, far: f32, best: Option<f32>| {
+            let leaf = tree.leaf_balls(node);
+            let t = match spheres {
+                Some(soa) => {
+                    gathered.clear();
+                    let owners = (node.owned as usize, leaf_params.owners_only);
+                    let first = node.first as usize;
+                    soa.gather(&self.balls, leaf, first, owners, ray, (near, far), gathered);
+                    search_gathered(&leaf_params, finder, near, far, gathered, scratch, counters)
                 }
-                if best.is_none_or(|b| t < b) {
-                    std::mem::swap(&mut best_balls, gathered);
-                    return Some(t);
-                }
-                None
-            },
-        );
+                None => self.search_leaf(
+                    leaf,
+                    node.owned as usize,
+                    ray,
+                    near,
+                    far,
+                    &leaf_params,
+                    finder,
+                    gathered,
+                    scratch,
+                    counters,
+                ),
+            }?;
+            if first_leaf {
+                return Some(t);
+            }
+            if best.is_none_or(|b| t < b) {
+                std::mem::swap(&mut best_balls, gathered);
+                return Some(t);
+            }
+            None
+        };
+        let walk = (ray.origin, inv_dir, t_min, t_max);
+        let best = match self.wide_of(tree).filter(|_| wide && first_leaf) {
+            Some(w) => w.walk_first(tree, walk, stack, &mut node_traversals, leaf),
+            None => tree.walk(
+                ray.origin,
+                inv_dir,
+                t_min,
+                t_max,
+                first_leaf,
+                stack,
+                &mut node_traversals,
+                leaf,
+            ),
+        };
         counters.node_traversals = node_traversals;
         // The first leaf's root left its balls in `gathered`; the nearest of several swapped
         // them out.
@@ -246,6 +247,18 @@ impl PreparedMetaballs {
             *gathered = best_balls;
         }
         best
+    }
+
+    /// The four-wide view of `tree`, when `tree` is this state's main tree, has one and
+    /// the options ask for it.
+    #[inline]
+    pub(super) fn wide_of(&self, tree: &Tree) -> Option<&Wide> {
+        match (&self.accel, &self.wide) {
+            (Accel::Tree(main), Some(w)) if std::ptr::eq(main, tree) && self.options.wide => {
+                Some(w)
+            }
+            _ => None,
+        }
     }
 
     /// `tree`'s leaf lists as structure-of-arrays, when `tree` is this state's main tree and

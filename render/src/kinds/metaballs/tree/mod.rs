@@ -34,29 +34,41 @@ pub mod flat;
 pub mod neighbours;
 pub mod sah;
 pub mod walk;
+pub mod wide;
 
 pub use crate::geom::aabb::Aabb;
 pub use flat::{
     BuildOptions, LeafCost, Node, Tree, TreeBall, TreeError, TreeKind, TreeStats,
     DEFAULT_TRAVERSAL_COST,
 };
+pub use wide::Wide;
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use crate::kinds::metaballs::kernel::Kernel;
     use glam::Vec3;
 
     fn cloud(n: usize) -> Vec<TreeBall> {
-        let mut rng = crate::geom::rng::SplitMix64(7);
+        random_balls(n, 7, Vec3::splat(5.0), (0.3, 0.9))
+    }
+
+    /// `n` unit-strength balls, centres uniform in `[-half, half]`, radii uniform in `radii`.
+    pub(crate) fn random_balls(
+        n: usize,
+        seed: u64,
+        half: Vec3,
+        radii: (f32, f32),
+    ) -> Vec<TreeBall> {
+        let mut rng = crate::geom::rng::SplitMix64(seed);
         (0..n)
             .map(|_| TreeBall {
                 center: Vec3::new(
-                    rng.range(-5.0, 5.0),
-                    rng.range(-5.0, 5.0),
-                    rng.range(-5.0, 5.0),
+                    rng.range(-half.x, half.x),
+                    rng.range(-half.y, half.y),
+                    rng.range(-half.z, half.z),
                 ),
-                radius: rng.range(0.3, 0.9),
+                radius: rng.range(radii.0, radii.1),
                 strength: 1.0,
             })
             .collect()
