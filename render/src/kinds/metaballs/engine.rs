@@ -360,7 +360,6 @@ impl PreparedMetaballs {
                 params,
                 finder,
                 tree.kind == TreeKind::Fitted,
-                true,
                 gathered,
                 scratch,
                 stack,

@@ -91,7 +91,7 @@ impl PreparedMetaballs {
             let (gathered, scratch, stack) = &mut *guard;
             match accel {
                 Accel::Tree(tree) => self.leaf_walk(
-                    tree, ray, t_min, t_max, &params, finder, true, true, gathered, scratch, stack,
+                    tree, ray, t_min, t_max, &params, finder, true, gathered, scratch, stack,
                     counters,
                 ),
                 _ => self.trace(
@@ -133,7 +133,6 @@ impl PreparedMetaballs {
                         &params,
                         RootFinder::BezierClipping,
                         first_leaf,
-                        true,
                         gathered,
                         scratch,
                         stack,
@@ -165,9 +164,9 @@ impl PreparedMetaballs {
     /// search. `first_leaf`: the first leaf with a root answers (the Fitted BVH's disjoint
     /// leaves, or any hit at all); otherwise the nearest root over every leaf (the BVH's
     /// overlapping leaves, searched only where an owner covers the ray). On return `gathered`
-    /// holds the balls of the search that produced the answer. `wide`: with `first_leaf`, walk
-    /// the four-wide view of the main tree where it has one ([`Wide`]: the same leaves with
-    /// the same ranges in the same order, fewer nodes popped).
+    /// holds the balls of the search that produced the answer. With `first_leaf` the walk is
+    /// the four-wide view's where the main tree has one ([`Wide`]: the same leaves with the
+    /// same ranges in the same order, fewer nodes popped).
     #[allow(clippy::too_many_arguments)]
     #[inline]
     pub(super) fn leaf_walk(
@@ -179,7 +178,6 @@ impl PreparedMetaballs {
         params: &FindParams<f32>,
         finder: RootFinder,
         first_leaf: bool,
-        wide: bool,
         gathered: &mut Vec<RayBall<f32>>,
         scratch: &mut Scratch<f32>,
         stack: &mut Vec<(u32, f32, f32)>,
@@ -227,7 +225,7 @@ impl PreparedMetaballs {
             None
         };
         let walk = (ray.origin, inv_dir, t_min, t_max);
-        let best = match self.wide_of(tree).filter(|_| wide && first_leaf) {
+        let best = match self.wide_of(tree).filter(|_| first_leaf) {
             Some(w) => w.walk_first(tree, walk, stack, &mut node_traversals, leaf),
             None => tree.walk(
                 ray.origin,
