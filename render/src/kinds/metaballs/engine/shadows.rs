@@ -36,7 +36,7 @@ const CULL_FROM_RAYS: usize = 4;
 /// both ways): packets win below about 8 radii on every scene (Pool 1.5–1.7×, Scattered-30k
 /// 1.3–1.6×, Tornado-128k 1.1×), are even at 8–16 (Tornado 0.93×, the others 1.1×) and lose
 /// beyond 16 (Scattered-30k 0.84–1.0×, Tornado-128k 0.87–0.89×). Since single rays walk the
-/// tree four boxes at a time ([`crate::kinds::metaballs::tree::Wide`]) they are 5–15% faster,
+/// tree four boxes at a time ([`crate::kinds::metaballs::tree::Wide`]) they are 2–16% faster,
 /// and the 8–16 bin went over to them: at 16 Tornado-128k's hard shadows at 1920×1080 took
 /// 162–164 ms against 148–150 ms for single rays alone; at 8, 149–153 ms, with Pool and
 /// Molecule's packets unchanged (2, 4, 6, 8 and 16 compared in two rounds).
