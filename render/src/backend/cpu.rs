@@ -396,15 +396,11 @@ mod tests {
     #[test]
     fn the_wide_walk_renders_the_binary_walks_frames() {
         let all = Effects {
-            shadows: true,
-            soft_shadows: true,
-            reflections: true,
-            refraction: true,
-            transparency: true,
-            ambient_occlusion: true,
+            clip_box: false,
+            isosurfaces: false,
             ao_samples: 2,
             light_samples: 2,
-            ..Effects::OFF
+            ..Effects::ALL
         };
         let hard = Effects {
             shadows: true,

@@ -172,7 +172,8 @@ impl PreparedMetaballs {
             Accel::BruteForce | Accel::ActiveList => None,
         };
         let wide = match &accel {
-            Accel::Tree(tree) if nested && options.wide => Wide::build(tree),
+            // `nested` is `boxes_nest()`, the one condition `Wide::build` checks.
+            Accel::Tree(tree) if nested && options.wide => Wide::of_nested(tree),
             _ => None,
         };
         let mean_radius = if scene.balls.is_empty() {

@@ -126,23 +126,8 @@ impl PreparedMetaballs {
                 // Stop the walk once enough crossings are found.
                 (out.len() >= enough).then_some(state.t)
             };
-            let inv_dir = ray.dir.recip();
-            match self.wide_of(tree) {
-                Some(w) => {
-                    let walk = (ray.origin, inv_dir, t_min, t_max);
-                    w.walk_first(tree, walk, stack, &mut node_traversals, leaf)
-                }
-                None => tree.walk(
-                    ray.origin,
-                    inv_dir,
-                    t_min,
-                    t_max,
-                    true,
-                    stack,
-                    &mut node_traversals,
-                    leaf,
-                ),
-            };
+            let walk = (ray.origin, ray.dir.recip(), t_min, t_max);
+            self.walk_tree(tree, walk, true, stack, &mut node_traversals, leaf);
             counters.node_traversals = node_traversals;
         });
     }

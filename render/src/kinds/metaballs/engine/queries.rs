@@ -19,7 +19,7 @@
 use super::{build_fallback, Accel, AccelKind, PreparedMetaballs, SCRATCH};
 use crate::kinds::metaballs::counters::MetaballCounters;
 use crate::kinds::metaballs::roots::{self, FindParams, KernelPoly, RayBall, RootFinder, Scratch};
-use crate::kinds::metaballs::tree::{BuildOptions, Node, Tree, TreeKind, Wide};
+use crate::kinds::metaballs::tree::{BuildOptions, Node, Tree, TreeKind};
 use crate::ray::{Hit, Ray};
 
 impl PreparedMetaballs {
@@ -164,9 +164,8 @@ impl PreparedMetaballs {
     /// search. `first_leaf`: the first leaf with a root answers (the Fitted BVH's disjoint
     /// leaves, or any hit at all); otherwise the nearest root over every leaf (the BVH's
     /// overlapping leaves, searched only where an owner covers the ray). On return `gathered`
-    /// holds the balls of the search that produced the answer. With `first_leaf` the walk is
-    /// the four-wide view's where the main tree has one ([`Wide`]: the same leaves with the
-    /// same ranges in the same order, fewer nodes popped).
+    /// holds the balls of the search that produced the answer. The walk is
+    /// [`PreparedMetaballs::walk_tree`]'s.
     #[allow(clippy::too_many_arguments)]
     #[inline]
     pub(super) fn leaf_walk(
@@ -225,19 +224,7 @@ impl PreparedMetaballs {
             None
         };
         let walk = (ray.origin, inv_dir, t_min, t_max);
-        let best = match self.wide_of(tree).filter(|_| first_leaf) {
-            Some(w) => w.walk_first(tree, walk, stack, &mut node_traversals, leaf),
-            None => tree.walk(
-                ray.origin,
-                inv_dir,
-                t_min,
-                t_max,
-                first_leaf,
-                stack,
-                &mut node_traversals,
-                leaf,
-            ),
-        };
+        let best = self.walk_tree(tree, walk, first_leaf, stack, &mut node_traversals, leaf);
         counters.node_traversals = node_traversals;
         // The first leaf's root left its balls in `gathered`; the nearest of several swapped
         // them out.
@@ -247,15 +234,37 @@ impl PreparedMetaballs {
         best
     }
 
-    /// The four-wide view of `tree`, when `tree` is this state's main tree, has one and
-    /// the options ask for it.
+    /// [`Tree::walk`] of `tree`, or, where `first_leaf` holds and `tree` is this state's main
+    /// tree with a four-wide view ([`Wide`](crate::kinds::metaballs::tree::Wide), built unless `PrepareOptions::wide` is off), the
+    /// view's walk: the same leaves with the same ranges in the same order, fewer nodes popped.
+    /// `ray`: the origin, the direction's reciprocal, `t_min` and `t_max`.
     #[inline]
-    pub(super) fn wide_of(&self, tree: &Tree) -> Option<&Wide> {
+    pub(super) fn walk_tree(
+        &self,
+        tree: &Tree,
+        ray: (glam::Vec3, glam::Vec3, f32, f32),
+        first_leaf: bool,
+        stack: &mut Vec<(u32, f32, f32)>,
+        node_traversals: &mut u64,
+        leaf: impl FnMut(&Node, f32, f32, Option<f32>) -> Option<f32>,
+    ) -> Option<f32> {
         match (&self.accel, &self.wide) {
-            (Accel::Tree(main), Some(w)) if std::ptr::eq(main, tree) && self.options.wide => {
-                Some(w)
+            (Accel::Tree(main), Some(w)) if first_leaf && std::ptr::eq(main, tree) => {
+                w.walk_first(tree, ray, stack, node_traversals, leaf)
             }
-            _ => None,
+            _ => {
+                let (origin, inv_dir, t_min, t_max) = ray;
+                tree.walk(
+                    origin,
+                    inv_dir,
+                    t_min,
+                    t_max,
+                    first_leaf,
+                    stack,
+                    node_traversals,
+                    leaf,
+                )
+            }
         }
     }
 

@@ -39,7 +39,15 @@ impl Wide {
     /// The wide view of `tree`, or `None` where it would not give the binary walk's leaf
     /// ranges (boxes that do not nest) or there is nothing to widen (a root leaf).
     pub fn build(tree: &Tree) -> Option<Wide> {
-        if tree.nodes.first().is_none_or(Node::is_leaf) || !tree.boxes_nest() {
+        if !tree.boxes_nest() {
+            return None;
+        }
+        Wide::of_nested(tree)
+    }
+
+    /// [`Wide::build`] for a caller that has already found `tree.boxes_nest()` true.
+    pub fn of_nested(tree: &Tree) -> Option<Wide> {
+        if tree.nodes.first().is_none_or(Node::is_leaf) {
             return None;
         }
         let mut nodes = vec![empty_node()];
