@@ -6,11 +6,13 @@
 //! once with `PrepareOptions::packets` off and once on; the shadow pass starts from the
 //! packet's primary hits (untimed) and traces a ray from each hit towards the light, single
 //! rays through `any_hit_counted` and packets of a tile's shadow rays through
-//! `any_hits_packet`, or one by one where `shadow_packet_pays` finds the tile's rays too
-//! spread out for a packet to gain (the renderer's choice). Runs of the two alternate, medians over `--runs`; rays per second per
+//! `any_hits_packet`, or, where `shadow_packet_pays` finds the tile's rays too spread out for
+//! a packet to gain, one by one through `occluded_counted` with one hint for the tile (the
+//! renderer's choices). Runs of the two alternate, medians over `--runs`; rays per second per
 //! core divide by the worker threads.
 
 use crate::common::median;
+use isoray_render::kinds::contract::OcclusionHint;
 use isoray_render::kinds::metaballs::{PrepareOptions, PreparedMetaballs, RayCounters};
 use isoray_render::ray::Ray;
 use isoray_render::scene::PreparedGeometry;
@@ -166,9 +168,14 @@ pub(crate) fn measure(demos: &[DemoScene], runs: usize, time: f64) -> Vec<Packet
                                 m.any_hits_packet(rays, 0.0, t_max, Some(light), isovalue, &mut c);
                             std::hint::black_box(hits);
                         } else {
+                            // One by one, each searching first the leaf that blocked the
+                            // tile's last blocked ray.
+                            let mut hint = OcclusionHint::default();
                             for (ray, &hi) in rays.iter().zip(t_max) {
-                                let hit = m.any_hit_counted(ray, 0.0, hi, isovalue, &mut c);
-                                std::hint::black_box(hit);
+                                let span = (0.0, hi);
+                                let blocked =
+                                    m.occluded_counted(ray, span, isovalue, &mut hint, &mut c);
+                                std::hint::black_box(blocked);
                             }
                         }
                     })

@@ -30,6 +30,7 @@ mod batch;
 use crate::effects::plan::EffectsPlan;
 use crate::effects::rays::{RayCounts, RayKind};
 use crate::geom::rng::PixelRng;
+use crate::kinds::contract::OcclusionHint;
 use crate::kinds::counters::SceneCounters;
 use crate::ray::{surface_offset, Hit, Ray, INSIDE_EPS};
 use crate::sampling::{cosine_hemisphere, uniform_cone};
@@ -108,6 +109,8 @@ pub struct Tracer<'a> {
     terms: Vec<batch::Term>,
     /// The point light the next shadow ray goes to (`None`: directional), for the batch.
     shadow_light: Option<Vec3>,
+    /// Where the tile's last blocked shadow or occlusion ray was blocked.
+    hint: OcclusionHint,
 }
 
 impl<'a> Tracer<'a> {
@@ -124,6 +127,7 @@ impl<'a> Tracer<'a> {
             batch: batch::ShadowBatch::Off,
             terms: Vec::new(),
             shadow_light: None,
+            hint: OcclusionHint::default(),
         }
     }
 
@@ -621,23 +625,13 @@ impl<'a> Tracer<'a> {
         transmitted
     }
 
-    /// Whether the isosurface at `isovalue` crosses `[a, b]` outside the clip box (any hit).
+    /// Whether the isosurface at `isovalue` crosses `[a, b]` outside the clip box (any hit),
+    /// each query searching first where the tile's last blocked ray was blocked.
     fn blocked(&mut self, ray: &Ray, a: f32, b: f32, isovalue: f32) -> bool {
         let (segments, n) = self.segments(ray, a, b);
-        for &(lo, hi) in &segments[..n] {
-            let root = (self.scene).any_hit_counted(ray, lo, hi, isovalue, &mut self.counters);
-            if batch::settles(
-                self.scene,
-                ray,
-                (lo, hi),
-                isovalue,
-                root,
-                &mut self.counters,
-            ) {
-                return true;
-            }
-        }
-        false
+        segments[..n].iter().any(|&span| {
+            (self.scene).occluded_counted(ray, span, isovalue, &mut self.hint, &mut self.counters)
+        })
     }
 
     /// `∫ F dt` over `[a, b]` outside the clip box.

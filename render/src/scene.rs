@@ -15,6 +15,7 @@
 
 use crate::camera::{Camera, PrimaryRays};
 use crate::geom::frame::LocalFrame;
+use crate::kinds::contract::OcclusionHint;
 use crate::kinds::dispatch::Tally;
 use crate::kinds::metaballs::engine::PrepareOptions;
 use crate::kinds::tets::prepared::TetOptions;
@@ -210,6 +211,35 @@ impl PreparedScene {
         counters: &mut impl Tally,
     ) -> Option<f32> {
         self.prepared.any_hit(ray, t_min, t_max, isovalue, counters)
+    }
+
+    /// Whether the isosurface blocks `span` of `ray`
+    /// ([`PreparedKind::occluded`](crate::kinds::contract::PreparedKind::occluded)): `hint`
+    /// carries where the caller's last blocked ray was blocked.
+    #[inline]
+    pub fn occluded_counted(
+        &self,
+        ray: &Ray,
+        span: (f32, f32),
+        isovalue: f32,
+        hint: &mut OcclusionHint,
+        counters: &mut impl Tally,
+    ) -> bool {
+        self.prepared.occluded(ray, span, isovalue, hint, counters)
+    }
+
+    /// Whether `root`, an any-hit root on `span` of `ray`, blocks it
+    /// ([`settle`](crate::kinds::contract::settle)).
+    #[inline]
+    pub fn settles(
+        &self,
+        ray: &Ray,
+        span: (f32, f32),
+        isovalue: f32,
+        root: Option<f32>,
+        counters: &mut impl Tally,
+    ) -> bool {
+        self.prepared.settle(ray, span, isovalue, root, counters)
     }
 
     /// Shadow rays towards one light traced together, where the kind has a packet for them

@@ -7,8 +7,9 @@
 //! shading sums them. The image is the pixel-by-pixel one (checked by the CPU backend's
 //! `effects_frames_from_tile_hits_are_the_pixel_by_pixel_frames`).
 
+use crate::kinds::contract::OcclusionHint;
 use crate::kinds::counters::SceneCounters;
-use crate::ray::{Ray, INSIDE_EPS};
+use crate::ray::Ray;
 use crate::scene::PreparedScene;
 use glam::Vec3;
 
@@ -99,7 +100,8 @@ pub fn resolve(terms: &[Term], blocked: &[bool]) -> Vec3 {
 
 /// Whether each shadow ray is blocked by the isosurface at `isovalue`: rays towards one light
 /// in packets of 64 (in the order given, so neighbouring pixels share a packet), each root
-/// settled by [`settles`] as a single ray's is.
+/// settled as a single ray's is ([`PreparedScene::settles`]); where the kind has no packet
+/// for them, ray by ray ([`PreparedScene::occluded_counted`], with one hint for the batch).
 pub fn trace_shadows(
     scene: &PreparedScene,
     isovalue: f32,
@@ -114,6 +116,7 @@ pub fn trace_shadows(
         }
     }
     let (mut rays, mut t_max) = (Vec::new(), Vec::new());
+    let mut hint = OcclusionHint::default();
     for light in lights {
         let of_light: Vec<usize> = (0..queries.len())
             .filter(|&i| queries[i].light == light)
@@ -125,33 +128,13 @@ pub fn trace_shadows(
             t_max.extend(chunk.iter().map(|&i| queries[i].t_max));
             let found = scene.any_hits_towards(&rays, 0.0, &t_max, light, isovalue, counters);
             for (k, &i) in chunk.iter().enumerate() {
-                let (ray, hi) = (&rays[k], t_max[k]);
-                let root = match &found {
-                    Some(found) => found[k],
-                    None => scene.any_hit_counted(ray, 0.0, hi, isovalue, counters),
+                let (ray, span) = (&rays[k], (0.0, t_max[k]));
+                answers[i] = match &found {
+                    Some(found) => scene.settles(ray, span, isovalue, found[k], counters),
+                    None => scene.occluded_counted(ray, span, isovalue, &mut hint, counters),
                 };
-                answers[i] = settles(scene, ray, (0.0, hi), isovalue, root, counters);
             }
         }
     }
     answers
-}
-
-/// Whether `[lo, hi]` of `ray` is blocked, given the any-hit query's `root` on it.
-pub fn settles(
-    scene: &PreparedScene,
-    ray: &Ray,
-    (lo, hi): (f32, f32),
-    isovalue: f32,
-    root: Option<f32>,
-    counters: &mut SceneCounters,
-) -> bool {
-    match root {
-        None => false,
-        Some(t) if t > lo + INSIDE_EPS => true,
-        // Starting inside the solid: its boundary blocks if the ray leaves it here.
-        Some(_) => scene
-            .exit_hit_counted(ray, lo, hi, isovalue, counters)
-            .is_some(),
-    }
 }

@@ -80,6 +80,25 @@ pub trait PreparedKind {
         )
     }
 
+    /// Whether the isosurface blocks `[t_min, t_max]` of `ray`: [`settle`] of
+    /// [`PreparedKind::any_hit`]'s root. `hint` is what this caller's earlier queries left
+    /// (a tile's shadow rays, in order); a kind may search first where the last blocked ray
+    /// was blocked, taking only a root that is a genuine crossing from outside the solid
+    /// into it within the segment, where the full query answers "blocked" too. This default
+    /// ignores it.
+    fn occluded(
+        &self,
+        ray: &Ray,
+        (t_min, t_max): (f32, f32),
+        isovalue: f32,
+        hint: &mut OcclusionHint,
+        counters: &mut Self::Counters,
+    ) -> bool {
+        let _ = hint;
+        let root = self.any_hit(ray, t_min, t_max, isovalue, counters);
+        settle(self, ray, (t_min, t_max), isovalue, root, counters)
+    }
+
     /// `∫ density dt` over `[t_min, t_max]` (0 for a kind with no density).
     fn optical_depth(&self, ray: &Ray, t_min: f32, t_max: f32) -> f32;
 
@@ -113,6 +132,41 @@ pub trait PreparedKind {
         _counters: &mut Self::Counters,
     ) -> Option<Vec<Option<f32>>> {
         None
+    }
+}
+
+/// What one caller's occlusion queries leave for the next ([`PreparedKind::occluded`]):
+/// where the latest blocked rays were blocked. Only the cost of a query depends on it, so a
+/// tile's tracer owns one and the image does not depend on which thread traces the tile.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct OcclusionHint {
+    /// The prepared metaball state (its id) and the isovalue the leaves belong to.
+    pub(crate) metaball_state: (u64, f32),
+    /// The metaball leaves whose roots blocked the latest blocked rays, the latest first.
+    pub(crate) metaball_leaves: [Option<crate::kinds::metaballs::tree::flat::Node>; HINT_LEAVES],
+}
+
+/// How many leaves an [`OcclusionHint`] keeps. Single shadow rays at 1920×1080 answered by one
+/// of the last 1, 2, 4, 8 or 16 blocking leaves: Scattered-30k 68, 73, 85, 91 and 92% of the
+/// blocked ones, Tornado-128k 41, 44, 51, 72 and 80%; 8 was the fastest on both (performance
+/// log).
+pub const HINT_LEAVES: usize = 8;
+
+/// Whether `[lo, hi]` of `ray` is blocked, given the any-hit query's `root` on it: a root past
+/// the start blocks; one at the start means the ray starts inside the solid, and its boundary
+/// blocks if the ray leaves it within the segment.
+pub fn settle<K: PreparedKind + ?Sized>(
+    kind: &K,
+    ray: &Ray,
+    (lo, hi): (f32, f32),
+    isovalue: f32,
+    root: Option<f32>,
+    counters: &mut K::Counters,
+) -> bool {
+    match root {
+        None => false,
+        Some(t) if t > lo + INSIDE_EPS => true,
+        Some(_) => kind.exit_hit(ray, lo, hi, isovalue, counters).is_some(),
     }
 }
 

@@ -8,7 +8,7 @@
 
 use crate::camera::PrimaryRays;
 use crate::geom::frame::LocalFrame;
-use crate::kinds::contract::PreparedKind;
+use crate::kinds::contract::{settle, OcclusionHint, PreparedKind};
 use crate::kinds::counters::SceneCounters;
 use crate::kinds::metaballs::counters::MetaballCounters;
 use crate::kinds::metaballs::engine::{PrepareOptions, PreparedMetaballs};
@@ -257,6 +257,48 @@ impl PreparedGeometry {
         }
     }
 
+    /// [`PreparedKind::occluded`] of the kind.
+    #[inline]
+    pub fn occluded<C: Tally>(
+        &self,
+        ray: &Ray,
+        span: (f32, f32),
+        isovalue: f32,
+        hint: &mut OcclusionHint,
+        counters: &mut C,
+    ) -> bool {
+        match self {
+            PreparedGeometry::Metaballs(m) => {
+                occluded(m.as_ref(), ray, span, isovalue, hint, counters)
+            }
+            PreparedGeometry::Tets(t) => occluded(t.as_ref(), ray, span, isovalue, hint, counters),
+            PreparedGeometry::Surfels(s) => {
+                occluded(s.as_ref(), ray, span, isovalue, hint, counters)
+            }
+        }
+    }
+
+    /// [`settle`] of the kind: whether `root`, an any-hit root on `span`, blocks it.
+    #[inline]
+    pub fn settle<C: Tally>(
+        &self,
+        ray: &Ray,
+        span: (f32, f32),
+        isovalue: f32,
+        root: Option<f32>,
+        counters: &mut C,
+    ) -> bool {
+        match self {
+            PreparedGeometry::Metaballs(m) => {
+                settle_in(m.as_ref(), ray, span, isovalue, root, counters)
+            }
+            PreparedGeometry::Tets(t) => settle_in(t.as_ref(), ray, span, isovalue, root, counters),
+            PreparedGeometry::Surfels(s) => {
+                settle_in(s.as_ref(), ray, span, isovalue, root, counters)
+            }
+        }
+    }
+
     /// [`PreparedKind::crossings`] of the kind.
     #[allow(clippy::too_many_arguments)]
     #[inline]
@@ -377,6 +419,30 @@ fn any_hit<K: PreparedKind, C: Tally>(
     counters: &mut C,
 ) -> Option<f32> {
     counters.count::<K, _>(|c| k.any_hit(ray, t_min, t_max, isovalue, c))
+}
+
+#[inline]
+fn occluded<K: PreparedKind, C: Tally>(
+    k: &K,
+    ray: &Ray,
+    span: (f32, f32),
+    isovalue: f32,
+    hint: &mut OcclusionHint,
+    counters: &mut C,
+) -> bool {
+    counters.count::<K, _>(|c| k.occluded(ray, span, isovalue, hint, c))
+}
+
+#[inline]
+fn settle_in<K: PreparedKind, C: Tally>(
+    k: &K,
+    ray: &Ray,
+    span: (f32, f32),
+    isovalue: f32,
+    root: Option<f32>,
+    counters: &mut C,
+) -> bool {
+    counters.count::<K, _>(|c| settle(k, ray, span, isovalue, root, c))
 }
 
 #[inline]

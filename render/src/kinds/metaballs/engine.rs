@@ -31,6 +31,7 @@ mod shadows;
 mod soa;
 use soa::Ball;
 // Secondary-ray queries (any hit, exit from the solid, optical depth): the effects layer's.
+mod occlusion;
 mod queries;
 // Successive crossings along a ray in one walk (depth peeling).
 mod peel;
@@ -124,11 +125,21 @@ pub struct PreparedMetaballs {
     wide: Option<Wide>,
     /// The balls' mean support radius: the length a shadow packet's spread is measured in.
     mean_radius: f32,
+    /// This state among every state prepared in the process, so that an occlusion hint
+    /// names a leaf of this state's tree and no other's.
+    id: u64,
 }
 
 /// Per-thread buffers of a ray query: the balls along the ray, the root finder's scratch and
 /// the (ball, entry, exit) intervals.
 type RayScratch = (Vec<RayBall<f32>>, Scratch<f32>, Vec<(u32, f32, f32)>);
+
+/// The `skip` of a leaf walk (`PreparedMetaballs::leaf_walk`) that skips no leaf.
+const NO_SKIP: [u32; crate::kinds::contract::HINT_LEAVES] =
+    [u32::MAX; crate::kinds::contract::HINT_LEAVES];
+
+/// The next [`PreparedMetaballs::id`].
+static NEXT_ID: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
 
 thread_local! {
     static SCRATCH: RefCell<RayScratch> =
@@ -194,6 +205,7 @@ impl PreparedMetaballs {
             nested,
             spheres,
             wide,
+            id: NEXT_ID.fetch_add(1, std::sync::atomic::Ordering::Relaxed),
         }
     }
 
@@ -353,19 +365,21 @@ impl PreparedMetaballs {
                 }
                 None
             }
-            Accel::Tree(tree) => self.leaf_walk(
-                tree,
-                ray,
-                t_min,
-                t_max,
-                params,
-                finder,
-                tree.kind == TreeKind::Fitted,
-                gathered,
-                scratch,
-                stack,
-                counters,
-            ),
+            Accel::Tree(tree) => self
+                .leaf_walk(
+                    tree,
+                    ray,
+                    t_min,
+                    t_max,
+                    params,
+                    finder,
+                    (tree.kind == TreeKind::Fitted, NO_SKIP),
+                    gathered,
+                    scratch,
+                    stack,
+                    counters,
+                )
+                .map(|(t, _)| t),
         }
     }
 

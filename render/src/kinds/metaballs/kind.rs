@@ -2,7 +2,7 @@
 //! the prepared Fitted BVH (or the structure the options chose) and the root finders.
 
 use crate::camera::PrimaryRays;
-use crate::kinds::contract::PreparedKind;
+use crate::kinds::contract::{OcclusionHint, PreparedKind};
 use crate::kinds::counters::SceneCounters;
 use crate::kinds::metaballs::counters::MetaballCounters;
 use crate::kinds::metaballs::engine::PreparedMetaballs;
@@ -42,6 +42,18 @@ impl PreparedKind for PreparedMetaballs {
         counters: &mut MetaballCounters,
     ) -> Option<f32> {
         self.any_hit_counted(ray, t_min, t_max, isovalue, counters)
+    }
+
+    #[inline]
+    fn occluded(
+        &self,
+        ray: &Ray,
+        span: (f32, f32),
+        isovalue: f32,
+        hint: &mut OcclusionHint,
+        counters: &mut MetaballCounters,
+    ) -> bool {
+        self.occluded_counted(ray, span, isovalue, hint, counters)
     }
 
     /// The Fitted BVH's shadow packets ([`PreparedMetaballs::any_hits_packet`]: any_hit's

@@ -16,7 +16,8 @@
 //!   Fitted BVH built without the §5.3 optimisations (the same fallback structure low
 //!   isovalues use), whose disjoint leaves together hold the complete field.
 
-use super::{build_fallback, Accel, AccelKind, PreparedMetaballs, SCRATCH};
+use super::{build_fallback, Accel, AccelKind, PreparedMetaballs, NO_SKIP, SCRATCH};
+use crate::kinds::contract::HINT_LEAVES;
 use crate::kinds::metaballs::counters::MetaballCounters;
 use crate::kinds::metaballs::roots::{self, FindParams, KernelPoly, RayBall, RootFinder, Scratch};
 use crate::kinds::metaballs::tree::{BuildOptions, Node, Tree, TreeKind};
@@ -79,9 +80,23 @@ impl PreparedMetaballs {
         isovalue: f32,
         counters: &mut MetaballCounters,
     ) -> Option<f32> {
+        self.any_hit_leaf(ray, (t_min, t_max), isovalue, NO_SKIP, counters)
+            .0
+    }
+
+    /// [`PreparedMetaballs::any_hit_counted`]'s root, and the tree leaf it was found in (none
+    /// without a tree); `skip` as [`PreparedMetaballs::leaf_walk`]'s.
+    pub(super) fn any_hit_leaf(
+        &self,
+        ray: &Ray,
+        (t_min, t_max): (f32, f32),
+        isovalue: f32,
+        skip: [u32; HINT_LEAVES],
+        counters: &mut MetaballCounters,
+    ) -> (Option<f32>, Option<Node>) {
         counters.rays += 1;
         if !(isovalue > 0.0) || !isovalue.is_finite() || !(t_min < t_max) {
-            return None;
+            return (None, None);
         }
         let accel = self.accel_for(isovalue);
         let params = self.params(isovalue);
@@ -90,16 +105,31 @@ impl PreparedMetaballs {
             let mut guard = cell.borrow_mut();
             let (gathered, scratch, stack) = &mut *guard;
             match accel {
-                Accel::Tree(tree) => self.leaf_walk(
-                    tree, ray, t_min, t_max, &params, finder, true, gathered, scratch, stack,
+                Accel::Tree(tree) => match self.leaf_walk(
+                    tree,
+                    ray,
+                    t_min,
+                    t_max,
+                    &params,
+                    finder,
+                    (true, skip),
+                    gathered,
+                    scratch,
+                    stack,
                     counters,
-                ),
-                _ => self.trace(
-                    accel, ray, t_min, t_max, &params, gathered, scratch, stack, counters,
-                ),
+                ) {
+                    Some((t, leaf)) => (Some(t), Some(leaf)),
+                    None => (None, None),
+                },
+                _ => {
+                    let t = self.trace(
+                        accel, ray, t_min, t_max, &params, gathered, scratch, stack, counters,
+                    );
+                    (t, None)
+                }
             }
         });
-        counters.hits += hit.is_some() as u64;
+        counters.hits += hit.0.is_some() as u64;
         hit
     }
 
@@ -132,12 +162,13 @@ impl PreparedMetaballs {
                         t_max,
                         &params,
                         RootFinder::BezierClipping,
-                        first_leaf,
+                        (first_leaf, NO_SKIP),
                         gathered,
                         scratch,
                         stack,
                         counters,
                     )?
+                    .0
                 }
                 _ => {
                     gathered.clear();
@@ -163,8 +194,10 @@ impl PreparedMetaballs {
     /// Leaves front to back; in each, the balls whose support the stretch crosses and one
     /// search. `first_leaf`: the first leaf with a root answers (the Fitted BVH's disjoint
     /// leaves, or any hit at all); otherwise the nearest root over every leaf (the BVH's
-    /// overlapping leaves, searched only where an owner covers the ray). On return `gathered`
-    /// holds the balls of the search that produced the answer. The walk is
+    /// overlapping leaves, searched only where an owner covers the ray). `skip`: the leaves
+    /// starting at these indices of the tree's ball list are not searched (their searches on
+    /// the walk's ranges are known to find no root; `u32::MAX` names none). Returns the root and the leaf it was found in;
+    /// `gathered` then holds the balls of that leaf's search. The walk is
     /// [`PreparedMetaballs::walk_tree`]'s.
     #[allow(clippy::too_many_arguments)]
     #[inline]
@@ -176,49 +209,30 @@ impl PreparedMetaballs {
         t_max: f32,
         params: &FindParams<f32>,
         finder: RootFinder,
-        first_leaf: bool,
+        (first_leaf, skip): (bool, [u32; HINT_LEAVES]),
         gathered: &mut Vec<RayBall<f32>>,
         scratch: &mut Scratch<f32>,
         stack: &mut Vec<(u32, f32, f32)>,
         counters: &mut MetaballCounters,
-    ) -> Option<f32> {
-        let fitted = tree.kind == TreeKind::Fitted;
-        let leaf_params = FindParams {
-            owners_only: !fitted,
-            ..*params
-        };
+    ) -> Option<(f32, Node)> {
+        let leaf_params = self.leaf_params(tree, params);
         let inv_dir = ray.dir.recip();
         let mut best_balls: Vec<RayBall<f32>> = Vec::new();
+        let mut answered: Option<Node> = None;
         let mut node_traversals = counters.node_traversals;
-        let spheres = self.spheres_of(tree);
         let leaf = |node: &Node, near: f32, far: f32, best: Option<f32>| {
-            let leaf = tree.leaf_balls(node);
-            let t = match spheres {
-                Some(soa) => {
-                    gathered.clear();
-                    let owners = (node.owned as usize, leaf_params.owners_only);
-                    let first = node.first as usize;
-                    soa.gather(&self.balls, leaf, first, owners, ray, (near, far), gathered);
-                    search_gathered(&leaf_params, finder, near, far, gathered, scratch, counters)
-                }
-                None => self.search_leaf(
-                    leaf,
-                    node.owned as usize,
-                    ray,
-                    near,
-                    far,
-                    &leaf_params,
-                    finder,
-                    gathered,
-                    scratch,
-                    counters,
-                ),
-            }?;
+            if node.count > 0 && skip.contains(&node.first) {
+                return None;
+            }
+            let search = (near, far, &leaf_params, finder);
+            let t = self.search_node(tree, node, ray, search, gathered, scratch, counters)?;
             if first_leaf {
+                answered = Some(*node);
                 return Some(t);
             }
             if best.is_none_or(|b| t < b) {
                 std::mem::swap(&mut best_balls, gathered);
+                answered = Some(*node);
                 return Some(t);
             }
             None
@@ -231,7 +245,55 @@ impl PreparedMetaballs {
         if best.is_some() && !first_leaf {
             *gathered = best_balls;
         }
-        best
+        Some((best?, answered?))
+    }
+
+    /// The search parameters of `tree`'s leaves: owners only in the BVH's overlapping leaves.
+    #[inline]
+    pub(super) fn leaf_params(&self, tree: &Tree, params: &FindParams<f32>) -> FindParams<f32> {
+        FindParams {
+            owners_only: tree.kind != TreeKind::Fitted,
+            ..*params
+        }
+    }
+
+    /// One leaf of `tree` searched on `[near, far]` of `ray` with `params` (from
+    /// [`PreparedMetaballs::leaf_params`]) and `finder`: its balls gathered from the tree's
+    /// structure-of-arrays where it has them, else ball by ball, then one root search.
+    #[allow(clippy::too_many_arguments)]
+    #[inline]
+    pub(super) fn search_node(
+        &self,
+        tree: &Tree,
+        node: &Node,
+        ray: &Ray,
+        (near, far, params, finder): (f32, f32, &FindParams<f32>, RootFinder),
+        gathered: &mut Vec<RayBall<f32>>,
+        scratch: &mut Scratch<f32>,
+        counters: &mut MetaballCounters,
+    ) -> Option<f32> {
+        let leaf = tree.leaf_balls(node);
+        match self.spheres_of(tree) {
+            Some(soa) => {
+                gathered.clear();
+                let owners = (node.owned as usize, params.owners_only);
+                let first = node.first as usize;
+                soa.gather(&self.balls, leaf, first, owners, ray, (near, far), gathered);
+                search_gathered(params, finder, near, far, gathered, scratch, counters)
+            }
+            None => self.search_leaf(
+                leaf,
+                node.owned as usize,
+                ray,
+                near,
+                far,
+                params,
+                finder,
+                gathered,
+                scratch,
+                counters,
+            ),
+        }
     }
 
     /// [`Tree::walk`] of `tree`, or, where `first_leaf` holds and `tree` is this state's main
