@@ -109,8 +109,11 @@ pub struct Tracer<'a> {
     terms: Vec<batch::Term>,
     /// The point light the next shadow ray goes to (`None`: directional), for the batch.
     shadow_light: Option<Vec3>,
-    /// Where the tile's last blocked shadow or occlusion ray was blocked.
+    /// Where the tile's latest blocked shadow rays were blocked.
     hint: OcclusionHint,
+    /// Whether the next occlusion queries search `hint`'s leaves first (not for ambient
+    /// occlusion rays).
+    hinting: bool,
 }
 
 impl<'a> Tracer<'a> {
@@ -128,6 +131,7 @@ impl<'a> Tracer<'a> {
             terms: Vec::new(),
             shadow_light: None,
             hint: OcclusionHint::default(),
+            hinting: true,
         }
     }
 
@@ -443,6 +447,10 @@ impl<'a> Tracer<'a> {
         let mut ambient = self.lighting.ambient * albedo;
         let ao = self.plan.ao_samples;
         if ao > 0 && ambient.max_element() > 0.0 {
+            // Occlusion rays leave in every direction, so the leaves that blocked their
+            // neighbours rarely block them and searching those first costs more than it saves
+            // (Pool with occlusion at 640×480: 10% slower): they are asked without a hint.
+            self.hinting = false;
             let mut open = 0.0;
             for _ in 0..ao {
                 let dir = cosine_hemisphere(normal, rng.next_f32(), rng.next_f32());
@@ -450,6 +458,7 @@ impl<'a> Tracer<'a> {
                 let ray = Ray { origin: above, dir };
                 open += self.transmittance(&ray, self.lighting.occlusion_distance);
             }
+            self.hinting = true;
             ambient *= open / ao as f32;
         }
         let recording = self.batch.is_recording();
@@ -629,8 +638,14 @@ impl<'a> Tracer<'a> {
     /// each query searching first where the tile's last blocked ray was blocked.
     fn blocked(&mut self, ray: &Ray, a: f32, b: f32, isovalue: f32) -> bool {
         let (segments, n) = self.segments(ray, a, b);
+        let mut none = OcclusionHint::default();
+        let hint = if self.hinting {
+            &mut self.hint
+        } else {
+            &mut none
+        };
         segments[..n].iter().any(|&span| {
-            (self.scene).occluded_counted(ray, span, isovalue, &mut self.hint, &mut self.counters)
+            (self.scene).occluded_counted(ray, span, isovalue, hint, &mut self.counters)
         })
     }
 
