@@ -17,8 +17,9 @@
 use super::{Accel, PreparedMetaballs, NO_SKIP, SCRATCH};
 use crate::kinds::contract::{settle, OcclusionHint};
 use crate::kinds::metaballs::counters::MetaballCounters;
+use crate::kinds::metaballs::roots::FindParams;
 use crate::kinds::metaballs::tree::flat::Node;
-use crate::kinds::metaballs::tree::TreeKind;
+use crate::kinds::metaballs::tree::{Tree, TreeKind};
 use crate::ray::{Ray, INSIDE_EPS};
 
 /// What a hinted leaf's search found.
@@ -29,6 +30,16 @@ enum Hinted {
     Empty,
     /// No overlap, or a root the full query must settle.
     Unknown,
+}
+
+/// What the searches of one query's hinted leaves share: the tree (the Fitted BVH the query
+/// at its isovalue walks), the leaves' search parameters, the ray's inverse direction, and
+/// whether a leaf found empty may be skipped by the walk (the main tree, with nested boxes).
+struct HintedSearch<'a> {
+    tree: &'a Tree,
+    params: FindParams<f32>,
+    inv_dir: glam::Vec3,
+    may_skip: bool,
 }
 
 impl PreparedMetaballs {
@@ -46,12 +57,17 @@ impl PreparedMetaballs {
     ) -> bool {
         let mut skip = NO_SKIP;
         let ours = hint.metaball_state == (self.id, isovalue);
-        if ours {
+        let search = if ours && hint.metaball_leaves[0].is_some() {
+            self.hinted_search(ray, span, isovalue)
+        } else {
+            None
+        };
+        if let Some(search) = search {
             for (k, skip) in skip.iter_mut().enumerate() {
                 let Some(node) = hint.metaball_leaves[k] else {
                     break;
                 };
-                match self.search_hinted_leaf(ray, span, isovalue, &node, counters) {
+                match self.search_hinted_leaf(&search, ray, span, &node, counters) {
                     Hinted::Blocked => {
                         counters.rays += 1;
                         counters.hits += 1;
@@ -78,46 +94,59 @@ impl PreparedMetaballs {
         blocked
     }
 
-    /// The search of `node`, a leaf of the Fitted BVH this state's query at `isovalue` walks:
-    /// blocked where it has a root on the segment more than [`INSIDE_EPS`] past the leaf's
-    /// entry (which is at or past `t_min`); empty where it has none and the tree is the main
-    /// one with nested boxes, so that the walk would search it on the same range with the
-    /// same balls.
-    fn search_hinted_leaf(
+    /// What the hinted leaves' searches share, where the query is valid and walks a tree of
+    /// disjoint leaves (the Fitted BVH's), each with the whole field in its box.
+    fn hinted_search(
         &self,
         ray: &Ray,
         (t_min, t_max): (f32, f32),
         isovalue: f32,
+    ) -> Option<HintedSearch<'_>> {
+        if !(isovalue > 0.0 && isovalue.is_finite() && t_min < t_max) {
+            return None;
+        }
+        let Accel::Tree(tree) = self.accel_for(isovalue) else {
+            return None;
+        };
+        if tree.kind != TreeKind::Fitted {
+            return None;
+        }
+        let main = matches!(&self.accel, Accel::Tree(main) if std::ptr::eq(main, tree));
+        Some(HintedSearch {
+            tree,
+            params: self.leaf_params(tree, &self.params(isovalue)),
+            inv_dir: ray.dir.recip(),
+            may_skip: main && self.nested,
+        })
+    }
+
+    /// The search of `node`, a leaf of `search.tree`: blocked where it has a root on the
+    /// segment more than [`INSIDE_EPS`] past the leaf's entry (which is at or past `t_min`);
+    /// empty where it has none and `search.may_skip`, so that the walk would search it on the
+    /// same range with the same balls.
+    fn search_hinted_leaf(
+        &self,
+        search: &HintedSearch<'_>,
+        ray: &Ray,
+        (t_min, t_max): (f32, f32),
         node: &Node,
         counters: &mut MetaballCounters,
     ) -> Hinted {
-        if !(isovalue > 0.0 && isovalue.is_finite() && t_min < t_max) {
-            return Hinted::Unknown;
-        }
-        // A tree of disjoint leaves (the Fitted BVH's), each with the whole field in its box.
-        let Accel::Tree(tree) = self.accel_for(isovalue) else {
-            return Hinted::Unknown;
-        };
-        if tree.kind != TreeKind::Fitted {
-            return Hinted::Unknown;
-        }
         let Some((near, far)) = node
             .bounds
-            .ray_range(ray.origin, ray.dir.recip(), t_min, t_max)
+            .ray_range(ray.origin, search.inv_dir, t_min, t_max)
         else {
             return Hinted::Unknown;
         };
-        let params = self.leaf_params(tree, &self.params(isovalue));
-        let search = (near, far, &params, self.options.finder);
+        let leaf = (near, far, &search.params, self.options.finder);
         let t = SCRATCH.with(|cell| {
             let mut guard = cell.borrow_mut();
             let (gathered, scratch, _) = &mut *guard;
-            self.search_node(tree, node, ray, search, gathered, scratch, counters)
+            self.search_node(search.tree, node, ray, leaf, gathered, scratch, counters)
         });
-        let main = matches!(&self.accel, Accel::Tree(main) if std::ptr::eq(main, tree));
         match t {
             Some(t) if t > near + INSIDE_EPS => Hinted::Blocked,
-            None if main && self.nested => Hinted::Empty,
+            None if search.may_skip => Hinted::Empty,
             _ => Hinted::Unknown,
         }
     }
