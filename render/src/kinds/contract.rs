@@ -144,6 +144,11 @@ pub struct OcclusionHint {
     pub(crate) metaball_state: (u64, f32),
     /// The metaball leaves whose roots blocked the latest blocked rays, the latest first.
     pub(crate) metaball_leaves: [Option<crate::kinds::metaballs::tree::flat::Node>; HINT_LEAVES],
+    /// Balls whose core (where the ball's term alone exceeds the isovalue) the latest blocked
+    /// rays crossed, the latest first, each with the largest `s` inside its core.
+    pub(crate) metaball_witnesses: [Option<(u32, f32)>; HINT_LEAVES],
+    /// The last strength a witness was found for and the largest `s` inside its core.
+    pub(crate) metaball_core: Option<(f32, Option<f32>)>,
 }
 
 /// How many leaves an [`OcclusionHint`] keeps. Single shadow rays at 1920×1080 answered by one

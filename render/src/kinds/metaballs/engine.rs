@@ -128,6 +128,10 @@ pub struct PreparedMetaballs {
     /// This state among every state prepared in the process, so that an occlusion hint
     /// names a leaf of this state's tree and no other's.
     id: u64,
+    /// Whether no term of the field is ever negative (every strength positive, the kernel's
+    /// coefficients `≥ 0`): then the field is at least any one ball's term, and a ray through
+    /// a ball's core is inside the solid there (`occlusion`'s witnesses).
+    terms_positive: bool,
 }
 
 /// Per-thread buffers of a ray query: the balls along the ray, the root finder's scratch and
@@ -193,8 +197,14 @@ impl PreparedMetaballs {
             (scene.balls.iter().map(|b| b.radius as f64).sum::<f64>() / scene.balls.len() as f64)
                 as f32
         };
+        let terms_positive = scene.balls.iter().all(|b| b.strength > 0.0)
+            && KernelPoly::<f64>::new(scene.kernel)
+                .c
+                .iter()
+                .all(|&c| c >= 0.0);
         PreparedMetaballs {
             mean_radius,
+            terms_positive,
             scene,
             balls,
             frames,
@@ -471,6 +481,18 @@ impl PreparedMetaballs {
         hi: f32,
         out: &mut Vec<RayBall<f32>>,
     ) {
+        let Some((t0, t1, a, tc, s_min)) = self.along(ray, i) else {
+            return;
+        };
+        if t1 < lo || t0 > hi {
+            return;
+        }
+        out.push(self.balls[i as usize].seen(i, (t0, t1, a, tc, s_min), owner));
+    }
+
+    /// Ball `i` as `ray` sees it: [`RayBall::along`] in the ball's unit frame.
+    #[inline]
+    fn along(&self, ray: &Ray, i: u32) -> Option<(f32, f32, f32, f32, f32)> {
         let b = &self.balls[i as usize];
         let (e, g) = if b.frame == u32::MAX {
             let inv_r = b.inv_r;
@@ -479,13 +501,7 @@ impl PreparedMetaballs {
             let m = self.frames[b.frame as usize];
             (m * (ray.origin - b.center), m * ray.dir)
         };
-        let Some((t0, t1, a, tc, s_min)) = RayBall::along(e.to_array(), g.to_array()) else {
-            return;
-        };
-        if t1 < lo || t0 > hi {
-            return;
-        }
-        out.push(b.seen(i, (t0, t1, a, tc, s_min), owner));
+        RayBall::along(e.to_array(), g.to_array())
     }
 }
 

@@ -74,7 +74,12 @@ pub(crate) fn first_root<R: Real>(
 /// The smallest `w` in `[0, 1]` with `q·K(w) ≥ T` (`w = 1 − s_T`, where the ray meets the
 /// ball's isosurface), `None` when even the centre stays below `T`; `Err(())` when `q·K` is
 /// not rising and convex in `w` (a coefficient below 0).
-fn level<R: Real>(k: &KernelPoly<R>, isovalue: R, q: R, iters: &mut u32) -> Result<Option<R>, ()> {
+pub(crate) fn level<R: Real>(
+    k: &KernelPoly<R>,
+    isovalue: R,
+    q: R,
+    iters: &mut u32,
+) -> Result<Option<R>, ()> {
     let zero = R::default();
     let degree = k.degree;
     // q·K as a polynomial in w: every coefficient must be >= 0 (rising and convex on w >= 0).

@@ -13,19 +13,35 @@
 //! outcome falls back to the full query, whose walk skips a hinted leaf only where it found
 //! no root on the very range the walk gives it (nested boxes), so the answer never depends on
 //! the hint, only its cost.
+//!
+//! Cheaper still, before any leaf: witnesses. Where no term of the field is negative, the
+//! field is at least any one ball's term, so a point where one ball's term alone exceeds the
+//! isovalue (its core, shrunk by [`WITNESS_MARGIN`]) lies inside the solid. A segment that
+//! passes through a core and ends outside the tree's box (outside every leaf, where the field
+//! is 0) has the surface between the two, which is what the full query answers "blocked" for,
+//! whether it starts inside the solid or not. The hint keeps the balls whose cores the latest
+//! blocked rays crossed; testing one is a ray–sphere test, where a leaf's search gathers all
+//! its balls and finds a root.
 
 use super::{Accel, PreparedMetaballs, NO_SKIP, SCRATCH};
 use crate::kinds::contract::{settle, OcclusionHint};
 use crate::kinds::metaballs::counters::MetaballCounters;
-use crate::kinds::metaballs::roots::FindParams;
+use crate::kinds::metaballs::one_ball;
+use crate::kinds::metaballs::roots::{FindParams, KernelPoly, RayBall};
 use crate::kinds::metaballs::tree::flat::Node;
 use crate::kinds::metaballs::tree::{Tree, TreeKind};
 use crate::ray::{Ray, INSIDE_EPS};
 
+/// How far inside a ball's isosurface its core ends: where its term alone is
+/// `(1 + WITNESS_MARGIN)·T`, so that the field the root finder sums there in `f32` (every
+/// other term `≥ 0`) stands clear of `T` by far more than its rounding.
+const WITNESS_MARGIN: f64 = 1e-2;
+
 /// What a hinted leaf's search found.
 enum Hinted {
-    /// A crossing from outside: the segment is blocked.
-    Blocked,
+    /// A crossing from outside: the segment is blocked; the ball whose core it crosses, if
+    /// any, as a witness for the next rays.
+    Blocked(Option<(u32, f32)>),
     /// No root on the range the walk would search it on: the walk may skip the leaf.
     Empty,
     /// No overlap, or a root the full query must settle.
@@ -40,6 +56,9 @@ struct HintedSearch<'a> {
     params: FindParams<f32>,
     inv_dir: glam::Vec3,
     may_skip: bool,
+    /// Whether witnesses may answer: no negative term, and the segment ends outside the tree's
+    /// box.
+    witnesses: bool,
 }
 
 impl PreparedMetaballs {
@@ -62,16 +81,22 @@ impl PreparedMetaballs {
         } else {
             None
         };
-        if let Some(search) = search {
+        if let Some(search) = &search {
+            if search.witnesses && witnessed(self, ray, span, hint) {
+                counters.rays += 1;
+                counters.hits += 1;
+                return true;
+            }
             for (k, skip) in skip.iter_mut().enumerate() {
                 let Some(node) = hint.metaball_leaves[k] else {
                     break;
                 };
-                match self.search_hinted_leaf(&search, ray, span, &node, counters) {
-                    Hinted::Blocked => {
+                match self.search_hinted_leaf(search, ray, span, &node, hint, counters) {
+                    Hinted::Blocked(witness) => {
                         counters.rays += 1;
                         counters.hits += 1;
                         hint.metaball_leaves[..=k].rotate_right(1);
+                        remember(hint, witness);
                         return true;
                     }
                     Hinted::Empty => *skip = node.first,
@@ -80,6 +105,16 @@ impl PreparedMetaballs {
             }
         }
         let (root, leaf) = self.any_hit_leaf(ray, span, isovalue, skip, counters);
+        // The walk left the answering leaf's balls in the scratch; settling a root at the
+        // start may search again.
+        let witness = match (ours, root, &search) {
+            (true, Some(t), Some(search)) if search.witnesses && t > span.0 + INSIDE_EPS => SCRATCH
+                .with(|cell| {
+                    let gathered = &cell.borrow().0;
+                    self.witness_in(gathered, span, isovalue, hint)
+                }),
+            _ => None,
+        };
         let blocked = settle(self, ray, span, isovalue, root, counters);
         if let (true, Some(leaf)) = (blocked, leaf) {
             if !ours {
@@ -90,6 +125,7 @@ impl PreparedMetaballs {
             }
             hint.metaball_leaves.rotate_right(1);
             hint.metaball_leaves[0] = Some(leaf);
+            remember(hint, witness);
         }
         blocked
     }
@@ -112,12 +148,64 @@ impl PreparedMetaballs {
             return None;
         }
         let main = matches!(&self.accel, Accel::Tree(main) if std::ptr::eq(main, tree));
+        let end = ray.at(t_max);
+        let root = &tree.nodes[0].bounds;
         Some(HintedSearch {
             tree,
             params: self.leaf_params(tree, &self.params(isovalue)),
             inv_dir: ray.dir.recip(),
             may_skip: main && self.nested,
+            witnesses: self.terms_positive
+                && (end.cmplt(root.min).any() || end.cmpgt(root.max).any()),
         })
+    }
+
+    /// The ball of `gathered` (a blocking leaf's balls along `ray`) whose core the segment
+    /// passes deepest into, with the largest `s` inside that core; `None` where it crosses
+    /// none. `hint` keeps the last strength's core.
+    fn witness_in(
+        &self,
+        gathered: &[RayBall<f32>],
+        (t_min, t_max): (f32, f32),
+        isovalue: f32,
+        hint: &mut OcclusionHint,
+    ) -> Option<(u32, f32)> {
+        let mut best: Option<(u32, f32, f32)> = None;
+        for b in gathered {
+            let s_limit = match hint.metaball_core {
+                Some((q, s_limit)) if q == b.q => s_limit,
+                _ => {
+                    let s_limit = core_limit(&KernelPoly::new(self.scene.kernel), isovalue, b.q);
+                    hint.metaball_core = Some((b.q, s_limit));
+                    s_limit
+                }
+            };
+            let Some(s_limit) = s_limit else {
+                continue;
+            };
+            let depth = s_limit - b.s_min;
+            if !(depth >= 0.0) || best.is_some_and(|(_, _, d)| d >= depth) {
+                continue;
+            }
+            let half = (depth / b.a).sqrt();
+            if (b.tc - half).max(t_min) <= (b.tc + half).min(t_max) {
+                best = Some((b.ball, s_limit, depth));
+            }
+        }
+        best.map(|(ball, s_limit, _)| (ball, s_limit))
+    }
+
+    /// Whether `[t_min, t_max]` of `ray` passes where ball `ball`'s `s` is at most `s_limit`.
+    fn crosses_core(&self, ray: &Ray, (t_min, t_max): (f32, f32), ball: u32, s_limit: f32) -> bool {
+        let Some((_, _, a, tc, s_min)) = self.along(ray, ball) else {
+            return false;
+        };
+        let depth = s_limit - s_min;
+        if !(depth >= 0.0) {
+            return false;
+        }
+        let half = (depth / a).sqrt();
+        (tc - half).max(t_min) <= (tc + half).min(t_max)
     }
 
     /// The search of `node`, a leaf of `search.tree`: blocked where it has a root on the
@@ -130,6 +218,7 @@ impl PreparedMetaballs {
         ray: &Ray,
         (t_min, t_max): (f32, f32),
         node: &Node,
+        hint: &mut OcclusionHint,
         counters: &mut MetaballCounters,
     ) -> Hinted {
         let Some((near, far)) = node
@@ -139,17 +228,62 @@ impl PreparedMetaballs {
             return Hinted::Unknown;
         };
         let leaf = (near, far, &search.params, self.options.finder);
-        let t = SCRATCH.with(|cell| {
+        SCRATCH.with(|cell| {
             let mut guard = cell.borrow_mut();
             let (gathered, scratch, _) = &mut *guard;
-            self.search_node(search.tree, node, ray, leaf, gathered, scratch, counters)
-        });
-        match t {
-            Some(t) if t > near + INSIDE_EPS => Hinted::Blocked,
-            None if search.may_skip => Hinted::Empty,
-            _ => Hinted::Unknown,
+            let t = self.search_node(search.tree, node, ray, leaf, gathered, scratch, counters);
+            match t {
+                Some(t) if t > near + INSIDE_EPS => Hinted::Blocked(if search.witnesses {
+                    self.witness_in(gathered, (t_min, t_max), search.params.isovalue, hint)
+                } else {
+                    None
+                }),
+                None if search.may_skip => Hinted::Empty,
+                _ => Hinted::Unknown,
+            }
+        })
+    }
+}
+
+/// Whether one of `hint`'s witnesses shows `[t_min, t_max]` of `ray` blocked (the caller has
+/// checked that witnesses may answer): the segment passes through the ball's core. The
+/// witness goes to the front.
+fn witnessed(m: &PreparedMetaballs, ray: &Ray, span: (f32, f32), hint: &mut OcclusionHint) -> bool {
+    for k in 0..hint.metaball_witnesses.len() {
+        let Some((ball, s_limit)) = hint.metaball_witnesses[k] else {
+            return false;
+        };
+        if m.crosses_core(ray, span, ball, s_limit) {
+            hint.metaball_witnesses[..=k].rotate_right(1);
+            return true;
         }
     }
+    false
+}
+
+/// Puts `witness` at the front of `hint`'s witnesses (if it is not there already).
+fn remember(hint: &mut OcclusionHint, witness: Option<(u32, f32)>) {
+    let Some(witness) = witness else {
+        return;
+    };
+    let list = &mut hint.metaball_witnesses;
+    let k = list
+        .iter()
+        .position(|w| w.is_none_or(|(ball, _)| ball == witness.0))
+        .unwrap_or(list.len() - 1);
+    list[..=k].rotate_right(1);
+    list[0] = Some(witness);
+}
+
+/// The largest `s` where a ball of strength `q` alone reaches `(1 + WITNESS_MARGIN)·T` under
+/// `kernel`, rounded down into `f32`; `None` where even its centre does not.
+fn core_limit(kernel: &KernelPoly<f64>, isovalue: f32, q: f32) -> Option<f32> {
+    let mut iters = 0;
+    let level = isovalue as f64 * (1.0 + WITNESS_MARGIN);
+    let w = one_ball::level(kernel, level, q as f64, &mut iters).ok()??;
+    // Newton's iterates come down onto the root from above; a millionth keeps the `f32`
+    // rounding on the inner side too.
+    Some(((1.0 - w) * (1.0 - 1e-6)) as f32)
 }
 
 #[cfg(test)]
@@ -158,37 +292,55 @@ mod tests {
     use crate::kinds::metaballs::{Kernel, Metaball, MetaballScene, PrepareOptions};
     use glam::Vec3;
 
-    /// A Wyvill ball of radius 2 at `T = 0.5` is the unit sphere (analytic). After a ray from
-    /// outside leaves its leaf in the hint, a second ray from outside is answered by that
-    /// leaf alone, while rays starting inside the solid (the leaf's root at its entry) are
-    /// left to the full query: blocked only if they leave the sphere within the segment.
-    #[test]
-    fn the_hinted_leaf_answers_only_crossings_from_outside() {
+    /// A Wyvill ball of radius 2 at `T = 0.5`: the unit sphere (analytic).
+    fn unit_sphere() -> PreparedMetaballs {
         let scene = MetaballScene::new(
             Kernel::Wyvill,
             vec![Metaball::sphere(Vec3::ZERO, 2.0, 1.0, Vec3::ONE)],
         );
-        let m = PreparedMetaballs::new(scene, PrepareOptions::fitted(0.05));
+        PreparedMetaballs::new(scene, PrepareOptions::fitted(0.05))
+    }
+
+    /// Whether `m`'s surface at `T = 0.5` blocks `[0, t_max]` of the ray, asked with `hint`,
+    /// and the query's counters; the answer checked against the full query's.
+    fn ask(
+        m: &PreparedMetaballs,
+        (origin, dir, t_max): (Vec3, Vec3, f32),
+        hint: &mut OcclusionHint,
+    ) -> (bool, MetaballCounters) {
+        let mut c = MetaballCounters::default();
+        let ray = Ray::new(origin, dir);
+        let blocked = m.occluded_counted(&ray, (0.0, t_max), 0.5, hint, &mut c);
+        let mut full = MetaballCounters::default();
+        let root = m.any_hit_counted(&ray, 0.0, t_max, 0.5, &mut full);
+        assert_eq!(blocked, settle(m, &ray, (0.0, t_max), 0.5, root, &mut full));
+        (blocked, c)
+    }
+
+    /// The unit sphere. After a ray from outside leaves its leaf in the hint, a second ray
+    /// from outside is answered by that leaf alone, while rays starting inside the solid (the
+    /// leaf's root at its entry) are left to the full query: blocked only if they leave the
+    /// sphere within the segment.
+    #[test]
+    fn the_hinted_leaf_answers_only_crossings_from_outside() {
+        let m = unit_sphere();
         let mut hint = OcclusionHint::default();
-        let ask = |origin: Vec3, dir: Vec3, t_max: f32, hint: &mut OcclusionHint| {
-            let mut c = MetaballCounters::default();
-            let ray = Ray::new(origin, dir);
-            let blocked = m.occluded_counted(&ray, (0.0, t_max), 0.5, hint, &mut c);
+        let mut ask = |ray: (Vec3, Vec3, f32)| {
+            let (blocked, c) = ask(&m, ray, &mut hint);
             (blocked, c.node_traversals)
         };
-        let (blocked, walked) = ask(Vec3::new(0.0, 0.0, 5.0), Vec3::NEG_Z, 10.0, &mut hint);
+        let (blocked, walked) = ask((Vec3::new(0.0, 0.0, 5.0), Vec3::NEG_Z, 10.0));
         assert!(blocked && walked > 0, "the first ray walks the tree");
-        assert!(hint.metaball_leaves[0].is_some(), "and leaves its leaf");
         assert_eq!(
-            ask(Vec3::new(0.0, 5.0, 0.3), Vec3::NEG_Y, 10.0, &mut hint),
+            ask((Vec3::new(0.0, 5.0, 0.3), Vec3::NEG_Y, 10.0)),
             (true, 0),
             "a crossing from outside is answered by the hinted leaf"
         );
         assert!(
-            !ask(Vec3::new(0.0, 5.0, 0.3), Vec3::NEG_Y, 3.0, &mut hint).0,
+            !ask((Vec3::new(0.0, 5.0, 0.3), Vec3::NEG_Y, 3.0)).0,
             "the segment ends before the sphere"
         );
-        let (blocked, walked) = ask(Vec3::new(0.2, 0.1, 0.0), Vec3::X, 0.5, &mut hint);
+        let (blocked, walked) = ask((Vec3::new(0.2, 0.1, 0.0), Vec3::X, 0.5));
         assert!(
             !blocked,
             "starting inside, the segment never leaves the sphere"
@@ -197,10 +349,105 @@ mod tests {
             walked > 0,
             "a root at the leaf's entry is the full query's to settle"
         );
-        let (blocked, walked) = ask(Vec3::new(0.2, 0.1, 0.0), Vec3::X, 5.0, &mut hint);
+        // The hinted leaf's answer above left the ball as a witness: this segment passes
+        // through its core and ends outside the tree's box.
+        let (blocked, walked) = ask((Vec3::new(0.2, 0.1, 0.0), Vec3::X, 5.0));
         assert!(
-            blocked && walked > 0,
+            blocked && walked == 0,
             "starting inside, the ray leaves the sphere at 0.79"
         );
+    }
+
+    /// The unit sphere. Once a blocked ray has left the ball as a witness, a segment through
+    /// its core that ends outside the tree's box is answered without a leaf search; one that
+    /// ends inside the box (here inside the solid, which the full query does not call
+    /// blocked), one that passes beside the core and one whose line crosses the core only
+    /// behind its start are not.
+    #[test]
+    fn a_witness_answers_only_segments_through_a_core_that_end_outside_the_tree() {
+        let m = unit_sphere();
+        let mut hint = OcclusionHint::default();
+        let mut ask = |ray: (Vec3, Vec3, f32)| {
+            let (blocked, c) = ask(&m, ray, &mut hint);
+            (blocked, c.leaf_tests + c.node_traversals)
+        };
+        assert!(ask((Vec3::new(0.0, 0.0, 5.0), Vec3::NEG_Z, 10.0)).0);
+        assert!(ask((Vec3::new(0.0, 5.0, 0.3), Vec3::NEG_Y, 10.0)).0);
+        assert_eq!(
+            ask((Vec3::new(5.0, 0.2, 0.0), Vec3::NEG_X, 10.0)),
+            (true, 0),
+            "through the core, ending outside the box"
+        );
+        let (blocked, searched) = ask((Vec3::new(-0.5, 0.0, 0.0), Vec3::X, 1.0));
+        assert!(!blocked && searched > 0, "inside the solid all along");
+        let (blocked, searched) = ask((Vec3::new(5.0, 0.9, 0.9), Vec3::NEG_X, 10.0));
+        assert!(!blocked && searched > 0, "beside the core");
+        let (blocked, _) = ask((Vec3::new(0.0, 1.5, 0.0), Vec3::Y, 10.0));
+        assert!(!blocked, "leaving the ball behind");
+    }
+
+    /// Where a term can be negative the field may stay below one ball's term, so a witness is
+    /// not used: a positive ball cancelled by a negative one of the same support (no surface
+    /// anywhere), with the positive ball put in the hint as a witness by hand.
+    #[test]
+    fn no_witness_where_a_term_can_be_negative() {
+        let scene = MetaballScene::new(
+            Kernel::Wyvill,
+            vec![
+                Metaball::sphere(Vec3::ZERO, 2.0, 1.0, Vec3::ONE),
+                Metaball::sphere(Vec3::ZERO, 2.0, -0.9, Vec3::ONE),
+            ],
+        );
+        let m = PreparedMetaballs::new(scene, PrepareOptions::fitted(0.05));
+        let Accel::Tree(tree) = &m.accel else {
+            unreachable!("the Fitted BVH")
+        };
+        let kernel = KernelPoly::new(Kernel::Wyvill);
+        let mut hint = OcclusionHint {
+            metaball_state: (m.id, 0.5),
+            ..OcclusionHint::default()
+        };
+        hint.metaball_leaves[0] = tree.nodes.iter().find(|n| n.is_leaf()).copied();
+        hint.metaball_witnesses[0] = Some((0, core_limit(&kernel, 0.5, 1.0).expect("a core")));
+        let ray = Ray::new(Vec3::new(5.0, 0.0, 0.0), Vec3::NEG_X);
+        let mut c = MetaballCounters::default();
+        assert!(!m.occluded_counted(&ray, (0.0, 10.0), 0.5, &mut hint, &mut c));
+    }
+
+    /// A core's limit against `f64` bisection on the kernel's own value (Wyvill and the
+    /// quartic kernel, several strengths): the ball's term there is `(1 + WITNESS_MARGIN)·T`
+    /// within a part in 10⁵, never less; `None` where the centre stays below.
+    #[test]
+    fn the_core_limit_is_where_one_term_clears_the_isovalue() {
+        for kernel in [Kernel::Wyvill, Kernel::Quartic] {
+            let poly = KernelPoly::new(kernel);
+            for (q, isovalue) in [(1.0f32, 0.5f32), (2.5, 0.5), (0.7, 0.3), (1.0, 0.05)] {
+                let want = isovalue as f64 * (1.0 + WITNESS_MARGIN);
+                let term = |s: f64| q as f64 * kernel.value_f64(s);
+                let (mut lo, mut hi) = (0.0f64, 1.0f64);
+                for _ in 0..100 {
+                    let mid = 0.5 * (lo + hi);
+                    if term(mid) >= want {
+                        lo = mid;
+                    } else {
+                        hi = mid;
+                    }
+                }
+                let s = core_limit(&poly, isovalue, q).expect("the centre clears T") as f64;
+                assert!(
+                    term(s) >= want,
+                    "{kernel:?} q {q} T {isovalue}: {s} against {lo}"
+                );
+                assert!(
+                    (s - lo).abs() < 1e-5 * lo.max(1e-3),
+                    "{kernel:?} q {q}: {s} against {lo}"
+                );
+            }
+            assert_eq!(
+                core_limit(&poly, 0.5, 0.4),
+                None,
+                "{kernel:?}: a weak ball has no core"
+            );
+        }
     }
 }

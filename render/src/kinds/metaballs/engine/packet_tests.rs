@@ -242,10 +242,11 @@ fn shadow_packets_match_single_rays_on_every_demo() {
 #[test]
 fn occlusion_with_the_hint_answers_as_the_full_query_on_every_demo() {
     let (mut blocked, mut from_hint, mut with_hinted) = (0usize, 0usize, 0usize);
+    let (mut witnessed, mut with_witnessed) = (0usize, 0usize);
     for (demo, prepared, m) in demos() {
         let rays = prepared.primary_rays(&demo.default_camera(), WIDTH, HEIGHT);
         let isovalue = demo.default_isovalue();
-        let (mut demo_blocked, mut demo_hinted) = (0, 0);
+        let (mut demo_blocked, mut demo_hinted, mut demo_witnessed) = (0, 0, 0);
         for light in shadow_lights(&rays) {
             for rect in tiles() {
                 let (shadow_rays, t_max) = tile_shadow_rays(m, &rays, rect, isovalue, light);
@@ -259,18 +260,26 @@ fn occlusion_with_the_hint_answers_as_the_full_query_on_every_demo() {
                     assert_eq!(got, want, "{} {rect:?} shadow ray {k}", demo.id());
                     demo_blocked += want as usize;
                     demo_hinted += (got && c.node_traversals == 0) as usize;
+                    // A witness answers without searching a leaf.
+                    demo_witnessed += (got && c.node_traversals == 0 && c.leaf_tests == 0) as usize;
                 }
             }
         }
         // At 48×40 the paper scenes' neighbouring rays mostly meet different leaves (a few
         // hinted answers on Scattered-30k, none on Tornado-128k); small scenes share many.
         with_hinted += (demo_hinted > 0) as usize;
+        with_witnessed += (demo_witnessed > 0) as usize;
         blocked += demo_blocked;
         from_hint += demo_hinted;
+        witnessed += demo_witnessed;
     }
     assert!(
         from_hint > 0 && from_hint < blocked && with_hinted * 2 > demos().len(),
         "{from_hint} of {blocked} blocked rays answered by the hint, on {with_hinted} demos"
+    );
+    assert!(
+        witnessed > 0 && with_witnessed * 2 > demos().len(),
+        "{witnessed} of {blocked} blocked rays answered by a witness, on {with_witnessed} demos"
     );
 }
 
