@@ -5,14 +5,15 @@
 //! Primary rays go through `PreparedScene::primary_hits` tile by tile (the renderer's path),
 //! once with `PrepareOptions::packets` off and once on; the shadow pass starts from the
 //! packet's primary hits (untimed) and traces a ray from each hit towards the light, single
-//! rays through `any_hit_counted` and packets of a tile's shadow rays through
-//! `any_hits_packet`, or, where `shadow_packet_pays` finds the tile's rays too spread out for
-//! a packet to gain, one by one through `occluded_counted` with one hint for the tile (the
-//! renderer's choices). Runs of the two alternate, medians over `--runs`; rays per second per
-//! core divide by the worker threads.
+//! rays through `any_hit_counted` against the renderer's choices: the tile's shadow rays
+//! handed to the kind's `any_hits_towards` (two packets, the first 64 rays leaving witnesses
+//! in the tile's hint for the rest, where `shadow_packet_pays`), or, where the tile's rays
+//! are too spread out for a packet to gain, one by one through `occluded_counted` with the
+//! same hint. Runs of the two alternate, medians over `--runs`; rays per second per core
+//! divide by the worker threads.
 
 use crate::common::median;
-use isoray_render::kinds::contract::OcclusionHint;
+use isoray_render::kinds::contract::{OcclusionHint, PreparedKind};
 use isoray_render::kinds::metaballs::{PrepareOptions, PreparedMetaballs, RayCounters};
 use isoray_render::ray::Ray;
 use isoray_render::scene::PreparedGeometry;
@@ -162,21 +163,24 @@ pub(crate) fn measure(demos: &[DemoScene], runs: usize, time: f64) -> Vec<Packet
                         if rays.is_empty() {
                             return;
                         }
-                        // As the renderer does: a packet where its rays are coherent enough.
-                        if m.shadow_packet_pays(rays, 0.0) {
-                            let hits =
-                                m.any_hits_packet(rays, 0.0, t_max, Some(light), isovalue, &mut c);
-                            std::hint::black_box(hits);
-                        } else {
-                            // One by one, each searching first the leaf that blocked the
-                            // tile's last blocked ray.
-                            let mut hint = OcclusionHint::default();
-                            for (ray, &hi) in rays.iter().zip(t_max) {
-                                let span = (0.0, hi);
-                                let blocked =
-                                    m.occluded_counted(ray, span, isovalue, &mut hint, &mut c);
-                                std::hint::black_box(blocked);
-                            }
+                        // As the renderer's shadow batch does (`integrator::batch`): the
+                        // tile's rays handed to the kind together, traced as packets where
+                        // they are coherent enough, otherwise one by one; one hint for the
+                        // tile (witnesses, then the leaves of the last blocked rays, answer
+                        // first).
+                        let mut hint = OcclusionHint::default();
+                        let light = Some(light);
+                        if let Some(found) =
+                            m.any_hits_towards(rays, 0.0, t_max, light, isovalue, &mut hint, &mut c)
+                        {
+                            std::hint::black_box(found);
+                            return;
+                        }
+                        for (ray, &hi) in rays.iter().zip(t_max) {
+                            let span = (0.0, hi);
+                            let blocked =
+                                m.occluded_counted(ray, span, isovalue, &mut hint, &mut c);
+                            std::hint::black_box(blocked);
                         }
                     })
                 },

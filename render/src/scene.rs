@@ -252,9 +252,10 @@ impl PreparedScene {
         t_max: &[f32],
         light: Option<Vec3>,
         isovalue: f32,
+        hint: &mut OcclusionHint,
         counters: &mut impl Tally,
     ) -> Option<Vec<Option<f32>>> {
-        (self.prepared).any_hits_towards(rays, t_min, t_max, light, isovalue, counters)
+        (self.prepared).any_hits_towards(rays, t_min, t_max, light, isovalue, hint, counters)
     }
 
     /// From a start inside the solid, where the ray leaves it within `[t_min, t_max]`.

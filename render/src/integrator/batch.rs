@@ -98,10 +98,11 @@ pub fn resolve(terms: &[Term], blocked: &[bool]) -> Vec3 {
     emission + local
 }
 
-/// Whether each shadow ray is blocked by the isosurface at `isovalue`: rays towards one light
-/// in packets of 64 (in the order given, so neighbouring pixels share a packet), each root
-/// settled as a single ray's is ([`PreparedScene::settles`]); where the kind has no packet
-/// for them, ray by ray ([`PreparedScene::occluded_counted`], with one hint for the batch).
+/// Whether each shadow ray is blocked by the isosurface at `isovalue`: the rays towards one
+/// light handed to the kind together, in the order given (it packs them, neighbouring pixels
+/// sharing a packet), each root settled as a single ray's is ([`PreparedScene::settles`]);
+/// where the kind has no packet for them, ray by ray ([`PreparedScene::occluded_counted`]).
+/// One hint serves the whole batch.
 pub fn trace_shadows(
     scene: &PreparedScene,
     isovalue: f32,
@@ -121,19 +122,18 @@ pub fn trace_shadows(
         let of_light: Vec<usize> = (0..queries.len())
             .filter(|&i| queries[i].light == light)
             .collect();
-        for chunk in of_light.chunks(64) {
-            rays.clear();
-            t_max.clear();
-            rays.extend(chunk.iter().map(|&i| queries[i].ray));
-            t_max.extend(chunk.iter().map(|&i| queries[i].t_max));
-            let found = scene.any_hits_towards(&rays, 0.0, &t_max, light, isovalue, counters);
-            for (k, &i) in chunk.iter().enumerate() {
-                let (ray, span) = (&rays[k], (0.0, t_max[k]));
-                answers[i] = match &found {
-                    Some(found) => scene.settles(ray, span, isovalue, found[k], counters),
-                    None => scene.occluded_counted(ray, span, isovalue, &mut hint, counters),
-                };
-            }
+        rays.clear();
+        t_max.clear();
+        rays.extend(of_light.iter().map(|&i| queries[i].ray));
+        t_max.extend(of_light.iter().map(|&i| queries[i].t_max));
+        let found =
+            scene.any_hits_towards(&rays, 0.0, &t_max, light, isovalue, &mut hint, counters);
+        for (k, &i) in of_light.iter().enumerate() {
+            let (ray, span) = (&rays[k], (0.0, t_max[k]));
+            answers[i] = match &found {
+                Some(found) => scene.settles(ray, span, isovalue, found[k], counters),
+                None => scene.occluded_counted(ray, span, isovalue, &mut hint, counters),
+            };
         }
     }
     answers

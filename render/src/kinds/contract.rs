@@ -119,8 +119,10 @@ pub trait PreparedKind {
     /// traced together: for each ray, `Some` root on `[t_min, t_max[i]]` exactly when
     /// [`PreparedKind::any_hit`] finds one; a kind whose rays can start inside a solid (a root
     /// at `t_min`) returns `any_hit`'s own root, a kind of sheets (surfels, whose way out is
-    /// any later hit) may return another. `None` where the kind has no packet for these rays
-    /// (the caller asks ray by ray).
+    /// any later hit) may return another, and a kind that shows a ray blocked by other means
+    /// (a metaball witness, with the caller's `hint`) a point of its segment inside the
+    /// solid, which [`settle`] answers as it answers the root. `None` where the kind has no
+    /// packet for these rays (the caller asks ray by ray).
     #[allow(clippy::too_many_arguments)]
     fn any_hits_towards(
         &self,
@@ -129,6 +131,7 @@ pub trait PreparedKind {
         _t_max: &[f32],
         _light: Option<Vec3>,
         _isovalue: f32,
+        _hint: &mut OcclusionHint,
         _counters: &mut Self::Counters,
     ) -> Option<Vec<Option<f32>>> {
         None

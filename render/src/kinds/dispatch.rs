@@ -360,18 +360,14 @@ impl PreparedGeometry {
         t_max: &[f32],
         light: Option<Vec3>,
         isovalue: f32,
+        hint: &mut OcclusionHint,
         counters: &mut C,
     ) -> Option<Vec<Option<f32>>> {
+        let ask = (rays, t_min, t_max, light, isovalue);
         match self {
-            PreparedGeometry::Metaballs(m) => {
-                any_hits_towards(m.as_ref(), rays, t_min, t_max, light, isovalue, counters)
-            }
-            PreparedGeometry::Tets(t) => {
-                any_hits_towards(t.as_ref(), rays, t_min, t_max, light, isovalue, counters)
-            }
-            PreparedGeometry::Surfels(s) => {
-                any_hits_towards(s.as_ref(), rays, t_min, t_max, light, isovalue, counters)
-            }
+            PreparedGeometry::Metaballs(m) => any_hits_towards(m.as_ref(), ask, hint, counters),
+            PreparedGeometry::Tets(t) => any_hits_towards(t.as_ref(), ask, hint, counters),
+            PreparedGeometry::Surfels(s) => any_hits_towards(s.as_ref(), ask, hint, counters),
         }
     }
 }
@@ -479,15 +475,15 @@ fn primary_tile<K: PreparedKind, C: Tally>(
     counters.count::<K, _>(|c| k.primary_tile(rays, rect, isovalue, t_max, c))
 }
 
-#[allow(clippy::too_many_arguments)]
+/// The shadow rays of [`PreparedGeometry::any_hits_towards`]: rays, `t_min`, each `t_max`,
+/// the light and the isovalue.
+type ShadowPacket<'a> = (&'a [Ray], f32, &'a [f32], Option<Vec3>, f32);
+
 fn any_hits_towards<K: PreparedKind, C: Tally>(
     k: &K,
-    rays: &[Ray],
-    t_min: f32,
-    t_max: &[f32],
-    light: Option<Vec3>,
-    isovalue: f32,
+    (rays, t_min, t_max, light, isovalue): ShadowPacket<'_>,
+    hint: &mut OcclusionHint,
     counters: &mut C,
 ) -> Option<Vec<Option<f32>>> {
-    counters.count::<K, _>(|c| k.any_hits_towards(rays, t_min, t_max, light, isovalue, c))
+    counters.count::<K, _>(|c| k.any_hits_towards(rays, t_min, t_max, light, isovalue, hint, c))
 }

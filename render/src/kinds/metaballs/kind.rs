@@ -5,7 +5,7 @@ use crate::camera::PrimaryRays;
 use crate::kinds::contract::{OcclusionHint, PreparedKind};
 use crate::kinds::counters::SceneCounters;
 use crate::kinds::metaballs::counters::MetaballCounters;
-use crate::kinds::metaballs::engine::PreparedMetaballs;
+use crate::kinds::metaballs::engine::{PreparedMetaballs, FIRST_SHADOW_PACKET};
 use crate::ray::{Hit, Ray};
 
 impl PreparedKind for PreparedMetaballs {
@@ -56,10 +56,13 @@ impl PreparedKind for PreparedMetaballs {
         self.occluded_counted(ray, span, isovalue, hint, counters)
     }
 
-    /// The Fitted BVH's shadow packets ([`PreparedMetaballs::any_hits_packet`]: any_hit's
-    /// own roots) towards a point or a directional light, where the rays are coherent enough
-    /// to gain from one ([`PreparedMetaballs::shadow_packet_pays`]); otherwise none, and the
-    /// caller traces them one by one.
+    /// The Fitted BVH's shadow packets towards a point or a directional light, where the rays
+    /// (a tile's, for one light) are coherent enough to gain from packets
+    /// ([`PreparedMetaballs::shadow_packet_pays`]); otherwise none, and the caller traces them
+    /// one by one. Two packets, in the order given: the first [`FIRST_SHADOW_PACKET`] rays,
+    /// whose roots leave witnesses in `hint`, then the rest, answered first by those
+    /// witnesses ([`PreparedMetaballs::any_hits_packet_hinted`]: any_hit's own roots, or a
+    /// point inside the solid for a witnessed ray).
     fn any_hits_towards(
         &self,
         rays: &[Ray],
@@ -67,12 +70,20 @@ impl PreparedKind for PreparedMetaballs {
         t_max: &[f32],
         light: Option<glam::Vec3>,
         isovalue: f32,
+        hint: &mut OcclusionHint,
         counters: &mut MetaballCounters,
     ) -> Option<Vec<Option<f32>>> {
-        if !self.shadow_packet_pays(rays, t_min) {
+        if t_max.len() != rays.len() || !self.shadow_packet_pays(rays, t_min) {
             return None;
         }
-        self.any_hits_packet(rays, t_min, t_max, light, isovalue, counters)
+        let mut found = Vec::with_capacity(rays.len());
+        let first = rays.len().min(FIRST_SHADOW_PACKET);
+        let packets = [(0, first), (first, rays.len())];
+        for (from, to) in packets.into_iter().filter(|(from, to)| from < to) {
+            let packet = (&rays[from..to], t_min, &t_max[from..to], light);
+            found.extend(self.any_hits_packet_hinted(packet, isovalue, hint, counters)?);
+        }
+        Some(found)
     }
 
     #[inline]

@@ -3,7 +3,7 @@
 //! go through the per-pixel sphere-node cache (§4.2.2) when the scene enables it.
 
 use crate::camera::PrimaryRays;
-use crate::kinds::contract::PreparedKind;
+use crate::kinds::contract::{OcclusionHint, PreparedKind};
 use crate::kinds::counters::SceneCounters;
 use crate::kinds::surfels::counters::SurfelCounters;
 use crate::kinds::surfels::intersect::LeafHit;
@@ -118,6 +118,7 @@ impl PreparedKind for PreparedSurfels {
         t_max: &[f32],
         _light: Option<glam::Vec3>,
         _isovalue: f32,
+        _hint: &mut OcclusionHint,
         c: &mut SurfelCounters,
     ) -> Option<Vec<Option<f32>>> {
         if t_max.len() != rays.len() {

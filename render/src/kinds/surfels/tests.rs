@@ -431,8 +431,9 @@ fn shadow_packets_are_blocked_where_single_shadow_rays_are() {
                 t_max.push(to.length());
             }
             let single = prepare(&demo, 7, mode, false, &rt);
+            let mut hint = crate::kinds::contract::OcclusionHint::default();
             let packed = p
-                .any_hits_towards(&shadow, 0.0, &t_max, Some(light), 0.0, &mut c)
+                .any_hits_towards(&shadow, 0.0, &t_max, Some(light), 0.0, &mut hint, &mut c)
                 .expect("surfels have shadow packets");
             let mut blocked = 0;
             for (i, ray) in shadow.iter().enumerate() {

@@ -76,13 +76,14 @@ impl PreparedMetaballs {
     ) -> bool {
         let mut skip = NO_SKIP;
         let ours = hint.metaball_state == (self.id, isovalue);
-        let search = if ours && hint.metaball_leaves[0].is_some() {
+        let hinted = hint.metaball_leaves[0].is_some() || hint.metaball_witnesses[0].is_some();
+        let search = if ours && hinted {
             self.hinted_search(ray, span, isovalue)
         } else {
             None
         };
         if let Some(search) = &search {
-            if search.witnesses && witnessed(self, ray, span, hint) {
+            if search.witnesses && self.witness_point(search.tree, ray, span, hint).is_some() {
                 counters.rays += 1;
                 counters.hits += 1;
                 return true;
@@ -148,15 +149,12 @@ impl PreparedMetaballs {
             return None;
         }
         let main = matches!(&self.accel, Accel::Tree(main) if std::ptr::eq(main, tree));
-        let end = ray.at(t_max);
-        let root = &tree.nodes[0].bounds;
         Some(HintedSearch {
             tree,
             params: self.leaf_params(tree, &self.params(isovalue)),
             inv_dir: ray.dir.recip(),
             may_skip: main && self.nested,
-            witnesses: self.terms_positive
-                && (end.cmplt(root.min).any() || end.cmpgt(root.max).any()),
+            witnesses: self.terms_positive && ends_outside(tree, ray, t_max),
         })
     }
 
@@ -195,17 +193,74 @@ impl PreparedMetaballs {
         best.map(|(ball, s_limit, _)| (ball, s_limit))
     }
 
-    /// Whether `[t_min, t_max]` of `ray` passes where ball `ball`'s `s` is at most `s_limit`.
-    fn crosses_core(&self, ray: &Ray, (t_min, t_max): (f32, f32), ball: u32, s_limit: f32) -> bool {
-        let Some((_, _, a, tc, s_min)) = self.along(ray, ball) else {
-            return false;
-        };
+    /// A point of `[t_min, t_max]` of `ray` where ball `ball`'s `s` is at most `s_limit`
+    /// (the nearest to the ball's centre), if the segment passes there.
+    fn core_point(
+        &self,
+        ray: &Ray,
+        (t_min, t_max): (f32, f32),
+        ball: u32,
+        s_limit: f32,
+    ) -> Option<f32> {
+        let (_, _, a, tc, s_min) = self.along(ray, ball)?;
         let depth = s_limit - s_min;
         if !(depth >= 0.0) {
-            return false;
+            return None;
         }
         let half = (depth / a).sqrt();
-        (tc - half).max(t_min) <= (tc + half).min(t_max)
+        let (lo, hi) = ((tc - half).max(t_min), (tc + half).min(t_max));
+        (lo <= hi).then(|| tc.clamp(lo, hi))
+    }
+
+    /// Makes `hint` this state's at `isovalue`, emptied if it was another's.
+    pub(super) fn own_hint(&self, hint: &mut OcclusionHint, isovalue: f32) {
+        if hint.metaball_state != (self.id, isovalue) {
+            *hint = OcclusionHint {
+                metaball_state: (self.id, isovalue),
+                ..OcclusionHint::default()
+            };
+        }
+    }
+
+    /// A point of `[t_min, t_max]` of `ray` inside the solid, from one of `hint`'s witnesses
+    /// (this state's, at the isovalue `tree` was built for), where the segment ends outside
+    /// `tree`'s box and no term is negative: the segment is then blocked. The witness goes to
+    /// the front.
+    pub(super) fn witness_point(
+        &self,
+        tree: &Tree,
+        ray: &Ray,
+        span: (f32, f32),
+        hint: &mut OcclusionHint,
+    ) -> Option<f32> {
+        if !(self.terms_positive && ends_outside(tree, ray, span.1)) {
+            return None;
+        }
+        for k in 0..hint.metaball_witnesses.len() {
+            let (ball, s_limit) = hint.metaball_witnesses[k]?;
+            if let Some(t) = self.core_point(ray, span, ball, s_limit) {
+                hint.metaball_witnesses[..=k].rotate_right(1);
+                return Some(t);
+            }
+        }
+        None
+    }
+
+    /// Leaves in `hint` a witness for a ray that found a root among `gathered` (its balls in
+    /// a leaf of `tree`), where witnesses can answer such a ray.
+    pub(super) fn learn_witness(
+        &self,
+        tree: &Tree,
+        ray: &Ray,
+        span: (f32, f32),
+        gathered: &[RayBall<f32>],
+        isovalue: f32,
+        hint: &mut OcclusionHint,
+    ) {
+        if self.terms_positive && ends_outside(tree, ray, span.1) {
+            let witness = self.witness_in(gathered, span, isovalue, hint);
+            remember(hint, witness);
+        }
     }
 
     /// The search of `node`, a leaf of `search.tree`: blocked where it has a root on the
@@ -245,20 +300,10 @@ impl PreparedMetaballs {
     }
 }
 
-/// Whether one of `hint`'s witnesses shows `[t_min, t_max]` of `ray` blocked (the caller has
-/// checked that witnesses may answer): the segment passes through the ball's core. The
-/// witness goes to the front.
-fn witnessed(m: &PreparedMetaballs, ray: &Ray, span: (f32, f32), hint: &mut OcclusionHint) -> bool {
-    for k in 0..hint.metaball_witnesses.len() {
-        let Some((ball, s_limit)) = hint.metaball_witnesses[k] else {
-            return false;
-        };
-        if m.crosses_core(ray, span, ball, s_limit) {
-            hint.metaball_witnesses[..=k].rotate_right(1);
-            return true;
-        }
-    }
-    false
+/// Whether `ray` at `t_max` lies outside `tree`'s box, where no leaf holds a term.
+fn ends_outside(tree: &Tree, ray: &Ray, t_max: f32) -> bool {
+    let (end, root) = (ray.at(t_max), &tree.nodes[0].bounds);
+    end.cmplt(root.min).any() || end.cmpgt(root.max).any()
 }
 
 /// Puts `witness` at the front of `hint`'s witnesses (if it is not there already).

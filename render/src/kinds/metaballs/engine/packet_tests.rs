@@ -283,6 +283,53 @@ fn occlusion_with_the_hint_answers_as_the_full_query_on_every_demo() {
     );
 }
 
+/// A tile's shadow rays handed to the kind together, as the renderer's shadow batch hands
+/// them (packets of 64 with one hint, whose witnesses the earlier packets' roots leave):
+/// every answer, settled, is the full query's, on every demo towards a point and a
+/// directional light, and witnesses answered rays of later packets (their points differ from
+/// the plain packet's roots; at 48×40 few tiles hold more than one packet).
+#[test]
+fn hinted_shadow_packets_settle_as_the_full_query_on_every_demo() {
+    use crate::kinds::contract::PreparedKind;
+    let (mut packed, mut witnessed, mut with_witnessed) = (0usize, 0usize, 0usize);
+    for (demo, prepared, m) in demos() {
+        let rays = prepared.primary_rays(&demo.default_camera(), WIDTH, HEIGHT);
+        let isovalue = demo.default_isovalue();
+        let mut demo_witnessed = 0;
+        for light in shadow_lights(&rays) {
+            for rect in tiles() {
+                let (shadow_rays, t_max) = tile_shadow_rays(m, &rays, rect, isovalue, light);
+                let mut hint = OcclusionHint::default();
+                let mut c = MetaballCounters::default();
+                let ask = (&shadow_rays[..], 0.0, &t_max[..], light, isovalue);
+                let Some(found) =
+                    m.any_hits_towards(ask.0, 0.0, ask.2, ask.3, ask.4, &mut hint, &mut c)
+                else {
+                    continue;
+                };
+                let plain = m
+                    .any_hits_packet(ask.0, 0.0, ask.2, ask.3, ask.4, &mut c)
+                    .expect("a packet where the kind packs them");
+                for (k, (ray, &hi)) in shadow_rays.iter().zip(&t_max).enumerate() {
+                    let span = (0.0, hi);
+                    let got = settle(m.as_ref(), ray, span, isovalue, found[k], &mut c);
+                    let root = m.any_hit_counted(ray, 0.0, hi, isovalue, &mut c);
+                    let want = settle(m.as_ref(), ray, span, isovalue, root, &mut c);
+                    assert_eq!(got, want, "{} {rect:?} shadow ray {k}", demo.id());
+                    packed += 1;
+                    demo_witnessed += (found[k] != plain[k]) as usize;
+                }
+            }
+        }
+        with_witnessed += (demo_witnessed > 0) as usize;
+        witnessed += demo_witnessed;
+    }
+    assert!(
+        witnessed > 0 && witnessed < packed,
+        "{witnessed} of {packed} packed rays answered by a witness, on {with_witnessed} demos"
+    );
+}
+
 /// A hint left by one state is not used by another (its leaf is of another tree): the answer
 /// is the full query's and the tree is walked.
 #[test]
@@ -496,10 +543,27 @@ fn spread_out_shadow_rays_fall_back_to_single_rays() {
     let mut c = MetaballCounters::default();
     let (near, near_max) = from(7.9);
     assert!(m.shadow_packet_pays(&near, 0.0));
-    let packet = m.any_hits_towards(&near, 0.0, &near_max, Some(light), isovalue, &mut c);
+    let mut hint = OcclusionHint::default();
+    let packet = m.any_hits_towards(
+        &near,
+        0.0,
+        &near_max,
+        Some(light),
+        isovalue,
+        &mut hint,
+        &mut c,
+    );
     assert!(packet.is_some(), "a coherent pair is a packet");
     let (far, far_max) = from(8.1);
     assert!(!m.shadow_packet_pays(&far, 0.0));
-    let packet = m.any_hits_towards(&far, 0.0, &far_max, Some(light), isovalue, &mut c);
+    let packet = m.any_hits_towards(
+        &far,
+        0.0,
+        &far_max,
+        Some(light),
+        isovalue,
+        &mut hint,
+        &mut c,
+    );
     assert!(packet.is_none(), "a spread pair is traced ray by ray");
 }

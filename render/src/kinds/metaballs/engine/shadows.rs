@@ -22,7 +22,9 @@ use super::queries::search_gathered;
 use super::soa::LeafSpheres;
 use super::{Accel, PreparedMetaballs, SCRATCH};
 use crate::geom::aabb::Aabb;
+use crate::kinds::contract::OcclusionHint;
 use crate::kinds::metaballs::counters::MetaballCounters;
+use crate::kinds::metaballs::tree::{Tree, TreeKind};
 use crate::ray::Ray;
 use glam::Vec3;
 
@@ -206,7 +208,60 @@ impl PreparedMetaballs {
         isovalue: f32,
         counters: &mut MetaballCounters,
     ) -> Option<Vec<Option<f32>>> {
-        let n = rays.len();
+        let tree = self.shadow_packet_tree(rays.len(), t_min, t_max, isovalue)?;
+        self.packet_roots(tree, (rays, t_min, t_max), light, isovalue, None, counters)
+    }
+
+    /// [`PreparedMetaballs::any_hits_packet`] with the caller's occlusion hint: a ray that
+    /// one of the hint's witnesses (`occlusion`) shows blocked gets a point of its segment
+    /// inside the solid instead of a root, which [`settle`](crate::kinds::contract::settle)
+    /// answers as it answers the root (blocked: the segment ends outside the tree's box), and
+    /// is left out of the packet; the packet's roots leave witnesses for the next rays.
+    pub fn any_hits_packet_hinted(
+        &self,
+        (rays, t_min, t_max, light): (&[Ray], f32, &[f32], Option<Vec3>),
+        isovalue: f32,
+        hint: &mut OcclusionHint,
+        counters: &mut MetaballCounters,
+    ) -> Option<Vec<Option<f32>>> {
+        let tree = self.shadow_packet_tree(rays.len(), t_min, t_max, isovalue)?;
+        if tree.kind != TreeKind::Fitted || !self.terms_positive {
+            return self.packet_roots(tree, (rays, t_min, t_max), light, isovalue, None, counters);
+        }
+        self.own_hint(hint, isovalue);
+        let mut found: Vec<Option<f32>> = vec![None; rays.len()];
+        let mut rest: Vec<usize> = Vec::with_capacity(rays.len());
+        for (r, ray) in rays.iter().enumerate() {
+            let span = (t_min, t_max[r]);
+            match self.witness_point(tree, ray, span, hint) {
+                Some(t) => found[r] = Some(t),
+                None => rest.push(r),
+            }
+        }
+        counters.rays += (rays.len() - rest.len()) as u64;
+        counters.hits += (rays.len() - rest.len()) as u64;
+        if rest.is_empty() {
+            return Some(found);
+        }
+        let (rest_rays, rest_max): (Vec<Ray>, Vec<f32>) =
+            rest.iter().map(|&r| (rays[r], t_max[r])).unzip();
+        let packet = (&rest_rays[..], t_min, &rest_max[..]);
+        let roots = self.packet_roots(tree, packet, light, isovalue, Some(hint), counters)?;
+        for (&r, root) in rest.iter().zip(roots) {
+            found[r] = root;
+        }
+        Some(found)
+    }
+
+    /// The tree a shadow packet of `n` rays walks, where packets apply (packets on, a nested
+    /// tree, the main one for this isovalue, valid arguments).
+    fn shadow_packet_tree(
+        &self,
+        n: usize,
+        t_min: f32,
+        t_max: &[f32],
+        isovalue: f32,
+    ) -> Option<&Tree> {
         if !self.options.packets || !self.nested || n == 0 || t_max.len() != n {
             return None;
         }
@@ -217,10 +272,25 @@ impl PreparedMetaballs {
         if !std::ptr::eq(accel, &self.accel) {
             return None;
         }
-        let tree = match accel {
-            Accel::Tree(tree) => tree,
-            Accel::BruteForce | Accel::ActiveList => return None,
-        };
+        match accel {
+            Accel::Tree(tree) => Some(tree),
+            Accel::BruteForce | Accel::ActiveList => None,
+        }
+    }
+
+    /// The packet's roots ([`PreparedMetaballs::any_hits_packet`]), each root found leaving
+    /// a witness in `learn` where there is one.
+    #[allow(clippy::too_many_arguments)]
+    fn packet_roots(
+        &self,
+        tree: &Tree,
+        (rays, t_min, t_max): (&[Ray], f32, &[f32]),
+        light: Option<Vec3>,
+        isovalue: f32,
+        mut learn: Option<&mut OcclusionHint>,
+        counters: &mut MetaballCounters,
+    ) -> Option<Vec<Option<f32>>> {
+        let n = rays.len();
         let cone = Beam::new(rays, t_min, t_max, light)?;
         let inv: Vec<Vec3> = rays.iter().map(|r| r.dir.recip()).collect();
         let params = self.params(isovalue);
@@ -300,6 +370,10 @@ impl PreparedMetaballs {
                         };
                         if let Some(t) = found {
                             best[r] = Some((near, t));
+                            if let Some(hint) = learn.as_deref_mut() {
+                                let span = (t_min, t_max[r]);
+                                self.learn_witness(tree, ray, span, gathered, isovalue, hint);
+                            }
                         }
                     }
                     continue;
