@@ -62,10 +62,11 @@ struct HintedSearch<'a> {
 }
 
 impl PreparedMetaballs {
-    /// Whether the surface at `isovalue` blocks `[t_min, t_max]` of `ray`: the leaves `hint`
-    /// names searched first, the latest first, then [`settle`] of
-    /// [`PreparedMetaballs::any_hit_counted`]'s root, its walk skipping the leaves found
-    /// empty. The leaf that answers "blocked" goes to the front of `hint`.
+    /// Whether the surface at `isovalue` blocks `[t_min, t_max]` of `ray`: the witnesses
+    /// `hint` names tried first, then its leaves searched, the latest first, then [`settle`]
+    /// of [`PreparedMetaballs::any_hit_counted`]'s root, its walk skipping the leaves found
+    /// empty. The witness or leaf that answers "blocked" goes to the front of `hint`, and a
+    /// blocked ray's search leaves a witness where it crossed a core.
     pub fn occluded_counted(
         &self,
         ray: &Ray,
