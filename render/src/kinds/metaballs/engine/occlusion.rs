@@ -432,6 +432,77 @@ mod tests {
         assert!(!blocked, "leaving the ball behind");
     }
 
+    /// Random blobs (spheres and ellipsoids, positive strengths, Wyvill's and the quartic
+    /// kernel), shadow rays in groups from nearby points asked in sequence with one hint,
+    /// towards a light outside the scene (witnesses may answer) and one inside it (they may
+    /// not): every answer is the full query's, and witnesses answered some.
+    #[test]
+    fn witnesses_answer_as_the_full_query_on_random_blobs() {
+        use crate::geom::rng::SplitMix64;
+        use crate::kinds::metaballs::scene::Shape;
+        let mut witnessed = 0;
+        for seed in 0..16u64 {
+            let mut rng = SplitMix64(seed);
+            let kernel = if seed % 2 == 0 {
+                Kernel::Wyvill
+            } else {
+                Kernel::Quartic
+            };
+            let balls = (0..40)
+                .map(|i| {
+                    let centre = Vec3::new(
+                        rng.range(-3.0, 3.0),
+                        rng.range(-3.0, 3.0),
+                        rng.range(-3.0, 3.0),
+                    );
+                    let mut ball = Metaball::sphere(
+                        centre,
+                        rng.range(0.8, 1.6),
+                        rng.range(0.6, 1.5),
+                        Vec3::ONE,
+                    );
+                    if i % 3 == 0 {
+                        let axes = Vec3::new(1.0, rng.range(0.5, 1.0), rng.range(0.5, 1.0));
+                        let rotation = glam::Quat::from_axis_angle(
+                            (rng.in_unit_ball() + Vec3::X * 0.1).normalize(),
+                            rng.range(0.0, 3.0),
+                        );
+                        ball.shape = Shape::Ellipsoid { axes, rotation };
+                    }
+                    ball
+                })
+                .collect();
+            let m = PreparedMetaballs::new(
+                MetaballScene::new(kernel, balls),
+                PrepareOptions::fitted(0.05),
+            );
+            for light in [Vec3::new(20.0, 30.0, 10.0), Vec3::new(0.3, 0.2, 0.1)] {
+                let mut hint = OcclusionHint::default();
+                for _ in 0..24 {
+                    let base = Vec3::new(
+                        rng.range(-4.0, 4.0),
+                        rng.range(-4.0, 4.0),
+                        rng.range(-4.0, 4.0),
+                    );
+                    for _ in 0..8 {
+                        let origin = base + rng.in_unit_ball() * 0.2;
+                        let to = light - origin;
+                        let ray = Ray::new(origin, to);
+                        let span = (0.0, to.length());
+                        let mut c = MetaballCounters::default();
+                        let got = m.occluded_counted(&ray, span, 0.5, &mut hint, &mut c);
+                        let mut full = MetaballCounters::default();
+                        let root = m.any_hit_counted(&ray, span.0, span.1, 0.5, &mut full);
+                        let want = settle(&m, &ray, span, 0.5, root, &mut full);
+                        assert_eq!(got, want, "seed {seed}, light {light}, ray {ray:?}");
+                        witnessed += (got && c.leaf_tests + c.node_traversals == 0) as usize;
+                    }
+                }
+            }
+        }
+        assert!(witnessed > 0, "no ray was answered by a witness");
+    }
+
     /// Where a term can be negative the field may stay below one ball's term, so a witness is
     /// not used: a positive ball cancelled by a negative one of the same support (no surface
     /// anywhere), with the positive ball put in the hint as a witness by hand.
