@@ -84,7 +84,7 @@ impl PreparedMetaballs {
             None
         };
         if let Some(search) = &search {
-            if search.witnesses && self.witness_point(search.tree, ray, span, hint).is_some() {
+            if search.witnesses && self.first_witness(ray, span, hint).is_some() {
                 counters.rays += 1;
                 counters.hits += 1;
                 return true;
@@ -119,12 +119,7 @@ impl PreparedMetaballs {
         };
         let blocked = settle(self, ray, span, isovalue, root, counters);
         if let (true, Some(leaf)) = (blocked, leaf) {
-            if !ours {
-                *hint = OcclusionHint {
-                    metaball_state: (self.id, isovalue),
-                    ..OcclusionHint::default()
-                };
-            }
+            self.own_hint(hint, isovalue);
             hint.metaball_leaves.rotate_right(1);
             hint.metaball_leaves[0] = Some(leaf);
             remember(hint, witness);
@@ -183,34 +178,14 @@ impl PreparedMetaballs {
                 continue;
             };
             let depth = s_limit - b.s_min;
-            if !(depth >= 0.0) || best.is_some_and(|(_, _, d)| d >= depth) {
+            if best.is_some_and(|(_, _, d)| d >= depth) {
                 continue;
             }
-            let half = (depth / b.a).sqrt();
-            if (b.tc - half).max(t_min) <= (b.tc + half).min(t_max) {
+            if core_point((b.a, b.tc, b.s_min), s_limit, (t_min, t_max)).is_some() {
                 best = Some((b.ball, s_limit, depth));
             }
         }
         best.map(|(ball, s_limit, _)| (ball, s_limit))
-    }
-
-    /// A point of `[t_min, t_max]` of `ray` where ball `ball`'s `s` is at most `s_limit`
-    /// (the nearest to the ball's centre), if the segment passes there.
-    fn core_point(
-        &self,
-        ray: &Ray,
-        (t_min, t_max): (f32, f32),
-        ball: u32,
-        s_limit: f32,
-    ) -> Option<f32> {
-        let (_, _, a, tc, s_min) = self.along(ray, ball)?;
-        let depth = s_limit - s_min;
-        if !(depth >= 0.0) {
-            return None;
-        }
-        let half = (depth / a).sqrt();
-        let (lo, hi) = ((tc - half).max(t_min), (tc + half).min(t_max));
-        (lo <= hi).then(|| tc.clamp(lo, hi))
     }
 
     /// Makes `hint` this state's at `isovalue`, emptied if it was another's.
@@ -237,9 +212,18 @@ impl PreparedMetaballs {
         if !(self.terms_positive && ends_outside(tree, ray, span.1)) {
             return None;
         }
+        self.first_witness(ray, span, hint)
+    }
+
+    /// [`PreparedMetaballs::witness_point`] where the caller has checked that witnesses may
+    /// answer.
+    fn first_witness(&self, ray: &Ray, span: (f32, f32), hint: &mut OcclusionHint) -> Option<f32> {
         for k in 0..hint.metaball_witnesses.len() {
             let (ball, s_limit) = hint.metaball_witnesses[k]?;
-            if let Some(t) = self.core_point(ray, span, ball, s_limit) {
+            let Some((_, _, a, tc, s_min)) = self.along(ray, ball) else {
+                continue; // the ray misses this ball's support
+            };
+            if let Some(t) = core_point((a, tc, s_min), s_limit, span) {
                 hint.metaball_witnesses[..=k].rotate_right(1);
                 return Some(t);
             }
@@ -299,6 +283,23 @@ impl PreparedMetaballs {
             }
         })
     }
+}
+
+/// A point of `[t_min, t_max]` where a ball seen along the ray as `(a, tc, s_min)` (a
+/// [`RayBall`]'s) has `s` at most `s_limit`, the nearest to its centre, if the segment passes
+/// there.
+fn core_point(
+    (a, tc, s_min): (f32, f32, f32),
+    s_limit: f32,
+    (t_min, t_max): (f32, f32),
+) -> Option<f32> {
+    let depth = s_limit - s_min;
+    if !(depth >= 0.0) {
+        return None;
+    }
+    let half = (depth / a).sqrt();
+    let (lo, hi) = ((tc - half).max(t_min), (tc + half).min(t_max));
+    (lo <= hi).then(|| tc.clamp(lo, hi))
 }
 
 /// Whether `ray` at `t_max` lies outside `tree`'s box, where no leaf holds a term.
