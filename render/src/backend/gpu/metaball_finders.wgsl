@@ -167,27 +167,16 @@ fn isolated(c: array<f32, CONTROL_POINTS>, n: u32) -> bool {
 }
 
 // bezier.rs isolated_root's evaluation: the Bernstein form with binomials folded into `d`, by
-// Horner's rule in v / (1 - v) or (1 - v) / v, whichever is at most 1.
+// Horner's rule in v with the powers of 1 - v alongside (no division, no branch).
 fn bernstein_at(d: array<f32, CONTROL_POINTS>, n: u32, v: f32) -> f32 {
     let u = 1.0 - v;
-    var scale = 1.0;
-    var h: f32;
-    if (v <= 0.5) {
-        let s = v / u;
-        h = d[n];
-        for (var k = n; k > 0u; k = k - 1u) {
-            h = h * s + d[k - 1u];
-            scale = scale * u;
-        }
-    } else {
-        let r = u / v;
-        h = d[0];
-        for (var k = 1u; k <= n; k = k + 1u) {
-            h = h * r + d[k];
-            scale = scale * v;
-        }
+    var h = d[n];
+    var up = 1.0;
+    for (var k = n; k > 0u; k = k - 1u) {
+        up = up * u;
+        h = h * v + d[k - 1u] * up;
     }
-    return h * scale;
+    return h;
 }
 
 // bezier.rs isolated_root: the one root of an isolated piece by regula falsi with Anderson
