@@ -88,6 +88,21 @@ pub fn bezier_first_root<R: Real>(
     iters: &mut u32,
     halves: &mut HalfStack<R>,
 ) -> Option<R> {
+    first_root_or_piece(b, n, tol_v, iters, halves, None)
+}
+
+/// [`bezier_first_root`], except that with `defer` an isolated piece is not solved: it goes
+/// into `defer` (its `a`, `h` left for the caller) and the piece's start `lo` comes back, a
+/// placeholder for the root found later (the `lanes` module solves such pieces together).
+#[inline(always)]
+pub(crate) fn first_root_or_piece<R: Real>(
+    b: &[R; MAX_DEGREE + 1],
+    n: usize,
+    tol_v: R,
+    iters: &mut u32,
+    halves: &mut HalfStack<R>,
+    mut defer: Option<&mut Option<Piece<R>>>,
+) -> Option<R> {
     let zero = R::default();
     let inv_n = R::of(1.0 / n.max(1) as f64);
     // Pending halves, nearest last popped first.
@@ -104,6 +119,19 @@ pub fn bezier_first_root<R: Real>(
             done = true; // the hull lies below the axis: no root here
         }
         if !done && isolated(c, n) {
+            if let Some(slot) = defer.as_deref_mut() {
+                *slot = Some(Piece {
+                    c: *c,
+                    n,
+                    lo: *lo,
+                    hi: *hi,
+                    tol_v,
+                    iters: *iters,
+                    a: zero,
+                    h: zero,
+                });
+                return Some(*lo);
+            }
             return isolated_root(c, n, *lo, *hi, tol_v, iters);
         }
         if !done {
@@ -185,7 +213,7 @@ fn isolated<R: Real>(c: &[R; MAX_DEGREE + 1], n: usize) -> bool {
 /// iterations costs two de Casteljau subdivisions and the hull's crossings over every pair of
 /// control points.
 #[inline(always)]
-fn isolated_root<R: Real>(
+pub(crate) fn isolated_root<R: Real>(
     c: &[R; MAX_DEGREE + 1],
     n: usize,
     lo: R,
@@ -257,6 +285,34 @@ fn isolated_root<R: Real>(
             }
             (b, gb, fb, side) = (x, gx, gx, 1);
         }
+    }
+}
+
+/// An isolated piece whose root was set aside: what `isolated_root` takes, the section's
+/// iterations so far, and the section's map from the piece's `v` to `t` (`a + h v`).
+#[derive(Clone, Copy, Debug)]
+pub struct Piece<R> {
+    /// Bernstein control points of degree `n`, one sign change, the last positive.
+    pub c: [R; MAX_DEGREE + 1],
+    pub n: usize,
+    /// The piece's stretch of the section's `[0, 1]`.
+    pub lo: R,
+    pub hi: R,
+    pub tol_v: R,
+    /// The section's iterations when the piece was set aside.
+    pub iters: u32,
+    /// The section's start and length.
+    pub a: R,
+    pub h: R,
+}
+
+impl<R: Real> Piece<R> {
+    /// The piece's root as a ray parameter and the section's iterations, one at a time: what
+    /// the search would have returned had it not set the piece aside.
+    pub fn solve_one(&self) -> (Option<R>, u32) {
+        let mut iters = self.iters;
+        let v = isolated_root(&self.c, self.n, self.lo, self.hi, self.tol_v, &mut iters);
+        (v.map(|v| self.a + self.h * v), iters)
     }
 }
 

@@ -1,4 +1,4 @@
-//! The metaball kind's own ray counters.
+//! The metaball kind's own ray counters, and the outcome of one root search they count.
 
 use crate::geom::counters::{KindCounters, RayTotals};
 
@@ -43,5 +43,33 @@ impl KindCounters for MetaballCounters {
             hits: self.hits,
             iterations: self.iterations,
         }
+    }
+}
+
+/// The outcome of one search.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Found<R> {
+    pub t: Option<R>,
+    /// Iterations spent in total.
+    pub iterations: u32,
+    /// Iterations spent on the section or bracket that produced the hit.
+    pub hit_iterations: u32,
+    /// Whether a search stopped at its iteration cap (a miss or a coarse hit that may be wrong).
+    pub capped: bool,
+}
+
+impl Found<f32> {
+    /// Adds this leaf search over `balls` balls to `counters` (a leaf test, its balls, its
+    /// iterations, a capped search, and the hit's iterations when it hit); the hit distance.
+    #[inline]
+    pub fn counted(self, counters: &mut MetaballCounters, balls: usize) -> Option<f32> {
+        counters.leaf_tests += 1;
+        counters.metaballs_considered += balls as u64;
+        counters.iterations += self.iterations as u64;
+        counters.capped += self.capped as u64;
+        if self.t.is_some() {
+            counters.hit_iterations += self.hit_iterations as u64;
+        }
+        self.t
     }
 }

@@ -305,10 +305,14 @@ impl PreparedMetaballs {
     /// that found it.
     #[inline]
     pub(super) fn hit_at(&self, ray: &Ray, t: f32, gathered: &[RayBall<f32>]) -> Hit {
+        self.hit_at_balls(ray, t, gathered.iter().map(|b| b.ball))
+    }
+
+    /// [`PreparedMetaballs::hit_at`] from the gathered balls' indices.
+    #[inline]
+    pub(super) fn hit_at_balls(&self, ray: &Ray, t: f32, balls: impl Iterator<Item = u32>) -> Hit {
         let position = ray.at(t);
-        let (normal, albedo, primitive) = self
-            .scene
-            .surface_detail(gathered.iter().map(|b| b.ball), position);
+        let (normal, albedo, primitive) = self.scene.surface_detail(balls, position);
         Hit {
             t,
             position,

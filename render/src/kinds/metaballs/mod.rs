@@ -10,7 +10,8 @@
 //!   `KernelPoly`, a kernel's coefficients in a root finder's precision.
 //! - [`roots`]: the root finders along one ray (marching, projections + secant, Bézier
 //!   clipping, sphere tracing), generic over `f32` and `f64`; `one_ball`, Bézier clipping's
-//!   closed form for a section where one ball alone is active.
+//!   closed form for a section where one ball alone is active; [`lanes`], the isolated
+//!   roots a primary packet sets aside, solved eight at a time.
 //! - [`tree`]: the BVH with split metaballs and the Fitted BVH (fitted-bvh-metaballs.txt).
 //! - [`engine`]: a state prepared for tracing: per-ball data, the acceleration structure, and
 //!   the traversal modes (brute force, sorted active list, BVH, FBVH).
@@ -22,6 +23,7 @@ pub mod counters;
 pub mod engine;
 pub mod kernel;
 pub mod kind;
+pub mod lanes;
 mod one_ball;
 pub mod pdb;
 pub mod real;

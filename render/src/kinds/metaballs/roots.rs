@@ -33,9 +33,11 @@
 //! the rounding of the field itself.
 
 // Re-exported for the other crates' paths; the definitions are in `bezier` and `real`.
-use crate::kinds::metaballs::bezier::{bezier_first_root, power_to_bernstein};
+use crate::kinds::metaballs::bezier::{
+    bezier_first_root, first_root_or_piece, power_to_bernstein, Piece,
+};
 pub use crate::kinds::metaballs::bezier::{HalfStack, ITERATION_CAP, MAX_DEGREE};
-use crate::kinds::metaballs::counters::MetaballCounters;
+pub use crate::kinds::metaballs::counters::Found;
 pub use crate::kinds::metaballs::kernel::KernelPoly;
 use crate::kinds::metaballs::one_ball;
 pub use crate::kinds::metaballs::real::Real;
@@ -186,34 +188,6 @@ pub struct FindParams<R> {
     pub step: R,
 }
 
-/// The outcome of one search.
-#[derive(Clone, Copy, Debug, Default)]
-pub struct Found<R> {
-    pub t: Option<R>,
-    /// Iterations spent in total.
-    pub iterations: u32,
-    /// Iterations spent on the section or bracket that produced the hit.
-    pub hit_iterations: u32,
-    /// Whether a search stopped at its iteration cap (a miss or a coarse hit that may be wrong).
-    pub capped: bool,
-}
-
-impl Found<f32> {
-    /// Adds this leaf search over `balls` balls to `counters` (a leaf test, its balls, its
-    /// iterations, a capped search, and the hit's iterations when it hit); the hit distance.
-    #[inline]
-    pub fn counted(self, counters: &mut MetaballCounters, balls: usize) -> Option<f32> {
-        counters.leaf_tests += 1;
-        counters.metaballs_considered += balls as u64;
-        counters.iterations += self.iterations as u64;
-        counters.capped += self.capped as u64;
-        if self.t.is_some() {
-            counters.hit_iterations += self.hit_iterations as u64;
-        }
-        self.t
-    }
-}
-
 /// Reusable buffers, one set per thread.
 #[derive(Debug, Default)]
 pub struct Scratch<R: Real> {
@@ -230,6 +204,9 @@ pub struct Scratch<R: Real> {
 struct SectionScratch<R> {
     halves: HalfStack<R>,
     level: one_ball::LevelMemo<R>,
+    /// Set isolated pieces aside instead of solving them ([`find_first_deferring`]).
+    defer: bool,
+    piece: Option<Piece<R>>,
 }
 
 #[inline]
@@ -276,6 +253,26 @@ pub fn find_first<R: Real>(
             walk_sections::<R, 0, _>(p, balls, lo, hi, scratch, trace_section)
         }
     }
+}
+
+/// [`find_first`], except that a Bézier search which ends on an isolated piece sets the
+/// piece aside instead of solving it: then `Found::t` is a placeholder inside the piece (the
+/// search is over: its first root lies in the piece) and the piece comes back, to be solved
+/// with others in lanes (`lanes::solve`). `Found`'s iterations then leave out the piece's
+/// own.
+pub fn find_first_deferring<R: Real>(
+    finder: RootFinder,
+    p: &FindParams<R>,
+    balls: &[RayBall<R>],
+    lo: R,
+    hi: R,
+    scratch: &mut Scratch<R>,
+) -> (Found<R>, Option<Piece<R>>) {
+    scratch.section.defer = true;
+    scratch.section.piece = None;
+    let found = find_first(finder, p, balls, lo, hi, scratch);
+    scratch.section.defer = false;
+    (found, scratch.section.piece.take())
 }
 
 /// Whether the field can reach `T` on `[a, b]`. The kernels are monotone in `s` with one
@@ -705,7 +702,7 @@ fn bezier_section<R: Real, const W: usize>(
         }
     }
     let w_degree = if W == 0 { p.kernel.degree } else { W };
-    bezier_section_of(w_degree, p, balls, active, a, b, iters, &mut scratch.halves)
+    bezier_section_of(w_degree, p, balls, active, a, b, iters, scratch)
 }
 
 /// [`bezier_section`] for a kernel of `w`-degree `w_degree` (`p.kernel.degree`).
@@ -719,7 +716,7 @@ fn bezier_section_of<R: Real>(
     a: R,
     b: R,
     iters: &mut u32,
-    halves: &mut HalfStack<R>,
+    scratch: &mut SectionScratch<R>,
 ) -> Option<R> {
     let h = b - a;
     let degree = 2 * w_degree;
@@ -767,7 +764,22 @@ fn bezier_section_of<R: Real>(
     let mut bern = [R::default(); MAX_DEGREE + 1];
     power_to_bernstein(&poly, degree, &mut bern);
     let tol_v = p.tolerance / h;
-    bezier_first_root(&bern, degree, tol_v, iters, halves).map(|v| a + h * v)
+    let halves = &mut scratch.halves;
+    if !scratch.defer {
+        return bezier_first_root(&bern, degree, tol_v, iters, halves).map(|v| a + h * v);
+    }
+    let v = first_root_or_piece(
+        &bern,
+        degree,
+        tol_v,
+        iters,
+        halves,
+        Some(&mut scratch.piece),
+    );
+    if let Some(piece) = &mut scratch.piece {
+        (piece.a, piece.h) = (a, h);
+    }
+    v.map(|v| a + h * v)
 }
 
 #[cfg(test)]

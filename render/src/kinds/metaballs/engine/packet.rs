@@ -21,6 +21,10 @@
 //!    ([`PreparedMetaballs::search_leaf`]) on the same `[near, far]`: the same balls gathered
 //!    in the same order. A ray is done at its first root, as a single ray is at the first leaf
 //!    with a root.
+//! 4. Roots in lanes: a search that ends on an isolated piece (one simple root, nearly every
+//!    hit) is done there, since its first root lies in it, and the piece is set aside; after
+//!    the walk the tile's pieces are solved eight at a time ([`lanes`]), every lane with the
+//!    scalar search's operations in its order, so the roots are the same bit for bit.
 //!
 //! Why the hits equal the single ray's: the single-ray walk searches a leaf on its slab range
 //! clamped to the ancestors' entries and to `[t_min, t_max]`; when every box lies inside its
@@ -37,6 +41,8 @@ use crate::camera::PrimaryRays;
 use crate::geom::aabb::Aabb;
 use crate::geom::tile::TileGrid;
 use crate::kinds::metaballs::counters::MetaballCounters;
+use crate::kinds::metaballs::lanes::{self, Piece};
+use crate::kinds::metaballs::roots::{self, Found, RayBall, RootFinder, ITERATION_CAP};
 use crate::kinds::metaballs::tree::Tree;
 use crate::ray::{Hit, Ray};
 use glam::Vec3;
@@ -54,6 +60,41 @@ struct TileBuffers {
     /// A leaf's balls less those outside the cover's pyramid.
     culled: Vec<u32>,
     soa: SharedOriginBalls,
+    aside: SetAside,
+}
+
+/// Rays done with their search but for the root of the isolated piece their hit lies in
+/// ([`lanes`]), the pieces, and each ray's gathered balls for its hit's normal.
+#[derive(Default)]
+struct SetAside {
+    /// (ray, the search as it stood (its iterations leave out the piece's), its balls'
+    /// range in `balls`).
+    rays: Vec<(u32, Found<f32>, (u32, u32))>,
+    pieces: Vec<Piece<f32>>,
+    balls: Vec<u32>,
+    solved: Vec<(Option<f32>, u32)>,
+}
+
+impl SetAside {
+    fn clear(&mut self) {
+        self.rays.clear();
+        self.pieces.clear();
+        self.balls.clear();
+    }
+
+    fn push(
+        &mut self,
+        ray: usize,
+        found: Found<f32>,
+        piece: Piece<f32>,
+        gathered: &[RayBall<f32>],
+    ) {
+        let start = self.balls.len() as u32;
+        self.balls.extend(gathered.iter().map(|b| b.ball));
+        let range = (start, self.balls.len() as u32);
+        self.rays.push((ray as u32, found, range));
+        self.pieces.push(piece);
+    }
 }
 
 thread_local! {
@@ -142,6 +183,7 @@ impl PreparedMetaballs {
             stack,
             culled,
             soa,
+            aside,
         } = buffers;
         let rays = &tile.rays;
         let (x0, y0) = (tile.x0, tile.y0);
@@ -158,6 +200,7 @@ impl PreparedMetaballs {
         hits.resize(n, None);
         done.clear();
         done.resize(n, false);
+        let defer = self.sets_roots_aside();
         counters.rays += n as u64;
         SCRATCH.with(|cell| {
             let mut guard = cell.borrow_mut();
@@ -201,7 +244,21 @@ impl PreparedMetaballs {
                         let found = if shared {
                             gathered.clear();
                             soa.gather(&self.balls, ray.dir, near, far, gathered);
-                            search_gathered(&params, finder, near, far, gathered, scratch, counters)
+                            if !defer || gathered.is_empty() {
+                                search_gathered(
+                                    &params, finder, near, far, gathered, scratch, counters,
+                                )
+                            } else {
+                                let (found, piece) = roots::find_first_deferring(
+                                    finder, &params, gathered, near, far, scratch,
+                                );
+                                if let Some(piece) = piece {
+                                    aside.push(r, found, piece, gathered);
+                                    done[r] = true;
+                                    return false;
+                                }
+                                found.counted(counters, gathered.len())
+                            }
                         } else {
                             self.search_leaf(
                                 balls,
@@ -250,6 +307,7 @@ impl PreparedMetaballs {
                 stack.push((near_child, fa as u32));
             }
         });
+        self.settle_aside(aside, tile_rays, hits, isovalue, t_max, counters);
         Some(
             tile_rays
                 .iter()
@@ -257,5 +315,44 @@ impl PreparedMetaballs {
                 .zip(hits.iter().copied())
                 .collect(),
         )
+    }
+
+    /// Whether a packet's Bézier searches set their isolated pieces aside, to be solved in
+    /// lanes (not with the `f64` refinement, which refines each hit from its own search).
+    fn sets_roots_aside(&self) -> bool {
+        self.options.finder == RootFinder::BezierClipping && !self.options.refine_f64
+    }
+
+    /// The roots of the pieces `aside` holds, in lanes, and the hits of their rays; `aside`
+    /// is left empty.
+    fn settle_aside(
+        &self,
+        aside: &mut SetAside,
+        tile_rays: &[Ray],
+        hits: &mut [Option<Hit>],
+        isovalue: f32,
+        t_max: f32,
+        counters: &mut MetaballCounters,
+    ) {
+        lanes::solve(&aside.pieces, &mut aside.solved);
+        let settled = aside.rays.iter().zip(&aside.pieces).zip(&aside.solved);
+        for ((&(r, mut found, (start, end)), piece), &(t, iters)) in settled {
+            let (r, ray) = (r as usize, &tile_rays[r as usize]);
+            // As the section's search would have counted it, had it solved the piece itself.
+            found.iterations += iters - piece.iters;
+            found.capped |= iters >= ITERATION_CAP;
+            found.hit_iterations = iters;
+            found.t = t;
+            let balls = &aside.balls[start as usize..end as usize];
+            let Some(t) = found.counted(counters, balls.len()) else {
+                // Past the iteration cap (in theory): the search would have gone on to later
+                // sections and leaves, so the ray is traced again alone.
+                hits[r] = self.first_hit_counted(ray, 0.0, t_max, isovalue, counters);
+                continue;
+            };
+            counters.hits += 1;
+            hits[r] = Some(self.hit_at_balls(ray, t, balls.iter().copied()));
+        }
+        aside.clear();
     }
 }

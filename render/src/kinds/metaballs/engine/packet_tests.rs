@@ -78,7 +78,6 @@ fn packets_match_single_rays_on_every_demo_at_1_2_and_8_threads() {
         assert!(m.options().packets, "packets are the default");
         let rays = prepared.primary_rays(&demo.default_camera(), WIDTH, HEIGHT);
         let isovalue = demo.default_isovalue();
-        let tolerance = m.options().tolerance;
         let single: Vec<_> = tiles()
             .iter()
             .flat_map(|&(x0, y0, x1, y1)| (y0..y1).flat_map(move |y| (x0..x1).map(move |x| (x, y))))
@@ -109,11 +108,9 @@ fn packets_match_single_rays_on_every_demo_at_1_2_and_8_threads() {
             for (k, ((_, p), s)) in packet.iter().zip(&single).enumerate() {
                 match (p, s) {
                     (Some(p), Some(s)) => assert!(
-                        (p.t - s.t).abs() <= tolerance,
-                        "{} ray {k}, {threads} threads: t {} against {}",
+                        p == s,
+                        "{} ray {k}, {threads} threads: hit {p:?} against {s:?}",
                         demo.id(),
-                        p.t,
-                        s.t
                     ),
                     (None, None) => {}
                     (p, s) => panic!(
