@@ -53,7 +53,6 @@ use std::cell::RefCell;
 struct TileBuffers {
     tile_rays: Vec<Ray>,
     inv: Vec<Vec3>,
-    hits: Vec<Option<Hit>>,
     done: Vec<bool>,
     /// (node, first active ray) still to visit.
     stack: Vec<(u32, u32)>,
@@ -178,7 +177,6 @@ impl PreparedMetaballs {
         let TileBuffers {
             tile_rays,
             inv,
-            hits,
             done,
             stack,
             culled,
@@ -196,8 +194,8 @@ impl PreparedMetaballs {
         }
         let params = self.params(isovalue);
         let finder = self.options.finder;
-        hits.clear();
-        hits.resize(n, None);
+        // The tile's rays and hits, the hits filled in as rays finish.
+        let mut out: Vec<(Ray, Option<Hit>)> = tile_rays.iter().map(|&ray| (ray, None)).collect();
         done.clear();
         done.resize(n, false);
         let defer = self.sets_roots_aside();
@@ -278,7 +276,7 @@ impl PreparedMetaballs {
                                 t = self.refine_f64(ray, t, 0.0, t_max, isovalue, gathered);
                             }
                             counters.hits += 1;
-                            hits[r] = Some(self.hit_at(ray, t, gathered));
+                            out[r].1 = Some(self.hit_at(ray, t, gathered));
                             done[r] = true;
                         }
                         false
@@ -307,14 +305,8 @@ impl PreparedMetaballs {
                 stack.push((near_child, fa as u32));
             }
         });
-        self.settle_aside(aside, tile_rays, hits, isovalue, t_max, counters);
-        Some(
-            tile_rays
-                .iter()
-                .copied()
-                .zip(hits.iter().copied())
-                .collect(),
-        )
+        self.settle_aside(aside, &mut out, isovalue, t_max, counters);
+        Some(out)
     }
 
     /// Whether a packet's Bézier searches set their isolated pieces aside, to be solved in
@@ -328,8 +320,7 @@ impl PreparedMetaballs {
     fn settle_aside(
         &self,
         aside: &mut SetAside,
-        tile_rays: &[Ray],
-        hits: &mut [Option<Hit>],
+        out: &mut [(Ray, Option<Hit>)],
         isovalue: f32,
         t_max: f32,
         counters: &mut MetaballCounters,
@@ -337,7 +328,7 @@ impl PreparedMetaballs {
         lanes::solve(&aside.pieces, &mut aside.solved);
         let settled = aside.rays.iter().zip(&aside.pieces).zip(&aside.solved);
         for ((&(r, mut found, (start, end)), piece), &(t, iters)) in settled {
-            let (r, ray) = (r as usize, &tile_rays[r as usize]);
+            let (ray, hit) = &mut out[r as usize];
             // As the section's search would have counted it, had it solved the piece itself.
             found.iterations += iters - piece.iters;
             found.capped |= iters >= ITERATION_CAP;
@@ -347,11 +338,11 @@ impl PreparedMetaballs {
             let Some(t) = found.counted(counters, balls.len()) else {
                 // Past the iteration cap (in theory): the search would have gone on to later
                 // sections and leaves, so the ray is traced again alone.
-                hits[r] = self.first_hit_counted(ray, 0.0, t_max, isovalue, counters);
+                *hit = self.first_hit_counted(ray, 0.0, t_max, isovalue, counters);
                 continue;
             };
             counters.hits += 1;
-            hits[r] = Some(self.hit_at_balls(ray, t, balls.iter().copied()));
+            *hit = Some(self.hit_at_balls(ray, t, balls.iter().copied()));
         }
         aside.clear();
     }
