@@ -6,9 +6,12 @@
 //! Horner's rule of `2n` multiplications waiting on the one before, with two divisions and a
 //! branch between them. One ray at a time that is a chain of latencies. A primary packet
 //! instead sets each ray's isolated piece aside ([`Piece`]; the ray's hit is known to lie in
-//! it, so the ray is done) and solves the tile's pieces [`LANES`] at a time: the evaluations
-//! run across the lanes (structure-of-arrays, a loop the compiler vectorizes), and the lanes'
-//! independent chains overlap.
+//! it, so the ray is done) and solves the tile's pieces [`LANES`] at a time in `wide`'s
+//! `f32x8` vectors (one AVX register, two SSE ones in the portable build): the evaluations,
+//! divisions and bracket updates of eight rays per instruction, each lane's case picked by
+//! masks. On 200,000 random degree-6 pieces (Intel Xeon, portable build) that took 11.3 ms
+//! against 28.0 ms one piece at a time and 22.9 ms for the same lockstep over plain arrays,
+//! whose branchy per-lane control the compiler left scalar.
 //!
 //! Each lane performs [`bezier::isolated_root`](super::bezier)'s operations in its order, so
 //! its root and iteration count are the scalar ones bit for bit (test
@@ -16,7 +19,7 @@
 
 pub use crate::kinds::metaballs::bezier::Piece;
 use crate::kinds::metaballs::bezier::{BINOMIAL, ITERATION_CAP, MAX_DEGREE};
-use crate::kinds::metaballs::real::Real;
+use wide::{f32x8, CmpGt, CmpLe, CmpLt};
 
 /// Pieces solved together.
 pub const LANES: usize = 8;
@@ -24,7 +27,7 @@ pub const LANES: usize = 8;
 /// Each piece's root as a ray parameter (`None` past the iteration cap, as `isolated_root`)
 /// and the section's iterations after it, into `out` (cleared first). Pieces of one degree
 /// run in lanes, [`LANES`] at a time; any other degree one by one.
-pub fn solve<R: Real>(pieces: &[Piece<R>], out: &mut Vec<(Option<R>, u32)>) {
+pub fn solve(pieces: &[Piece<f32>], out: &mut Vec<(Option<f32>, u32)>) {
     out.clear();
     let Some(first) = pieces.first() else {
         return;
@@ -41,108 +44,118 @@ pub fn solve<R: Real>(pieces: &[Piece<R>], out: &mut Vec<(Option<R>, u32)>) {
     }
 }
 
-/// `isolated_root` on up to [`LANES`] pieces of degree `n` in lockstep.
+/// `f32::max`'s choice lane by lane (a NaN gives the other operand).
 #[inline(always)]
-fn solve_lanes<R: Real>(pieces: &[Piece<R>], n: usize, out: &mut [(Option<R>, u32); LANES]) {
-    let (zero, one, half) = (R::default(), R::of(1.0), R::of(0.5));
-    let m = pieces.len();
-    // Per lane: the scaled control points (`d[k][lane]`), the bracket and its values.
-    let mut d = [[zero; LANES]; MAX_DEGREE + 1];
-    let (mut lo, mut width, mut tol_v, mut nudge) =
-        ([zero; LANES], [one; LANES], [zero; LANES], [zero; LANES]);
-    let (mut a, mut ga, mut b, mut gb) = ([zero; LANES], [zero; LANES], [one; LANES], [one; LANES]);
-    let mut iters = [0u32; LANES];
-    let mut active = [false; LANES];
-    for (l, p) in pieces.iter().enumerate() {
-        for k in 0..=n {
-            d[k][l] = p.c[k] * R::of(BINOMIAL[n][k]);
+fn max(x: f32x8, y: f32x8) -> f32x8 {
+    let larger = x.cmp_lt(y).blend(y, x);
+    x.is_nan().blend(y, larger)
+}
+
+/// `f32::min`'s choice lane by lane.
+#[inline(always)]
+fn min(x: f32x8, y: f32x8) -> f32x8 {
+    let smaller = y.cmp_lt(x).blend(y, x);
+    x.is_nan().blend(y, smaller)
+}
+
+/// `isolated_root` on up to [`LANES`] pieces of degree `n` in lockstep: the arithmetic in
+/// vector lanes, each lane's case chosen by masks (the same operations and choices as the
+/// scalar code's branches), and a lane's exits (a closed bracket, the cap, an exhausted
+/// precision) decided from the masks one lane at a time.
+#[inline(always)]
+fn solve_lanes(pieces: &[Piece<f32>], n: usize, out: &mut [(Option<f32>, u32); LANES]) {
+    let lane = |f: &dyn Fn(&Piece<f32>) -> f32, pad: f32| {
+        let mut v = [pad; LANES];
+        for (l, p) in pieces.iter().enumerate() {
+            v[l] = f(p);
         }
-        lo[l] = p.lo;
-        width[l] = p.hi - p.lo;
-        tol_v[l] = p.tol_v;
-        nudge[l] = half * p.tol_v / width[l];
-        (ga[l], gb[l]) = (p.c[0], p.c[n]);
-        iters[l] = p.iters;
-        active[l] = true;
+        f32x8::from(v)
+    };
+    let mut d = [f32x8::ZERO; MAX_DEGREE + 1];
+    for (k, dk) in d.iter_mut().enumerate().take(n + 1) {
+        *dk = lane(&|p| p.c[k] * BINOMIAL[n][k] as f32, 0.0);
     }
+    let (zero, one, half) = (f32x8::ZERO, f32x8::ONE, f32x8::splat(0.5));
+    let lo = lane(&|p| p.lo, 0.0);
+    let width = lane(&|p| p.hi - p.lo, 1.0);
+    let tol_v = lane(&|p| p.tol_v, 1.0);
+    let nudge = half * tol_v / width;
+    let (mut a, mut b) = (zero, one);
+    let (mut ga, mut gb) = (lane(&|p| p.c[0], -1.0), lane(&|p| p.c[n], 1.0));
     let (mut fa, mut fb) = (ga, gb);
-    let mut side = [0i8; LANES];
-    let mut x = [half; LANES];
+    let mut side = zero;
+    let mut iters = [0u32; LANES];
+    for (l, p) in pieces.iter().enumerate() {
+        iters[l] = p.iters;
+    }
+    let mut active: u32 = (1u32 << pieces.len()) - 1;
     loop {
-        // The bracket's tests, as `isolated_root` makes them before each evaluation.
-        let mut any = false;
-        for l in 0..m {
-            if !active[l] {
-                continue;
-            }
-            if width[l] * (b[l] - a[l]) <= tol_v[l] {
-                let chord = a[l] + (b[l] - a[l]) * (ga[l] / (ga[l] - gb[l]));
-                let v = if a[l] <= chord && chord <= b[l] {
-                    chord
-                } else {
-                    a[l]
-                };
-                out[l] = (Some(lo[l] + width[l] * v), iters[l]);
-                active[l] = false;
-                continue;
-            }
-            if iters[l] > ITERATION_CAP {
+        // The bracket's tests and the next point, as `isolated_root` makes them.
+        let ba = b - a;
+        let closed = (width * ba).cmp_le(tol_v).move_mask() as u32;
+        let chord = a + ba * (ga / (ga - gb));
+        let within = a.cmp_le(chord) & chord.cmp_le(b);
+        let closed_root = (lo + width * within.blend(chord, a)).to_array();
+        let secant = a + ba * (fa / (fa - fb));
+        let step = min(max(secant, a + nudge), b - nudge);
+        let step_inside = a.cmp_lt(step) & step.cmp_lt(b);
+        let mid = half * (a + b);
+        let mid_inside = a.cmp_lt(mid) & mid.cmp_lt(b);
+        let x = step_inside.blend(step, mid);
+        let exhausted = (!(step_inside | mid_inside)).move_mask() as u32;
+        let exhausted_root = (lo + width * a).to_array();
+        let mut left = active;
+        while left != 0 {
+            let l = left.trailing_zeros() as usize;
+            left &= left - 1;
+            let bit = 1u32 << l;
+            if closed & bit != 0 {
+                out[l] = (Some(closed_root[l]), iters[l]);
+                active &= !bit;
+            } else if iters[l] > ITERATION_CAP {
                 out[l] = (None, iters[l]);
-                active[l] = false;
-                continue;
-            }
-            iters[l] += 1;
-            let secant = a[l] + (b[l] - a[l]) * (fa[l] / (fa[l] - fb[l]));
-            let mut xl = secant.max(a[l] + nudge[l]).min(b[l] - nudge[l]);
-            if !(a[l] < xl && xl < b[l]) {
-                xl = half * (a[l] + b[l]);
-                if !(a[l] < xl && xl < b[l]) {
-                    out[l] = (Some(lo[l] + width[l] * a[l]), iters[l]);
-                    active[l] = false;
-                    continue;
+                active &= !bit;
+            } else {
+                iters[l] += 1;
+                if exhausted & bit != 0 {
+                    out[l] = (Some(exhausted_root[l]), iters[l]);
+                    active &= !bit;
                 }
             }
-            x[l] = xl;
-            any = true;
         }
-        if !any {
+        if active == 0 {
             break;
         }
-        // The evaluations, across the lanes: `Σ d_k x^k (1 - x)^(n-k)` by Horner's rule in `x`
-        // with the powers of `1 - x` alongside (idle lanes compute a value nobody reads).
-        let mut g = [zero; LANES];
-        let mut up = [one; LANES];
-        let mut u = [zero; LANES];
-        for l in 0..LANES {
-            u[l] = one - x[l];
-            g[l] = d[n][l];
-        }
+        // `Σ d_k x^k (1 - x)^(n-k)` by Horner's rule in `x` with the powers of `1 - x`.
+        let u = one - x;
+        let (mut g, mut up) = (d[n], one);
         for k in (0..n).rev() {
-            for l in 0..LANES {
-                up[l] = up[l] * u[l];
-                g[l] = g[l] * x[l] + d[k][l] * up[l];
-            }
+            up *= u;
+            g = g * x + d[k] * up;
         }
         // Anderson–Björck: an end kept twice in a row has its value scaled down.
-        for l in 0..m {
-            if !active[l] {
-                continue;
-            }
-            let gx = g[l];
-            if gx < zero {
-                if side[l] < 0 {
-                    let mm = one - gx / fa[l];
-                    fb[l] = fb[l] * if mm > zero { mm } else { half };
-                }
-                (a[l], ga[l], fa[l], side[l]) = (x[l], gx, gx, -1);
-            } else {
-                if side[l] > 0 {
-                    let mm = one - gx / fb[l];
-                    fa[l] = fa[l] * if mm > zero { mm } else { half };
-                }
-                (b[l], gb[l], fb[l], side[l]) = (x[l], gx, gx, 1);
+        let mut on = [0.0f32; LANES];
+        for (l, o) in on.iter_mut().enumerate() {
+            if active & (1 << l) != 0 {
+                *o = f32::from_bits(u32::MAX);
             }
         }
+        let on = f32x8::from(on);
+        let below = g.cmp_lt(zero);
+        let (to_a, to_b) = (on & below, on & !below);
+        let ma = one - g / fa;
+        let mb = one - g / fb;
+        let fb_kept = side
+            .cmp_lt(zero)
+            .blend(fb * ma.cmp_gt(zero).blend(ma, half), fb);
+        let fa_kept = side
+            .cmp_gt(zero)
+            .blend(fa * mb.cmp_gt(zero).blend(mb, half), fa);
+        fb = to_a.blend(fb_kept, fb);
+        fa = to_b.blend(fa_kept, fa);
+        (a, ga, fa) = (to_a.blend(x, a), to_a.blend(g, ga), to_a.blend(g, fa));
+        (b, gb, fb) = (to_b.blend(x, b), to_b.blend(g, gb), to_b.blend(g, fb));
+        side = to_a.blend(-one, to_b.blend(one, side));
     }
     for (l, p) in pieces.iter().enumerate() {
         out[l].0 = out[l].0.map(|v| p.a + p.h * v);
