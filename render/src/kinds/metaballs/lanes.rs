@@ -25,8 +25,9 @@ use wide::{f32x8, CmpGt, CmpLe, CmpLt};
 pub const LANES: usize = 8;
 
 /// Each piece's root as a ray parameter (`None` past the iteration cap, as `isolated_root`)
-/// and the section's iterations after it, into `out` (cleared first). Pieces of one degree
-/// run in lanes, [`LANES`] at a time; any other degree one by one.
+/// and the section's iterations after it, into `out` (cleared first). Pieces run in lanes,
+/// [`LANES`] at a time, where a chunk's pieces all have the first piece's degree (a packet's
+/// do: one kernel); a chunk that mixes degrees is solved one piece at a time.
 pub fn solve(pieces: &[Piece<f32>], out: &mut Vec<(Option<f32>, u32)>) {
     out.clear();
     let Some(first) = pieces.first() else {
