@@ -42,6 +42,10 @@ pub struct SceneEntry {
     /// Stored steps prepared for this scene so far (cache misses); demos count in their
     /// pipeline. A scene nobody watches builds nothing.
     states_built: std::sync::atomic::AtomicU64,
+    /// Pool seconds per pixel of this scene's latest interactive frames, as the frame's
+    /// session estimated it (`f64` bits; 0: none yet): a new viewer's first frame starts from
+    /// it instead of from the full size.
+    pixel_cost: std::sync::atomic::AtomicU64,
 }
 
 enum Source {
@@ -73,6 +77,7 @@ impl SceneEntry {
         };
         SceneEntry {
             states_built: Default::default(),
+            pixel_cost: Default::default(),
             id: demo.id().to_string(),
             source: Source::Demo {
                 demo,
@@ -87,6 +92,7 @@ impl SceneEntry {
     pub(crate) fn stored(scene: Arc<StoredScene>, cache: Arc<PreparedCache>) -> SceneEntry {
         SceneEntry {
             states_built: Default::default(),
+            pixel_cost: Default::default(),
             id: scene.meta.id.clone(),
             source: Source::Stored {
                 setup: scene.setup.clone(),
@@ -226,6 +232,20 @@ impl SceneEntry {
     /// scene changes when a step is pushed).
     pub fn animates(&self) -> bool {
         matches!(self.source, Source::Demo { .. })
+    }
+
+    /// Pool seconds per pixel of the scene's latest interactive frames (see the field).
+    pub fn pixel_cost(&self) -> Option<f64> {
+        let bits = self.pixel_cost.load(std::sync::atomic::Ordering::Relaxed);
+        Some(f64::from_bits(bits)).filter(|c| *c > 0.0 && c.is_finite())
+    }
+
+    /// Records a session's estimate of the pool seconds a pixel of this scene costs.
+    pub fn note_pixel_cost(&self, seconds: f64) {
+        if seconds > 0.0 && seconds.is_finite() {
+            self.pixel_cost
+                .store(seconds.to_bits(), std::sync::atomic::Ordering::Relaxed);
+        }
     }
 
     /// States prepared for this scene since the server started (cache misses).

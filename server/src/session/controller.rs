@@ -61,6 +61,9 @@ pub struct Controller {
     pub bandwidth_scale: f64,
     /// Consecutive interactive frames since the last still frame.
     pub motion_frames: u32,
+    /// The per-pixel cost came from other sessions ([`Controller::starting_from`]) and no
+    /// frame has been planned yet: the first plan takes the size it gives at once.
+    seeded: bool,
 }
 
 impl Controller {
@@ -73,7 +76,20 @@ impl Controller {
             pool_s_per_pixel: None,
             bandwidth_scale: 1.0,
             motion_frames: 0,
+            seeded: false,
         }
+    }
+
+    /// Starts from the pool seconds per pixel other sessions of the scene measured, if any:
+    /// a viewer who joins a busy server then gets a first frame that fits its share, instead
+    /// of a full-size one that every other session's frames wait behind (sixteen viewers
+    /// opening a 1280×720 view of `scattered-1k` at once queued a second of full-size frames).
+    pub fn starting_from(mut self, pool_s_per_pixel: Option<f64>) -> Controller {
+        if let Some(cost) = pool_s_per_pixel.filter(|c| *c > 0.0 && c.is_finite()) {
+            self.pool_s_per_pixel = Some(cost);
+            self.seeded = true;
+        }
+        self
     }
 
     /// The scale for the next interactive frame at `fps` with `sessions` competing.
@@ -82,7 +98,11 @@ impl Controller {
             let budget_s = FRAME_BUDGET_SHARE / (fps * sessions.max(1) as f64);
             let full_pixels = full.0 as f64 * full.1 as f64;
             let wanted = (budget_s / (per_pixel * full_pixels)).sqrt();
-            self.scale = 0.5 * self.scale + 0.5 * wanted;
+            self.scale = if std::mem::take(&mut self.seeded) {
+                wanted
+            } else {
+                0.5 * self.scale + 0.5 * wanted
+            };
         }
         self.scale = self
             .scale
@@ -287,6 +307,36 @@ mod tests {
             (shared - alone / 2.0).abs() < 0.01,
             "four sessions: half the scale"
         );
+    }
+
+    #[test]
+    fn a_controller_seeded_by_other_sessions_plans_its_first_frame_to_fit() {
+        // 1 µs of pool time per pixel, sixteen sessions at 10 fps: 3.75 ms a frame, 3,750
+        // pixels of a million: scale 0.061.
+        let wanted = (0.6f64 / (10.0 * 16.0) / 1e-6 / 1e6).sqrt();
+        let mut seeded = Controller::new(80, 0.01).starting_from(Some(1e-6));
+        let first = seeded.plan_scale((1000, 1000), 10.0, 16);
+        assert!((first - wanted).abs() < 1e-9, "{first} against {wanted}");
+        // Later frames move halfway, as every controller does.
+        seeded.observe(
+            10_000,
+            JobCost {
+                pool_s: 0.04,
+                ..JobCost::default()
+            },
+            1,
+            Codec::Jpeg,
+            None,
+            10.0,
+        );
+        let second = seeded.plan_scale((1000, 1000), 10.0, 16);
+        assert!(second < first && second > 0.5 * first, "{second}");
+        // Without a measurement to start from, the first frame is full size; a cost that is
+        // no cost seeds nothing.
+        let mut fresh = Controller::new(80, 0.01).starting_from(None);
+        assert_eq!(fresh.plan_scale((1000, 1000), 10.0, 16), 1.0);
+        let mut zero = Controller::new(80, 0.01).starting_from(Some(0.0));
+        assert_eq!(zero.plan_scale((1000, 1000), 10.0, 16), 1.0);
     }
 
     #[test]

@@ -236,7 +236,8 @@ pub async fn render_loop(
     // Scene time steps: every session of a scene sees the same grid, so they share states.
     let time_step_fps = config.max_fps;
     let still_delay = Duration::from_millis(config.still_after_ms);
-    let mut controller = Controller::new(config.jpeg_quality, config.min_scale);
+    let mut controller =
+        Controller::new(config.jpeg_quality, config.min_scale).starting_from(entry.pixel_cost());
     let mut video: VideoState = None;
     // What the last frame showed: settings version, state key, and whether it was the still.
     let mut last: Option<(u64, u128, Quality)> = None;
@@ -362,6 +363,11 @@ pub async fn render_loop(
                     shared,
                     stats,
                 );
+                if plan.quality == Quality::Interactive {
+                    if let Some(per_pixel) = controller.pool_s_per_pixel {
+                        entry.note_pixel_cost(per_pixel);
+                    }
+                }
             }
             Ok((Err(e), _)) => {
                 stats.frames_dropped.fetch_add(1, Ordering::Relaxed);
