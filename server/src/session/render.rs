@@ -172,11 +172,23 @@ fn submit_frame(
     })
 }
 
-/// What the slot needs to know about a frame besides the frame.
-struct Shown {
+/// What the slot needs to know about a frame besides the frame, and the scene it showed.
+struct Shown<'a> {
     sequence: u64,
     input_at: Option<Instant>,
     fps: f64,
+    entry: &'a SceneEntry,
+}
+
+impl<'a> Shown<'a> {
+    fn new(sequence: u64, input_at: Option<Instant>, fps: f64, entry: &'a SceneEntry) -> Self {
+        Shown {
+            sequence,
+            input_at,
+            fps,
+            entry,
+        }
+    }
 }
 
 /// Tells the controller what the frame cost and puts it in the slot for the writer.
@@ -201,6 +213,9 @@ fn show(
             shared.bandwidth().estimate(),
             shown.fps,
         );
+        if let Some(per_pixel) = controller.pool_s_per_pixel {
+            shown.entry.note_pixel_cost(per_pixel);
+        }
     } else {
         controller.motion_frames = 0;
     }
@@ -349,11 +364,7 @@ pub async fn render_loop(
                 if rendered.state_time.is_some() {
                     seen = rendered.state_time;
                 }
-                let shown = Shown {
-                    sequence,
-                    input_at,
-                    fps,
-                };
+                let shown = Shown::new(sequence, input_at, fps, entry);
                 show(
                     rendered,
                     cost,
@@ -363,11 +374,6 @@ pub async fn render_loop(
                     shared,
                     stats,
                 );
-                if plan.quality == Quality::Interactive {
-                    if let Some(per_pixel) = controller.pool_s_per_pixel {
-                        entry.note_pixel_cost(per_pixel);
-                    }
-                }
             }
             Ok((Err(e), _)) => {
                 stats.frames_dropped.fetch_add(1, Ordering::Relaxed);
