@@ -97,8 +97,15 @@ struct SessionReport {
     settled_size: String,
     /// Connections opened again after the server closed one (a process restarted, say).
     reconnects: u64,
+    /// Scene seconds the frames' headers advanced per wall second, from the first frame to the
+    /// last (1: an animated demo runs in real time, whatever the number of viewers); `None`
+    /// with fewer than two frames.
+    animation_rate: Option<f64>,
     #[serde(skip)]
     latencies_ms: Vec<f64>,
+    /// (arrival, scene time) of the first and the latest frame.
+    #[serde(skip)]
+    scene_span: Option<((Instant, f64), (Instant, f64))>,
     /// (arrival, width, height) of every frame.
     #[serde(skip)]
     sizes: Vec<(Instant, u32, u32)>,
@@ -122,6 +129,8 @@ struct Report {
     latency_p50_ms: f64,
     latency_p95_ms: f64,
     latency_p99_ms: f64,
+    /// Median over the viewers of [`SessionReport::animation_rate`].
+    animation_rate_median: Option<f64>,
     errors: u64,
     reconnects: u64,
     per_session: Vec<SessionReport>,
@@ -296,7 +305,15 @@ pub fn run(args: LoadArgs) -> Result<(), String> {
             0.0
         };
         s.settled_size = settled_size(&s.sizes);
+        s.animation_rate = s.scene_span.and_then(|((t0, s0), (t1, s1))| {
+            let wall = t1.saturating_duration_since(t0).as_secs_f64();
+            (wall > 0.0).then(|| (s1 - s0) / wall)
+        });
     }
+    let rates: Vec<f64> = per_session
+        .iter()
+        .filter_map(|s| s.animation_rate)
+        .collect();
     let mut all: Vec<f64> = per_session
         .iter()
         .flat_map(|s| s.latencies_ms.iter().copied())
@@ -323,6 +340,7 @@ pub fn run(args: LoadArgs) -> Result<(), String> {
         latency_p50_ms: quantile(&all, 0.50),
         latency_p95_ms: quantile(&all, 0.95),
         latency_p99_ms: quantile(&all, 0.99),
+        animation_rate_median: (!rates.is_empty()).then(|| crate::common::median(rates)),
         errors: per_session.iter().map(|s| s.errors).sum::<u64>()
             + pushers.iter().map(|p| p.failed).sum::<u64>(),
         reconnects: per_session.iter().map(|s| s.reconnects).sum(),
@@ -391,6 +409,12 @@ fn print_report(r: &Report) {
         r.errors,
         r.reconnects
     );
+    if let Some(rate) = r.animation_rate_median {
+        println!(
+            "scene time in the frames' headers: {rate:.2} s per wall second (median over the \
+             viewers; 1.00 for an animated demo in real time, 0 for a still scene)"
+        );
+    }
     for p in &r.pushers {
         println!(
             "pusher {}: {} steps pushed, {} failed; push p50 {:.1} ms, p95 {:.1} ms, max {:.1} ms{}",
@@ -487,6 +511,10 @@ async fn reconnecting_viewer(
         }
         total.latencies_ms.extend(r.latencies_ms);
         total.sizes.extend(r.sizes);
+        total.scene_span = match (total.scene_span, r.scene_span) {
+            (Some((first, _)), Some((_, last))) => Some((first, last)),
+            (a, b) => a.or(b),
+        };
         if r.errors == 0 || Instant::now() + Duration::from_millis(500) >= end {
             return total;
         }
@@ -639,6 +667,8 @@ async fn viewer(
                         first_frame.get_or_insert(now);
                         report.frames += 1;
                         report.sizes.push((now, header.width, header.height));
+                        let seen = (now, header.scene_time);
+                        report.scene_span = Some(report.scene_span.map_or((seen, seen), |(first, _)| (first, seen)));
                         report.bytes += (bytes.len().saturating_sub(FRAME_HEADER_LEN)) as u64;
                         if header.input_id > answered {
                             answered = header.input_id;
