@@ -92,8 +92,14 @@ impl Controller {
         self
     }
 
-    /// The scale for the next interactive frame at `fps` with `sessions` competing.
+    /// The scale for the next interactive frame at `fps` with `sessions` competing. Before any
+    /// measurement (the scene's first viewers since the server started), the frame takes its
+    /// share of the pixels: full size alone, a sixteenth of them among sixteen sessions, so
+    /// that viewers arriving together cost the pool what one full-size viewer would.
     pub fn plan_scale(&mut self, full: (u32, u32), fps: f64, sessions: usize) -> f64 {
+        if self.pool_s_per_pixel.is_none() {
+            self.scale = self.scale.min((1.0 / sessions.max(1) as f64).sqrt());
+        }
         if let Some(per_pixel) = self.pool_s_per_pixel {
             let budget_s = FRAME_BUDGET_SHARE / (fps * sessions.max(1) as f64);
             let full_pixels = full.0 as f64 * full.1 as f64;
@@ -331,12 +337,15 @@ mod tests {
         );
         let second = seeded.plan_scale((1000, 1000), 10.0, 16);
         assert!(second < first && second > 0.5 * first, "{second}");
-        // Without a measurement to start from, the first frame is full size; a cost that is
-        // no cost seeds nothing.
+        // Without a measurement to start from, the first frame takes its share of the pixels:
+        // full size alone, a quarter of the width among sixteen; a cost that is no cost seeds
+        // nothing.
+        let mut alone = Controller::new(80, 0.01).starting_from(None);
+        assert_eq!(alone.plan_scale((1000, 1000), 10.0, 1), 1.0);
         let mut fresh = Controller::new(80, 0.01).starting_from(None);
-        assert_eq!(fresh.plan_scale((1000, 1000), 10.0, 16), 1.0);
+        assert_eq!(fresh.plan_scale((1000, 1000), 10.0, 16), 0.25);
         let mut zero = Controller::new(80, 0.01).starting_from(Some(0.0));
-        assert_eq!(zero.plan_scale((1000, 1000), 10.0, 16), 1.0);
+        assert_eq!(zero.plan_scale((1000, 1000), 10.0, 16), 0.25);
     }
 
     #[test]
