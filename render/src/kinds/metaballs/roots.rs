@@ -33,9 +33,7 @@
 //! the rounding of the field itself.
 
 // Re-exported for the other crates' paths; the definitions are in `bezier` and `real`.
-use crate::kinds::metaballs::bezier::{
-    bezier_first_root, first_root_or_piece, power_to_bernstein, Piece,
-};
+use crate::kinds::metaballs::bezier::{first_root_or_piece, power_to_bernstein, Piece};
 pub use crate::kinds::metaballs::bezier::{HalfStack, ITERATION_CAP, MAX_DEGREE};
 pub use crate::kinds::metaballs::counters::Found;
 pub use crate::kinds::metaballs::kernel::KernelPoly;
@@ -764,18 +762,8 @@ fn bezier_section_of<R: Real>(
     let mut bern = [R::default(); MAX_DEGREE + 1];
     power_to_bernstein(&poly, degree, &mut bern);
     let tol_v = p.tolerance / h;
-    let halves = &mut scratch.halves;
-    if !scratch.defer {
-        return bezier_first_root(&bern, degree, tol_v, iters, halves).map(|v| a + h * v);
-    }
-    let v = first_root_or_piece(
-        &bern,
-        degree,
-        tol_v,
-        iters,
-        halves,
-        Some(&mut scratch.piece),
-    );
+    let defer = scratch.defer.then_some(&mut scratch.piece);
+    let v = first_root_or_piece(&bern, degree, tol_v, iters, &mut scratch.halves, defer);
     if let Some(piece) = &mut scratch.piece {
         (piece.a, piece.h) = (a, h);
     }
