@@ -16,11 +16,12 @@
 //!    lies outside the pyramid of the rectangle's rays (widened by a pixel,
 //!    [`crate::geom::tile::Frustum`]) is missed by every one of them, so no ray would gather it
 //!    (a Fitted BVH leaf of Pool holds 33 balls of which a ray gathers 3). Then each ray of the
-//!    rectangle not yet done, from the first active one on, gets its own slab test and, where
-//!    it crosses the leaf, the single-ray leaf search over the remaining balls
-//!    ([`PreparedMetaballs::search_leaf`]) on the same `[near, far]`: the same balls gathered
-//!    in the same order. A ray is done at its first root, as a single ray is at the first leaf
-//!    with a root.
+//!    rectangle not yet done, from the first active one on, gets its own slab test; those
+//!    that cross the leaf gather its remaining balls eight rays at a time
+//!    ([`SharedOriginBalls::gather_rays`]; the same balls in the same order, to the bit, as
+//!    the single ray's gather on the same `[near, far]`) and each searches them with the
+//!    single ray's leaf search. A ray is done at its first root, as a single ray is at the
+//!    first leaf with a root.
 //! 4. Roots in lanes: a search that ends on an isolated piece (one simple root, nearly every
 //!    hit) is done there, since its first root lies in it, and the piece is set aside; after
 //!    the walk the tile's pieces are solved eight at a time ([`lanes`]), every lane with the
@@ -35,14 +36,16 @@
 //! rays, as it does with [`super::PrepareOptions::packets`] off.
 
 use super::queries::search_gathered;
-use super::soa::SharedOriginBalls;
+use super::soa::{SharedOriginBalls, RAY_LANES};
 use super::{Accel, PreparedMetaballs, SCRATCH};
 use crate::camera::PrimaryRays;
 use crate::geom::aabb::Aabb;
 use crate::geom::tile::TileGrid;
 use crate::kinds::metaballs::counters::MetaballCounters;
 use crate::kinds::metaballs::lanes::{self, Piece};
-use crate::kinds::metaballs::roots::{self, Found, RayBall, RootFinder, ITERATION_CAP};
+use crate::kinds::metaballs::roots::{
+    self, FindParams, Found, RayBall, RootFinder, Scratch, ITERATION_CAP,
+};
 use crate::kinds::metaballs::tree::Tree;
 use crate::ray::{Hit, Ray};
 use glam::Vec3;
@@ -58,6 +61,8 @@ struct TileBuffers {
     stack: Vec<(u32, u32)>,
     /// A leaf's balls less those outside the cover's pyramid.
     culled: Vec<u32>,
+    /// The rays of a leaf's cover that cross its box: (ray, near, far).
+    crossing: Vec<(u32, f32, f32)>,
     soa: SharedOriginBalls,
     aside: SetAside,
 }
@@ -93,6 +98,47 @@ impl SetAside {
         let range = (start, self.balls.len() as u32);
         self.rays.push((ray as u32, found, range));
         self.pieces.push(piece);
+    }
+}
+
+/// What every ray of a packet searches with.
+struct Walk<'a> {
+    rays: &'a [Ray],
+    params: FindParams<f32>,
+    finder: RootFinder,
+    /// Searches set their isolated pieces aside ([`PreparedMetaballs::sets_roots_aside`]).
+    defer: bool,
+    isovalue: f32,
+    t_max: f32,
+}
+
+/// Where a packet's rays end: their hits, which are done, the pieces set aside.
+struct Ends<'a> {
+    out: &'a mut [(Ray, Option<Hit>)],
+    done: &'a mut [bool],
+    aside: &'a mut SetAside,
+}
+
+impl Ends<'_> {
+    /// Ray `r`'s leaf search over the balls `gathered` found `found`: a root ends the ray.
+    fn record(
+        &mut self,
+        m: &PreparedMetaballs,
+        walk: &Walk,
+        r: usize,
+        found: Option<f32>,
+        gathered: &[RayBall<f32>],
+        counters: &mut MetaballCounters,
+    ) {
+        if let Some(mut t) = found {
+            let ray = &walk.rays[r];
+            if m.options.refine_f64 {
+                t = m.refine_f64(ray, t, 0.0, walk.t_max, walk.isovalue, gathered);
+            }
+            counters.hits += 1;
+            self.out[r].1 = Some(m.hit_at(ray, t, gathered));
+            self.done[r] = true;
+        }
     }
 }
 
@@ -180,6 +226,7 @@ impl PreparedMetaballs {
             done,
             stack,
             culled,
+            crossing,
             soa,
             aside,
         } = buffers;
@@ -192,13 +239,19 @@ impl PreparedMetaballs {
         if tile_rays.iter().any(|r| r.origin != origin) {
             return None;
         }
-        let params = self.params(isovalue);
         let finder = self.options.finder;
         // The tile's rays and hits, the hits filled in as rays finish.
         let mut out: Vec<(Ray, Option<Hit>)> = tile_rays.iter().map(|&ray| (ray, None)).collect();
         done.clear();
         done.resize(n, false);
-        let defer = self.sets_roots_aside();
+        let walk = Walk {
+            rays: tile_rays,
+            params: self.params(isovalue),
+            finder,
+            defer: self.sets_roots_aside(),
+            isovalue,
+            t_max,
+        };
         counters.rays += n as u64;
         SCRATCH.with(|cell| {
             let mut guard = cell.borrow_mut();
@@ -229,58 +282,56 @@ impl PreparedMetaballs {
                     if balls.is_empty() {
                         continue;
                     }
-                    let shared = soa.load(&self.balls, origin, balls);
+                    // The cover's rays not done that cross the leaf's box, with their ranges.
+                    crossing.clear();
                     cover.visit(width, from as usize, n, |r| {
-                        if done[r] {
-                            return false;
-                        }
-                        let ray = &tile_rays[r];
-                        let Some((near, far)) = node.bounds.ray_range(origin, inv[r], 0.0, t_max)
-                        else {
-                            return false;
-                        };
-                        let found = if shared {
-                            gathered.clear();
-                            soa.gather(&self.balls, ray.dir, near, far, gathered);
-                            if !defer || gathered.is_empty() {
-                                search_gathered(
-                                    &params, finder, near, far, gathered, scratch, counters,
-                                )
-                            } else {
-                                let (found, piece) = roots::find_first_deferring(
-                                    finder, &params, gathered, near, far, scratch,
-                                );
-                                if let Some(piece) = piece {
-                                    aside.push(r, found, piece, gathered);
-                                    done[r] = true;
-                                    return false;
-                                }
-                                found.counted(counters, gathered.len())
+                        if !done[r] {
+                            if let Some((near, far)) =
+                                node.bounds.ray_range(origin, inv[r], 0.0, t_max)
+                            {
+                                crossing.push((r as u32, near, far));
                             }
-                        } else {
-                            self.search_leaf(
+                        }
+                        false
+                    });
+                    if crossing.is_empty() {
+                        continue;
+                    }
+                    let mut ends = Ends {
+                        out: &mut out,
+                        done: &mut done[..],
+                        aside: &mut *aside,
+                    };
+                    if soa.load(&self.balls, origin, balls) {
+                        for rays in crossing.chunks(RAY_LANES) {
+                            soa.gather_rays(rays, tile_rays);
+                            for (lane, &(r, near, far)) in rays.iter().enumerate() {
+                                gathered.clear();
+                                soa.lane_gathered(&self.balls, lane, gathered);
+                                let search = (r as usize, near, far);
+                                self.end_search(
+                                    &walk, search, gathered, scratch, &mut ends, counters,
+                                );
+                            }
+                        }
+                    } else {
+                        for &(r, near, far) in crossing.iter() {
+                            let ray = &tile_rays[r as usize];
+                            let found = self.search_leaf(
                                 balls,
                                 balls.len(),
                                 ray,
                                 near,
                                 far,
-                                &params,
+                                &walk.params,
                                 finder,
                                 gathered,
                                 scratch,
                                 counters,
-                            )
-                        };
-                        if let Some(mut t) = found {
-                            if self.options.refine_f64 {
-                                t = self.refine_f64(ray, t, 0.0, t_max, isovalue, gathered);
-                            }
-                            counters.hits += 1;
-                            out[r].1 = Some(self.hit_at(ray, t, gathered));
-                            done[r] = true;
+                            );
+                            ends.record(self, &walk, r as usize, found, gathered, counters);
                         }
-                        false
-                    });
+                    }
                     continue;
                 }
                 // The first active ray: the first of the cover, from the packet's, that is not
@@ -307,6 +358,46 @@ impl PreparedMetaballs {
         });
         self.settle_aside(aside, &mut out, isovalue, t_max, counters);
         Some(out)
+    }
+
+    /// Ray `r`'s search of a leaf on `[near, far]` over `gathered`, the leaf's balls its
+    /// support crosses there: a root ends the ray, and so does an isolated piece set aside.
+    fn end_search(
+        &self,
+        walk: &Walk,
+        (r, near, far): (usize, f32, f32),
+        gathered: &[RayBall<f32>],
+        scratch: &mut Scratch<f32>,
+        ends: &mut Ends,
+        counters: &mut MetaballCounters,
+    ) {
+        let found = if !walk.defer || gathered.is_empty() {
+            search_gathered(
+                &walk.params,
+                walk.finder,
+                near,
+                far,
+                gathered,
+                scratch,
+                counters,
+            )
+        } else {
+            let (found, piece) = roots::find_first_deferring(
+                walk.finder,
+                &walk.params,
+                gathered,
+                near,
+                far,
+                scratch,
+            );
+            if let Some(piece) = piece {
+                ends.aside.push(r, found, piece, gathered);
+                ends.done[r] = true;
+                return;
+            }
+            found.counted(counters, gathered.len())
+        };
+        ends.record(self, walk, r, found, gathered, counters);
     }
 
     /// Whether a packet's Bézier searches set their isolated pieces aside, to be solved in

@@ -369,53 +369,71 @@ fn a_hint_from_another_state_is_not_used() {
 
 /// The structure-of-arrays gather of a packet leaf gives, for every ray from the shared
 /// origin, the balls the single ray's gather gives, field for field to the bit: every demo's
-/// spheres, rays from its camera through a grid over the image, a range cutting some balls;
-/// all the balls at once (the vector pass) and the first 84 in runs of 1, 3 and 7 (the one
-/// scalar pass for leaves with few balls).
+/// spheres, rays from its camera through a grid over the image in groups of 1 to 8 lanes (the
+/// lanes past a short group's last ray unused), each ray with a range of its own that cuts
+/// some balls; all the balls at once and the first 84 in leaves of 1, 3 and 7.
 #[test]
 fn the_shared_origin_gather_is_the_single_rays_bit_for_bit() {
-    use super::soa::SharedOriginBalls;
-    let (mut compared, mut in_small_runs) = (0usize, 0usize);
+    use super::soa::{SharedOriginBalls, RAY_LANES};
+    let (mut compared, mut in_small_leaves) = (0usize, 0usize);
     for (demo, prepared, m) in demos() {
         let all: Vec<u32> = (0..m.balls.len() as u32).collect();
         let rays = prepared.primary_rays(&demo.default_camera(), WIDTH, HEIGHT);
         let origin = rays.through_pixel(0, 0).origin;
         let reach = (demo.default_camera().target - origin).length();
-        let (lo, hi) = (0.0, 2.0 * reach);
-        let runs = [all.len(), 1, 3, 7];
-        for (r, run) in runs.into_iter().enumerate() {
-            // Runs of few balls from the first 84 balls (enough runs, quick).
+        let ranges = [
+            (0.0, 2.0 * reach),
+            (0.8 * reach, 1.1 * reach),
+            (0.0, 0.9 * reach),
+        ];
+        let mut grid: Vec<Ray> = Vec::new();
+        let mut crossing: Vec<(u32, f32, f32)> = Vec::new();
+        for y in (0..HEIGHT).step_by(3) {
+            for x in (0..WIDTH).step_by(3) {
+                let (lo, hi) = ranges[grid.len() % ranges.len()];
+                crossing.push((grid.len() as u32, lo, hi));
+                grid.push(rays.through_pixel(x, y));
+            }
+        }
+        for (r, leaf) in [all.len(), 1, 3, 7].into_iter().enumerate() {
+            // Leaves of few balls from the first 84 balls (enough of them, quick).
             let pool = if r == 0 {
                 &all[..]
             } else {
                 &all[..all.len().min(84)]
             };
-            for balls in pool.chunks(run.max(1)) {
+            for balls in pool.chunks(leaf.max(1)) {
                 let mut soa = SharedOriginBalls::default();
                 if !soa.load(&m.balls, origin, balls) {
                     continue; // ellipsoids: the packet gathers as single rays do
                 }
-                for y in (0..HEIGHT).step_by(3) {
-                    for x in (0..WIDTH).step_by(3) {
-                        let ray = rays.through_pixel(x, y);
+                let mut start = 0;
+                for group in [RAY_LANES, 3, 1, RAY_LANES - 1].into_iter().cycle() {
+                    let end = (start + group).min(crossing.len());
+                    if start == end {
+                        break;
+                    }
+                    soa.gather_rays(&crossing[start..end], &grid);
+                    for (lane, &(i, lo, hi)) in crossing[start..end].iter().enumerate() {
                         let (mut single, mut shared) = (Vec::new(), Vec::new());
                         for &b in balls {
-                            m.gather(&ray, b, true, lo, hi, &mut single);
+                            m.gather(&grid[i as usize], b, true, lo, hi, &mut single);
                         }
-                        soa.gather(&m.balls, ray.dir, lo, hi, &mut shared);
-                        let at = || format!("{demo:?} {x},{y}, runs of {run}");
+                        soa.lane_gathered(&m.balls, lane, &mut shared);
+                        let at = || format!("{demo:?} ray {i} lane {lane}, leaves of {leaf}");
                         let n = assert_same_balls(&single, &shared, at);
                         compared += n;
-                        in_small_runs += if r > 0 { n } else { 0 };
+                        in_small_leaves += if r > 0 { n } else { 0 };
                     }
+                    start = end;
                 }
             }
         }
     }
     assert!(compared > 1000, "{compared} gathered balls compared");
     assert!(
-        in_small_runs > 1000,
-        "{in_small_runs} gathered from runs of few balls"
+        in_small_leaves > 1000,
+        "{in_small_leaves} gathered from leaves of few balls"
     );
 }
 

@@ -2,21 +2,20 @@
 //!
 //! Every primary ray of a tile starts at the eye, so each sphere's `e = (o − p) / R` (the
 //! origin in the ball's unit frame) is the same for all of them and is computed once per leaf
-//! and packet. Per ray, the quantities [`RayBall::along`] derives (`a = |g|²`,
-//! `tc = −e·g / a`, `s_min = |e + tc g|²` with `g = d / R`) are computed for all the leaf's balls
-//! in one branch-free loop over the arrays, which the compiler turns into vector code (checked
-//! in the release assembly: `mulps`/`divps` over 4 lanes at the portable `x86-64` level);
-//! only the balls whose support the ray crosses go on to the scalar tail. A leaf with fewer
-//! than [`FUSED_BELOW`] balls left after the packet's culling (most on `scattered-1k`) takes
-//! one scalar pass with the same operations instead. The operations and
-//! their order are those of `PreparedMetaballs::gather` with `along`, in IEEE `f32` without
-//! contraction, so the gathered balls are bit for bit the single ray's.
+//! and packet. The quantities [`RayBall::along`] derives (`a = |g|²`, `tc = −e·g / a`,
+//! `s_min = |e + tc g|²` with `g = d / R`) and the support's span are then computed for
+//! [`RAY_LANES`] rays at once, ball by ball, in `wide`'s `f32x8`: across rays rather than
+//! across balls, so that the leaves of few balls left after the packet's culling (most of
+//! `scattered-1k`'s) fill the vector too. The operations and their order are those of
+//! `PreparedMetaballs::gather` with `along`, in IEEE `f32` without contraction, so the
+//! gathered balls are bit for bit the single ray's.
 
 use crate::kinds::metaballs::roots::RayBall;
 use crate::kinds::metaballs::tree::Tree;
 use crate::ray::Ray;
 use glam::Vec3;
 use rayon::prelude::*;
+use wide::{f32x8, CmpGt, CmpLt};
 
 /// The hot-path copy of one ball.
 #[derive(Clone, Copy, Debug)]
@@ -54,12 +53,6 @@ impl Ball {
     }
 }
 
-/// Balls below which [`SharedOriginBalls::gather`] takes one scalar pass instead of a
-/// vector pass and a filter pass (callgrind, ray cast at 320×240 on one thread: 8 saves
-/// 2.1% of `scattered-1k`'s instructions and 1.0% of `blobs`', against 1.2% and 0.6% for 4;
-/// 16 costs Molecule 1.5%).
-const FUSED_BELOW: usize = 8;
-
 /// The balls of one leaf for one shared origin (spheres only).
 #[derive(Debug, Default)]
 pub(super) struct SharedOriginBalls {
@@ -68,10 +61,16 @@ pub(super) struct SharedOriginBalls {
     ey: Vec<f32>,
     ez: Vec<f32>,
     inv_r: Vec<f32>,
-    a: Vec<f32>,
-    tc: Vec<f32>,
-    s_min: Vec<f32>,
+    /// The loaded balls some ray of the last [`SharedOriginBalls::gather_rays`] crosses
+    /// within its range, in the loaded order: (ball's place in the load, its lanes as bits).
+    lane_hits: Vec<(u32, u8)>,
+    /// For each of `lane_hits`, `(t0, t1, a, tc, s_min)` of every lane.
+    lane_spans: Vec<[[f32; RAY_LANES]; 5]>,
 }
+
+/// Rays [`SharedOriginBalls::gather_rays`] tests a leaf's balls against at once: `wide`'s
+/// `f32x8`, one AVX register or two SSE ones in the portable build.
+pub(super) const RAY_LANES: usize = 8;
 
 impl SharedOriginBalls {
     /// Loads `balls` (indices into `m`'s balls) as seen from `origin`; `false` when one of them
@@ -95,52 +94,77 @@ impl SharedOriginBalls {
             self.ez.push(e.z);
             self.inv_r.push(b.inv_r);
         }
-        let n = self.ids.len();
-        self.a.resize(n, 0.0);
-        self.tc.resize(n, 0.0);
-        self.s_min.resize(n, 0.0);
         true
     }
 
-    /// The balls whose support the ray along `dir` from the shared origin crosses within
-    /// `[lo, hi]`, appended to `out` in the loaded order: what
-    /// `PreparedMetaballs::gather` appends for each of them.
-    pub(super) fn gather(
-        &mut self,
-        records: &[Ball],
-        dir: Vec3,
-        lo: f32,
-        hi: f32,
-        out: &mut Vec<RayBall<f32>>,
-    ) {
-        let n = self.ids.len();
-        if n < FUSED_BELOW {
-            // Too few balls to fill a vector: one pass, the same operations ball by ball.
-            for k in 0..n {
-                let e = (self.ex[k], self.ey[k], self.ez[k]);
-                let (a, tc, s_min) = along_shared(dir, self.inv_r[k], e);
-                if let Some(span) = support_span(a, tc, s_min, lo, hi) {
-                    let i = self.ids[k];
-                    out.push(records[i as usize].seen(i, (span.0, span.1, a, tc, s_min), true));
-                }
+    /// Every loaded ball against up to [`RAY_LANES`] rays from the shared origin at once:
+    /// `rays[l] = (ray, near, far)` in lane `l`, directions from `dirs`. What
+    /// `PreparedMetaballs::gather` computes for one ray, the same IEEE operations in the same
+    /// order in every lane (so bit for bit; the negation flips the sign bit, as `-x` does on
+    /// a scalar), with the rays in the vector instead of the balls: a leaf of few balls (most
+    /// of `scattered-1k`'s after culling) fills the lanes too, and a ball no ray's line meets
+    /// (most of them) skips the span's division and square root. Read a lane's balls with
+    /// [`SharedOriginBalls::lane_gathered`].
+    pub(super) fn gather_rays(&mut self, rays: &[(u32, f32, f32)], dirs: &[Ray]) {
+        let m = rays.len();
+        debug_assert!((1..=RAY_LANES).contains(&m));
+        // Lanes past the last ray repeat it; their bits are cleared.
+        let mut lanes = [[0f32; RAY_LANES]; 5];
+        for l in 0..RAY_LANES {
+            let (i, near, far) = rays[l.min(m - 1)];
+            let dir = dirs[i as usize].dir;
+            (lanes[0][l], lanes[1][l], lanes[2][l]) = (dir.x, dir.y, dir.z);
+            (lanes[3][l], lanes[4][l]) = (near, far);
+        }
+        let [dx, dy, dz, lo, hi] = lanes.map(f32x8::from);
+        let live = ((1u32 << m) - 1) as i32;
+        let (zero, one, sign) = (f32x8::ZERO, f32x8::ONE, f32x8::splat(-0.0));
+        self.lane_hits.clear();
+        self.lane_spans.clear();
+        for k in 0..self.ids.len() {
+            let r = f32x8::splat(self.inv_r[k]);
+            let (ex, ey, ez) = (
+                f32x8::splat(self.ex[k]),
+                f32x8::splat(self.ey[k]),
+                f32x8::splat(self.ez[k]),
+            );
+            let (gx, gy, gz) = (dx * r, dy * r, dz * r);
+            let a = gx * gx + gy * gy + gz * gz;
+            let tc = ((ex * gx + ey * gy + ez * gz) ^ sign) / a;
+            let (qx, qy, qz) = (ex + tc * gx, ey + tc * gy, ez + tc * gz);
+            let s_min = qx * qx + qy * qy + qz * qz;
+            let inside = (a.cmp_gt(zero) & s_min.cmp_lt(one)).move_mask() & live;
+            if inside == 0 {
+                continue; // no ray meets the support: its span is not needed
             }
-            return;
+            let half = ((one - s_min) / a).sqrt();
+            let (t0, t1) = (tc - half, tc + half);
+            let apart = t1.cmp_lt(lo) | t0.cmp_gt(hi);
+            let hits = inside & !apart.move_mask();
+            if hits != 0 {
+                self.lane_hits.push((k as u32, hits as u8));
+                self.lane_spans.push([
+                    t0.to_array(),
+                    t1.to_array(),
+                    a.to_array(),
+                    tc.to_array(),
+                    s_min.to_array(),
+                ]);
+            }
         }
-        let (ex, ey, ez, inv_r) = (
-            &self.ex[..n],
-            &self.ey[..n],
-            &self.ez[..n],
-            &self.inv_r[..n],
-        );
-        let (a_out, tc_out, s_out) = (&mut self.a[..n], &mut self.tc[..n], &mut self.s_min[..n]);
-        for k in 0..n {
-            (a_out[k], tc_out[k], s_out[k]) = along_shared(dir, inv_r[k], (ex[k], ey[k], ez[k]));
-        }
-        for k in 0..n {
-            let (a, tc, s_min) = (self.a[k], self.tc[k], self.s_min[k]);
-            if let Some(span) = support_span(a, tc, s_min, lo, hi) {
-                let i = self.ids[k];
-                out.push(records[i as usize].seen(i, (span.0, span.1, a, tc, s_min), true));
+    }
+
+    /// The balls whose support lane `lane`'s ray of the last
+    /// [`SharedOriginBalls::gather_rays`] crosses within its range, appended to `out` in
+    /// the loaded order: what `PreparedMetaballs::gather` appends for that ray.
+    pub(super) fn lane_gathered(&self, records: &[Ball], lane: usize, out: &mut Vec<RayBall<f32>>) {
+        let bit = 1u8 << lane;
+        for (&(k, hits), spans) in self.lane_hits.iter().zip(&self.lane_spans) {
+            if hits & bit != 0 {
+                let i = self.ids[k as usize];
+                let [t0, t1, a, tc, s_min] = spans;
+                let span = (t0[lane], t1[lane], a[lane], tc[lane], s_min[lane]);
+                out.push(records[i as usize].seen(i, span, true));
             }
         }
     }
