@@ -239,7 +239,6 @@ impl PreparedMetaballs {
         if tile_rays.iter().any(|r| r.origin != origin) {
             return None;
         }
-        let finder = self.options.finder;
         // The tile's rays and hits, the hits filled in as rays finish.
         let mut out: Vec<(Ray, Option<Hit>)> = tile_rays.iter().map(|&ray| (ray, None)).collect();
         done.clear();
@@ -247,7 +246,7 @@ impl PreparedMetaballs {
         let walk = Walk {
             rays: tile_rays,
             params: self.params(isovalue),
-            finder,
+            finder: self.options.finder,
             defer: self.sets_roots_aside(),
             isovalue,
             t_max,
@@ -324,7 +323,7 @@ impl PreparedMetaballs {
                                 near,
                                 far,
                                 &walk.params,
-                                finder,
+                                walk.finder,
                                 gathered,
                                 scratch,
                                 counters,
