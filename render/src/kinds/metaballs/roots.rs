@@ -63,6 +63,13 @@ pub enum RootFinder {
 }
 
 impl RootFinder {
+    /// Whether this finder's search starts with the whole-stretch bound (`stretch_may_reach`),
+    /// answering "no root" without looking further when the bound is below the isovalue:
+    /// every finder that walks the sorted sections does; the secant method samples instead.
+    pub fn bounds_whole_stretch(self) -> bool {
+        !matches!(self, RootFinder::Secant)
+    }
+
     pub const ALL: [RootFinder; 4] = [
         RootFinder::March,
         RootFinder::Secant,
@@ -337,10 +344,10 @@ fn term_bound<R: Real, const W: usize>(
 }
 
 /// Whether the field can reach `T` anywhere on `[lo, hi]`: [`may_reach`]'s bound over the
-/// whole stretch, where a negative term counts only if its ball covers the whole stretch (a
-/// ball that does not may add 0). It is at least every section's bound, so when it says no,
-/// every section would have been skipped: the stretch is passed over before its events are
-/// sorted (an exit search through a leaf that lies inside the solid).
+/// whole stretch ([`stretch_bound`]) against the isovalue. It is at least every section's
+/// bound, so when it says no, every section would have been skipped: the stretch is passed
+/// over before its events are sorted (an exit search through a leaf that lies inside the
+/// solid).
 #[inline(always)]
 fn stretch_may_reach<R: Real, const W: usize>(
     p: &FindParams<R>,
@@ -348,6 +355,18 @@ fn stretch_may_reach<R: Real, const W: usize>(
     lo: R,
     hi: R,
 ) -> bool {
+    !(stretch_bound::<R, W>(p, balls, lo, hi) < p.isovalue)
+}
+
+/// [`may_reach`]'s bound over the whole of `[lo, hi]`, where a negative term counts only if
+/// its ball covers the whole stretch (a ball that does not may add 0).
+#[inline(always)]
+fn stretch_bound<R: Real, const W: usize>(
+    p: &FindParams<R>,
+    balls: &[RayBall<R>],
+    lo: R,
+    hi: R,
+) -> R {
     let peak = p.kernel.at_w_of::<W>(R::of(1.0));
     let mut bound = R::default();
     for ball in balls {
@@ -357,7 +376,7 @@ fn stretch_may_reach<R: Real, const W: usize>(
         }
         bound = bound + term_bound::<R, W>(p, peak, ball, a, b);
     }
-    !(bound < p.isovalue)
+    bound
 }
 
 /// Sorts the entry/exit points in `[lo, hi]` and calls `section` on each stretch between
@@ -772,4 +791,4 @@ fn bezier_section_of<R: Real>(
 
 #[cfg(test)]
 #[path = "roots_tests.rs"]
-mod tests;
+pub(crate) mod tests;

@@ -1,8 +1,21 @@
-//! Tests of the section bound's early exit ([`super::may_reach`]).
+//! Tests of the section bound's early exit ([`super::may_reach`]), and the whole-stretch
+//! bound for the tests of its copies in lanes.
 
 use super::*;
 use crate::geom::rng::SplitMix64;
 use crate::kinds::metaballs::kernel::Kernel;
+
+/// The whole-stretch bound a search of `balls` on `[lo, hi]` under `p` starts with
+/// ([`super::stretch_bound`]; the kernel's degree read at run time, the same Horner steps), for
+/// tests of the copies that compute it in lanes.
+pub(crate) fn whole_stretch_bound(
+    p: &FindParams<f32>,
+    balls: &[RayBall<f32>],
+    lo: f32,
+    hi: f32,
+) -> f32 {
+    stretch_bound::<f32, 0>(p, balls, lo, hi)
+}
 
 /// Up to 12 balls of random centre and radius along the ray `o + t x̂`, a fifth of them
 /// carving when `carving`, the ones the ray meets.

@@ -19,9 +19,13 @@
 //!    rectangle not yet done, from the first active one on, gets its own slab test; those
 //!    that cross the leaf gather its remaining balls eight rays at a time
 //!    ([`SharedOriginBalls::gather_rays`]; the same balls in the same order, to the bit, as
-//!    the single ray's gather on the same `[near, far]`) and each searches them with the
-//!    single ray's leaf search. A ray is done at its first root, as a single ray is at the
-//!    first leaf with a root.
+//!    the single ray's gather on the same `[near, far]`), and in the same lanes the bound the
+//!    leaf search starts with (the most the field can be over the ray's range,
+//!    [`StretchBound`]): a ray whose bound is below the isovalue passes the leaf without
+//!    its balls being read out of the lanes (57–74% of the leaf searches on the paper's
+//!    scenes), as its search would have stopped there. Each other ray searches its balls with
+//!    the single ray's leaf search. A ray is done at its first root, as a single ray is at
+//!    the first leaf with a root.
 //! 4. Roots in lanes: a search that ends on an isolated piece (one simple root, nearly every
 //!    hit) is done there, since its first root lies in it, and the piece is set aside; after
 //!    the walk the tile's pieces are solved eight at a time ([`lanes`]), every lane with the
@@ -36,7 +40,7 @@
 //! rays, as it does with [`super::PrepareOptions::packets`] off.
 
 use super::queries::search_gathered;
-use super::soa::{SharedOriginBalls, RAY_LANES};
+use super::soa::{SharedOriginBalls, StretchBound, RAY_LANES};
 use super::{Accel, PreparedMetaballs, SCRATCH};
 use crate::camera::PrimaryRays;
 use crate::geom::aabb::Aabb;
@@ -110,6 +114,9 @@ struct Walk<'a> {
     defer: bool,
     isovalue: f32,
     t_max: f32,
+    /// The leaf search's whole-stretch bound, answered in the gather's lanes (where the finder
+    /// starts with it).
+    bound: Option<StretchBound>,
 }
 
 /// Where a packet's rays end: their hits, which are done, the pieces set aside.
@@ -250,6 +257,8 @@ impl PreparedMetaballs {
             defer: self.sets_roots_aside(),
             isovalue,
             t_max,
+            bound: (self.options.finder.bounds_whole_stretch())
+                .then(|| StretchBound::new(self.params(isovalue).kernel, isovalue)),
         };
         counters.rays += n as u64;
         SCRATCH.with(|cell| {
@@ -302,17 +311,8 @@ impl PreparedMetaballs {
                         aside: &mut *aside,
                     };
                     if soa.load(&self.balls, origin, balls) {
-                        for rays in crossing.chunks(RAY_LANES) {
-                            soa.gather_rays(rays, tile_rays);
-                            for (lane, &(r, near, far)) in rays.iter().enumerate() {
-                                gathered.clear();
-                                soa.lane_gathered(&self.balls, lane, gathered);
-                                let search = (r as usize, near, far);
-                                self.end_search(
-                                    &walk, search, gathered, scratch, &mut ends, counters,
-                                );
-                            }
-                        }
+                        let buffers = (&mut *gathered, &mut *scratch);
+                        self.search_lanes(&walk, soa, crossing, buffers, &mut ends, counters);
                     } else {
                         for &(r, near, far) in crossing.iter() {
                             let ray = &tile_rays[r as usize];
@@ -357,6 +357,36 @@ impl PreparedMetaballs {
         });
         self.settle_aside(aside, &mut out, isovalue, t_max, counters);
         Some(out)
+    }
+
+    /// The rays `crossing` of a leaf whose balls `soa` holds: gathered eight at a time, and
+    /// each whose field may reach the isovalue on its range searched over its balls.
+    fn search_lanes(
+        &self,
+        walk: &Walk,
+        soa: &mut SharedOriginBalls,
+        crossing: &[(u32, f32, f32)],
+        (gathered, scratch): (&mut Vec<RayBall<f32>>, &mut Scratch<f32>),
+        ends: &mut Ends,
+        counters: &mut MetaballCounters,
+    ) {
+        for rays in crossing.chunks(RAY_LANES) {
+            soa.gather_rays(rays, walk.rays, walk.bound.as_ref());
+            for (lane, &(r, near, far)) in rays.iter().enumerate() {
+                if !soa.may_reach(lane) {
+                    // The search would stop at its whole-stretch bound.
+                    let balls = soa.lane_count(lane);
+                    if balls > 0 {
+                        roots::Found::default().counted(counters, balls);
+                    }
+                    continue;
+                }
+                gathered.clear();
+                soa.lane_gathered(&self.balls, lane, gathered);
+                let search = (r as usize, near, far);
+                self.end_search(walk, search, gathered, scratch, ends, counters);
+            }
+        }
     }
 
     /// Ray `r`'s search of a leaf on `[near, far]` over `gathered`, the leaf's balls its

@@ -413,7 +413,7 @@ fn the_shared_origin_gather_is_the_single_rays_bit_for_bit() {
                     if start == end {
                         break;
                     }
-                    soa.gather_rays(&crossing[start..end], &grid);
+                    soa.gather_rays(&crossing[start..end], &grid, None);
                     for (lane, &(i, lo, hi)) in crossing[start..end].iter().enumerate() {
                         let (mut single, mut shared) = (Vec::new(), Vec::new());
                         for &b in balls {
@@ -434,6 +434,90 @@ fn the_shared_origin_gather_is_the_single_rays_bit_for_bit() {
     assert!(
         in_small_leaves > 1000,
         "{in_small_leaves} gathered from leaves of few balls"
+    );
+}
+
+/// The packet leaf's whole-stretch bound in lanes ([`super::soa::StretchBound`]) is for every
+/// ray the bound the search of the ray's gathered balls starts with
+/// (`roots::whole_stretch_bound`), to the bit, and says "cannot reach" exactly when it is
+/// below the isovalue; the lanes count the ray's balls as its gather does:
+/// every demo's spheres in leaves of 5, at the demo's isovalue, half and twice it, a quarter
+/// of the balls carving (strength negated) or none, rays in groups of 1 to 8 lanes with
+/// ranges that cut some balls or lie inside them.
+#[test]
+fn the_lanes_stretch_bound_decides_as_the_search() {
+    use super::soa::{SharedOriginBalls, StretchBound, RAY_LANES};
+    use crate::kinds::metaballs::roots::tests::whole_stretch_bound;
+    let (mut yes, mut no, mut carving, mut covered) = (0usize, 0usize, 0usize, 0usize);
+    for (demo, prepared, m) in demos() {
+        let rays = prepared.primary_rays(&demo.default_camera(), WIDTH, HEIGHT);
+        let origin = rays.through_pixel(0, 0).origin;
+        let reach = (demo.default_camera().target - origin).length();
+        // Short ranges too, which some balls cover whole (a carving ball counts only then).
+        let ranges = [
+            (0.0, 2.0 * reach),
+            (0.8 * reach, 1.1 * reach),
+            (0.97 * reach, 0.98 * reach),
+            (reach, 1.005 * reach),
+        ];
+        let mut grid: Vec<Ray> = Vec::new();
+        let mut crossing: Vec<(u32, f32, f32)> = Vec::new();
+        for y in (0..HEIGHT).step_by(2) {
+            for x in (0..WIDTH).step_by(2) {
+                let (lo, hi) = ranges[grid.len() % ranges.len()];
+                crossing.push((grid.len() as u32, lo, hi));
+                grid.push(rays.through_pixel(x, y));
+            }
+        }
+        let all: Vec<u32> = (0..m.balls.len().min(200) as u32).collect();
+        for carve in [false, true] {
+            let mut records = m.balls.clone();
+            for (i, ball) in records.iter_mut().enumerate() {
+                if carve && i % 4 == 1 {
+                    ball.strength = -ball.strength;
+                }
+            }
+            for scale in [1.0, 0.5, 2.0] {
+                let params = m.params(demo.default_isovalue() * scale);
+                let bound = StretchBound::new(params.kernel, params.isovalue);
+                for balls in all.chunks(5) {
+                    let mut soa = SharedOriginBalls::default();
+                    if !soa.load(&records, origin, balls) {
+                        continue; // ellipsoids: the packet gathers as single rays do
+                    }
+                    for (g, rays) in crossing.chunks(RAY_LANES).enumerate() {
+                        let rays = &rays[..rays.len().min([RAY_LANES, 3, 1, 7][g % 4])];
+                        soa.gather_rays(rays, &grid, Some(&bound));
+                        for (lane, &(i, lo, hi)) in rays.iter().enumerate() {
+                            let mut single = Vec::new();
+                            for &b in balls {
+                                m.gather(&grid[i as usize], b, true, lo, hi, &mut single);
+                            }
+                            for b in single.iter_mut() {
+                                b.q = records[b.ball as usize].strength;
+                                carving += (b.q < 0.0) as usize;
+                                covered += (b.q < 0.0 && b.t0 <= lo && hi <= b.t1) as usize;
+                            }
+                            let at = format!("{demo:?} ray {i} lane {lane}, T × {scale}");
+                            assert_eq!(soa.lane_count(lane), single.len(), "{at}");
+                            let sum = whole_stretch_bound(&params, &single, lo, hi);
+                            assert_eq!(soa.lane_bound(lane), sum, "{at}");
+                            let search = !(sum < params.isovalue);
+                            assert_eq!(soa.may_reach(lane), search, "{at}");
+                            if !single.is_empty() {
+                                *(if search { &mut yes } else { &mut no }) += 1;
+                            }
+                        }
+                    }
+                }
+            }
+        }
+    }
+    assert!(yes > 1000 && no > 1000, "{yes} may reach, {no} may not");
+    assert!(carving > 1000, "{carving} carving balls gathered");
+    assert!(
+        covered > 100,
+        "{covered} carving balls cover their ray's range"
     );
 }
 

@@ -10,12 +10,13 @@
 //! `PreparedMetaballs::gather` with `along`, in IEEE `f32` without contraction, so the
 //! gathered balls are bit for bit the single ray's.
 
+use crate::kinds::metaballs::kernel::KernelPoly;
 use crate::kinds::metaballs::roots::RayBall;
 use crate::kinds::metaballs::tree::Tree;
 use crate::ray::Ray;
 use glam::Vec3;
 use rayon::prelude::*;
-use wide::{f32x8, CmpGt, CmpLt};
+use wide::{f32x8, CmpGe, CmpGt, CmpLt};
 
 /// The hot-path copy of one ball.
 #[derive(Clone, Copy, Debug)]
@@ -61,6 +62,13 @@ pub(super) struct SharedOriginBalls {
     ey: Vec<f32>,
     ez: Vec<f32>,
     inv_r: Vec<f32>,
+    /// Strength `q` of each loaded ball.
+    q: Vec<f32>,
+    /// The lanes of the last [`SharedOriginBalls::gather_rays`] whose field may reach the
+    /// isovalue on their range, as bits (all of them when no bound was asked), and the
+    /// bound of each lane.
+    reach: u8,
+    bounds: [f32; RAY_LANES],
     /// The loaded balls some ray of the last [`SharedOriginBalls::gather_rays`] crosses
     /// within its range, in the loaded order: (ball's place in the load, its lanes as bits).
     lane_hits: Vec<(u32, u8)>,
@@ -72,6 +80,66 @@ pub(super) struct SharedOriginBalls {
 /// `f32x8`, one AVX register or two SSE ones in the portable build.
 pub(super) const RAY_LANES: usize = 8;
 
+/// One ball's span in every lane, as [`SharedOriginBalls::gather_rays`] computes it.
+struct Span {
+    t0: f32x8,
+    t1: f32x8,
+    a: f32x8,
+    tc: f32x8,
+    s_min: f32x8,
+}
+
+/// The root finder's whole-stretch bound (`roots`' `stretch_may_reach`) in lanes: the sum,
+/// over a ray's gathered balls in their order, of the most each ball's term can be on the
+/// part of the ray's range its support covers (a negative term only where it covers all of
+/// it), with the scalar bound's operations in its order in every lane, so that a lane says
+/// "cannot reach" exactly when the ray's search would.
+pub(super) struct StretchBound {
+    kernel: KernelPoly<f32>,
+    isovalue: f32,
+    /// The kernel at `w = 1` (the centre): its sign says which way each ball's term points.
+    peak: f32,
+}
+
+impl StretchBound {
+    /// The bound for searches under `kernel` and `isovalue`.
+    pub(super) fn new(kernel: KernelPoly<f32>, isovalue: f32) -> Self {
+        let peak = kernel.at_w_of::<0>(1.0);
+        StretchBound {
+            kernel,
+            isovalue,
+            peak,
+        }
+    }
+
+    /// A ball of strength `q` and span `span` in the lanes `met` (a mask): its term's bound on
+    /// `[max(t0, lo), min(t1, hi)]` where it counts, 0 elsewhere.
+    #[inline(always)]
+    fn term(&self, q: f32, met: f32x8, span: &Span, lo: f32x8, hi: f32x8) -> f32x8 {
+        let (zero, one) = (f32x8::ZERO, f32x8::ONE);
+        let (a, b) = (span.t0.max(lo), span.t1.min(hi));
+        let positive = q * self.peak > 0.0;
+        let (t, counts) = if positive {
+            (span.tc.max(a).min(b), a.cmp_lt(b))
+        } else {
+            let farther = (a - span.tc).abs().cmp_gt((b - span.tc).abs());
+            let covers = !(a.cmp_gt(lo) | b.cmp_lt(hi));
+            (farther.blend(a, b), a.cmp_lt(b) & covers)
+        };
+        let u = t - span.tc;
+        let s = span.a * u * u + span.s_min;
+        let w = one - s;
+        let c = &self.kernel.c;
+        let degree = self.kernel.degree;
+        let mut acc = f32x8::splat(c[degree]);
+        for &ck in c[..degree].iter().rev() {
+            acc = acc * w + f32x8::splat(ck);
+        }
+        let term = s.cmp_ge(one).blend(zero, f32x8::splat(q) * acc);
+        (counts & met).blend(term, zero)
+    }
+}
+
 impl SharedOriginBalls {
     /// Loads `balls` (indices into `m`'s balls) as seen from `origin`; `false` when one of them
     /// is an ellipsoid (whose frame this layout does not hold), and the caller gathers as a
@@ -82,12 +150,14 @@ impl SharedOriginBalls {
         self.ey.clear();
         self.ez.clear();
         self.inv_r.clear();
+        self.q.clear();
         for &i in balls {
             let b = &records[i as usize];
             if b.frame != u32::MAX {
                 return false;
             }
             let e = (origin - b.center) * b.inv_r;
+            self.q.push(b.strength);
             self.ids.push(i);
             self.ex.push(e.x);
             self.ey.push(e.y);
@@ -105,7 +175,12 @@ impl SharedOriginBalls {
     /// of `scattered-1k`'s after culling) fills the lanes too, and a ball no ray's line meets
     /// (most of them) skips the span's division and square root. Read a lane's balls with
     /// [`SharedOriginBalls::lane_gathered`].
-    pub(super) fn gather_rays(&mut self, rays: &[(u32, f32, f32)], dirs: &[Ray]) {
+    pub(super) fn gather_rays(
+        &mut self,
+        rays: &[(u32, f32, f32)],
+        dirs: &[Ray],
+        bound: Option<&StretchBound>,
+    ) {
         let m = rays.len();
         debug_assert!((1..=RAY_LANES).contains(&m));
         // Lanes past the last ray repeat it; their bits are cleared.
@@ -119,6 +194,10 @@ impl SharedOriginBalls {
         let [dx, dy, dz, lo, hi] = lanes.map(f32x8::from);
         let live = ((1u32 << m) - 1) as i32;
         let (zero, one, sign) = (f32x8::ZERO, f32x8::ONE, f32x8::splat(-0.0));
+        let live_lanes = f32x8::from(std::array::from_fn::<f32, RAY_LANES, _>(|l| {
+            f32::from_bits(if l < m { u32::MAX } else { 0 })
+        }));
+        let mut sum = zero;
         self.lane_hits.clear();
         self.lane_spans.clear();
         for k in 0..self.ids.len() {
@@ -141,17 +220,57 @@ impl SharedOriginBalls {
             let (t0, t1) = (tc - half, tc + half);
             let apart = t1.cmp_lt(lo) | t0.cmp_gt(hi);
             let hits = inside & !apart.move_mask();
-            if hits != 0 {
-                self.lane_hits.push((k as u32, hits as u8));
-                self.lane_spans.push([
-                    t0.to_array(),
-                    t1.to_array(),
-                    a.to_array(),
-                    tc.to_array(),
-                    s_min.to_array(),
-                ]);
+            if hits == 0 {
+                continue;
             }
+            if let Some(bound) = bound {
+                let met = a.cmp_gt(zero) & s_min.cmp_lt(one) & !apart & live_lanes;
+                let span = Span {
+                    t0,
+                    t1,
+                    a,
+                    tc,
+                    s_min,
+                };
+                sum += bound.term(self.q[k], met, &span, lo, hi);
+            }
+            self.lane_hits.push((k as u32, hits as u8));
+            self.lane_spans.push([
+                t0.to_array(),
+                t1.to_array(),
+                a.to_array(),
+                tc.to_array(),
+                s_min.to_array(),
+            ]);
         }
+        self.bounds = sum.to_array();
+        self.reach = match bound {
+            Some(bound) => (!sum.cmp_lt(f32x8::splat(bound.isovalue))).move_mask() as u8,
+            None => u8::MAX,
+        };
+    }
+
+    /// Whether lane `lane`'s field may reach the isovalue on its range, by the bound the last
+    /// [`SharedOriginBalls::gather_rays`] was given (`true` without one): where it says no,
+    /// the search of the lane's balls would have said so before anything else.
+    pub(super) fn may_reach(&self, lane: usize) -> bool {
+        self.reach & (1 << lane) != 0
+    }
+
+    /// Lane `lane`'s bound of the last [`SharedOriginBalls::gather_rays`] (0 without one).
+    #[cfg(test)]
+    pub(super) fn lane_bound(&self, lane: usize) -> f32 {
+        self.bounds[lane]
+    }
+
+    /// How many balls lane `lane`'s ray of the last [`SharedOriginBalls::gather_rays`]
+    /// gathered.
+    pub(super) fn lane_count(&self, lane: usize) -> usize {
+        let bit = 1u8 << lane;
+        self.lane_hits
+            .iter()
+            .filter(|&&(_, h)| h & bit != 0)
+            .count()
     }
 
     /// The balls whose support lane `lane`'s ray of the last
