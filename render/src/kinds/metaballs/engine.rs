@@ -286,6 +286,7 @@ impl PreparedMetaballs {
             tolerance: self.options.tolerance,
             owners_only: false,
             step: self.options.step,
+            bounded: false,
         };
         SCRATCH.with(|cell| {
             let mut guard = cell.borrow_mut();

@@ -191,6 +191,10 @@ pub struct FindParams<R> {
     /// the smallest radius of the balls it searches (infinite: the secant method samples the
     /// centre projections only, as in the paper). See [`RootFinder::default_step`].
     pub step: R,
+    /// The caller has found the whole-stretch bound ([`stretch_may_reach`]) at or above the
+    /// isovalue for this search's balls and stretch (the packets answer it in lanes): the
+    /// search does not ask it again.
+    pub bounded: bool,
 }
 
 /// Reusable buffers, one set per thread.
@@ -403,7 +407,7 @@ where
         &mut SectionScratch<R>,
     ) -> Option<R>,
 {
-    if !stretch_may_reach::<R, W>(p, balls, lo, hi) {
+    if !p.bounded && !stretch_may_reach::<R, W>(p, balls, lo, hi) {
         return Found::default();
     }
     let events = &mut scratch.events;

@@ -67,6 +67,7 @@ fn the_bounds_early_exit_decides_as_the_whole_sum() {
             tolerance: 1e-4,
             owners_only: false,
             step: f32::INFINITY,
+            bounded: false,
         };
         p.kernel.c.iter_mut().for_each(|c| *c = -*c);
         p.isovalue = -p.isovalue;

@@ -117,6 +117,9 @@ struct Walk<'a> {
     /// The leaf search's whole-stretch bound, answered in the gather's lanes (where the finder
     /// starts with it).
     bound: Option<StretchBound>,
+    /// `params` for the searches of rays the lanes' bound let through, which do not ask it
+    /// again.
+    lane_params: FindParams<f32>,
 }
 
 /// Where a packet's rays end: their hits, which are done, the pieces set aside.
@@ -250,15 +253,21 @@ impl PreparedMetaballs {
         let mut out: Vec<(Ray, Option<Hit>)> = tile_rays.iter().map(|&ray| (ray, None)).collect();
         done.clear();
         done.resize(n, false);
+        let params = self.params(isovalue);
+        let bound = (self.options.finder.bounds_whole_stretch())
+            .then(|| StretchBound::new(params.kernel, isovalue));
         let walk = Walk {
             rays: tile_rays,
-            params: self.params(isovalue),
+            params,
+            lane_params: FindParams {
+                bounded: bound.is_some(),
+                ..params
+            },
             finder: self.options.finder,
             defer: self.sets_roots_aside(),
             isovalue,
             t_max,
-            bound: (self.options.finder.bounds_whole_stretch())
-                .then(|| StretchBound::new(self.params(isovalue).kernel, isovalue)),
+            bound,
         };
         counters.rays += n as u64;
         SCRATCH.with(|cell| {
@@ -390,7 +399,8 @@ impl PreparedMetaballs {
     }
 
     /// Ray `r`'s search of a leaf on `[near, far]` over `gathered`, the leaf's balls its
-    /// support crosses there: a root ends the ray, and so does an isolated piece set aside.
+    /// support crosses there, the search's whole-stretch bound already answered in the lanes
+    /// ([`Walk::lane_params`]): a root ends the ray, and so does an isolated piece set aside.
     fn end_search(
         &self,
         walk: &Walk,
@@ -402,7 +412,7 @@ impl PreparedMetaballs {
     ) {
         let found = if !walk.defer || gathered.is_empty() {
             search_gathered(
-                &walk.params,
+                &walk.lane_params,
                 walk.finder,
                 near,
                 far,
@@ -413,7 +423,7 @@ impl PreparedMetaballs {
         } else {
             let (found, piece) = roots::find_first_deferring(
                 walk.finder,
-                &walk.params,
+                &walk.lane_params,
                 gathered,
                 near,
                 far,

@@ -67,6 +67,7 @@ impl PreparedMetaballs {
             tolerance: self.options.tolerance,
             owners_only: false,
             step: self.options.step,
+            bounded: false,
         }
     }
 

@@ -94,6 +94,7 @@ struct Span {
 /// part of the ray's range its support covers (a negative term only where it covers all of
 /// it), with the scalar bound's operations in its order in every lane, so that a lane says
 /// "cannot reach" exactly when the ray's search would.
+#[derive(Clone, Copy, Debug)]
 pub(super) struct StretchBound {
     kernel: KernelPoly<f32>,
     isovalue: f32,
