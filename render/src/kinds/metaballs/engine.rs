@@ -28,6 +28,8 @@ mod packet_tests;
 // Shadow rays towards one point light traced as one packet.
 mod shadows;
 
+// A packet's rays against one box, eight at a time.
+mod slabs;
 mod soa;
 use soa::Ball;
 // Secondary-ray queries (any hit, exit from the solid, optical depth): the effects layer's.

@@ -40,6 +40,7 @@
 //! rays, as it does with [`super::PrepareOptions::packets`] off.
 
 use super::queries::search_gathered;
+use super::slabs::TileInverses;
 use super::soa::{SharedOriginBalls, StretchBound, RAY_LANES};
 use super::{Accel, PreparedMetaballs, SCRATCH};
 use crate::camera::PrimaryRays;
@@ -67,6 +68,8 @@ struct TileBuffers {
     culled: Vec<u32>,
     /// The rays of a leaf's cover that cross its box: (ray, near, far).
     crossing: Vec<(u32, f32, f32)>,
+    /// The tile's `1/dir` for the leaves' slab tests in lanes.
+    inverses: TileInverses,
     soa: SharedOriginBalls,
     aside: SetAside,
 }
@@ -237,12 +240,14 @@ impl PreparedMetaballs {
             stack,
             culled,
             crossing,
+            inverses,
             soa,
             aside,
         } = buffers;
         let rays = &tile.rays;
         let (x0, y0) = (tile.x0, tile.y0);
         rays.tile_rays((x0, y0, x0 + tile.width, y0 + tile.height), tile_rays, inv);
+        inverses.load(inv);
         let n = tile_rays.len();
         let width = tile.width as usize;
         let origin = tile_rays[0].origin;
@@ -300,17 +305,9 @@ impl PreparedMetaballs {
                         continue;
                     }
                     // The cover's rays not done that cross the leaf's box, with their ranges.
-                    crossing.clear();
-                    cover.visit(width, from as usize, n, |r| {
-                        if !done[r] {
-                            if let Some((near, far)) =
-                                node.bounds.ray_range(origin, inv[r], 0.0, t_max)
-                            {
-                                crossing.push((r as u32, near, far));
-                            }
-                        }
-                        false
-                    });
+                    let rays = (width, from as usize, n);
+                    let b = &node.bounds;
+                    inverses.crossing(cover, rays, done, b, origin, t_max, crossing);
                     if crossing.is_empty() {
                         continue;
                     }

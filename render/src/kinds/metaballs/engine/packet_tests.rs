@@ -666,3 +666,112 @@ fn spread_out_shadow_rays_fall_back_to_single_rays() {
     );
     assert!(packet.is_none(), "a spread pair is traced ray by ray");
 }
+
+/// The leaves' slab tests in lanes ([`super::slabs::TileInverses`]) list the rays, and their
+/// ranges, that the slab test ray by ray does: every demo's tree nodes (up to 400 a demo) and
+/// boxes about the eye (faces through it, which give a NaN slab where a direction component
+/// is zero, and boxes holding it) against every tile of its camera and of cameras looking
+/// down the z and x axes (rays with zero direction components among them), with every third ray done
+/// or none, from the first ray or the tile's middle.
+#[test]
+fn the_leaves_slab_tests_in_lanes_are_the_single_rays() {
+    use super::Accel;
+    use crate::geom::aabb::Aabb;
+    use crate::geom::tile::TileGrid;
+    let (mut listed, mut infinite) = (0usize, 0usize);
+    for (demo, prepared, m) in demos() {
+        let Accel::Tree(tree) = &m.accel else {
+            continue;
+        };
+        let step = (tree.nodes.len() / 400).max(1);
+        let nodes: Vec<Aabb> = tree.nodes.iter().step_by(step).map(|n| n.bounds).collect();
+        let camera = demo.default_camera();
+        let down = |axis: Vec3| crate::camera::Camera {
+            target: camera.eye - axis * (camera.target - camera.eye).length(),
+            up: Vec3::Y,
+            ..camera
+        };
+        let cameras = [
+            (camera, (WIDTH, HEIGHT)),
+            (down(Vec3::Z), (33, 33)),
+            (down(Vec3::X), (33, 33)),
+        ];
+        for (cam, (w, h)) in cameras {
+            let rays = prepared.primary_rays(&cam, w, h);
+            let mut boxes = nodes.clone();
+            boxes.extend(boxes_about(rays.through_pixel(0, 0).origin));
+            for y0 in (0..h).step_by(TILE as usize) {
+                for x0 in (0..w).step_by(TILE as usize) {
+                    let (width, height) = (TILE.min(w - x0), TILE.min(h - y0));
+                    let tile = TileGrid {
+                        rays,
+                        x0,
+                        y0,
+                        width,
+                        height,
+                    };
+                    let (l, i) = slabs_in_lanes_against_one_by_one(&tile, &boxes);
+                    (listed, infinite) = (listed + l, infinite + i);
+                }
+            }
+        }
+    }
+    assert!(listed > 10_000, "{listed} rays listed");
+    assert!(infinite > 0, "no ray with a zero direction component");
+}
+
+/// Boxes about `eye`: on each axis the low or the high face through it, the eye inside, or the
+/// box beside it.
+fn boxes_about(eye: Vec3) -> Vec<crate::geom::aabb::Aabb> {
+    let mut boxes = Vec::new();
+    for d in [0.5f32, 4.0] {
+        for k in 0..64u32 {
+            let (mut lo, mut hi) = (Vec3::ZERO, Vec3::ZERO);
+            for axis in 0..3 {
+                (lo[axis], hi[axis]) = match (k >> (2 * axis)) & 3 {
+                    0 => (-d, d),
+                    1 => (0.0, d),
+                    2 => (-d, 0.0),
+                    _ => (-3.0 * d, -d),
+                };
+            }
+            boxes.push(crate::geom::aabb::Aabb {
+                min: eye + lo,
+                max: eye + hi,
+            });
+        }
+    }
+    boxes
+}
+
+/// Asserts that `tile`'s slab tests in lanes list the rays ray by ray does for each of
+/// `boxes`; returns how many rays were listed and how many of the tile's rays have a zero
+/// direction component.
+fn slabs_in_lanes_against_one_by_one(
+    tile: &crate::geom::tile::TileGrid,
+    boxes: &[crate::geom::aabb::Aabb],
+) -> (usize, usize) {
+    use super::slabs::{crossing_one_by_one, TileInverses};
+    let (x1, y1) = (tile.x0 + tile.width, tile.y0 + tile.height);
+    let (mut tile_rays, mut inv) = (Vec::new(), Vec::new());
+    tile.rays
+        .tile_rays((tile.x0, tile.y0, x1, y1), &mut tile_rays, &mut inv);
+    let origin = tile_rays[0].origin;
+    let mut inverses = TileInverses::default();
+    inverses.load(&inv);
+    let n = inv.len();
+    let mut listed = 0;
+    for b in boxes {
+        let cover = tile.cover_box(b.min, b.max);
+        for (thirds, from) in [(false, 0), (true, 0), (false, n / 2), (true, n / 2)] {
+            let done: Vec<bool> = (0..n).map(|r| thirds && r % 3 == 1).collect();
+            let rays = (tile.width as usize, from, n);
+            let mut lanes = Vec::new();
+            inverses.crossing(cover, rays, &done, b, origin, T_MAX, &mut lanes);
+            let one = crossing_one_by_one(cover, rays, &done, &inv, b, origin, T_MAX);
+            assert_eq!(lanes, one, "tile ({}, {}), box {b:?}", tile.x0, tile.y0);
+            listed += one.len();
+        }
+    }
+    (listed, inv.iter().filter(|v| !v.is_finite()).count())
+}
