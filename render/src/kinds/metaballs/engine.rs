@@ -22,6 +22,8 @@ use std::cell::RefCell;
 use std::sync::{Arc, OnceLock};
 
 // Tiles of primary rays traced as one packet through the Fitted BVH.
+#[cfg(test)]
+mod lanes_tests;
 mod packet;
 #[cfg(test)]
 mod packet_tests;

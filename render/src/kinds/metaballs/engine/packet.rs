@@ -275,6 +275,7 @@ impl PreparedMetaballs {
             bound,
         };
         counters.rays += n as u64;
+        let spheres = self.spheres_of(tree);
         SCRATCH.with(|cell| {
             let mut guard = cell.borrow_mut();
             let (gathered, scratch, _) = &mut *guard;
@@ -290,8 +291,13 @@ impl PreparedMetaballs {
                 if node.is_leaf() {
                     // The leaf's balls less those outside the pyramid of the cover's rays.
                     let leaf = tree.leaf_balls(node);
-                    let balls = match tile.frustum(cover) {
-                        Some(frustum) => {
+                    let balls = match (tile.frustum(cover), spheres) {
+                        (Some(frustum), Some(spheres)) => {
+                            culled.clear();
+                            spheres.cull(&frustum, leaf, node.first as usize, culled);
+                            &culled[..]
+                        }
+                        (Some(frustum), None) => {
                             culled.clear();
                             culled.extend(leaf.iter().copied().filter(|&b| {
                                 let ball = &self.balls[b as usize];
@@ -299,7 +305,7 @@ impl PreparedMetaballs {
                             }));
                             &culled[..]
                         }
-                        None => leaf,
+                        (None, _) => leaf,
                     };
                     if balls.is_empty() {
                         continue;

@@ -10,6 +10,7 @@
 //! `PreparedMetaballs::gather` with `along`, in IEEE `f32` without contraction, so the
 //! gathered balls are bit for bit the single ray's.
 
+use crate::geom::tile::Frustum;
 use crate::kinds::metaballs::kernel::KernelPoly;
 use crate::kinds::metaballs::roots::RayBall;
 use crate::kinds::metaballs::tree::Tree;
@@ -427,6 +428,47 @@ impl TreeSpheres {
             })
             .collect();
         Some(TreeSpheres { cx, cy, cz, inv_r })
+    }
+
+    /// The balls of `tree.balls[first..first + ids.len()]` (`ids`, a leaf's list) whose
+    /// support sphere does not lie wholly outside `frustum`, appended to `out` in the leaf's
+    /// order: [`Frustum::excludes_sphere`]'s operations (with the radius `1 / (1/R)` as the
+    /// packet took it from the ball's record), eight balls at a time in `f32x8`.
+    pub(super) fn cull(&self, frustum: &Frustum, ids: &[u32], first: usize, out: &mut Vec<u32>) {
+        let eye = frustum.eye;
+        let (ex, ey, ez) = (
+            f32x8::splat(eye.x),
+            f32x8::splat(eye.y),
+            f32x8::splat(eye.z),
+        );
+        let mut start = 0;
+        while start < ids.len() {
+            let len = (ids.len() - start).min(RAY_LANES);
+            let at = first + start;
+            let lanes = |v: &[f32]| {
+                let mut a = [0f32; RAY_LANES];
+                a[..len].copy_from_slice(&v[at..at + len]);
+                f32x8::from(a)
+            };
+            let (vx, vy, vz) = (
+                lanes(&self.cx) - ex,
+                lanes(&self.cy) - ey,
+                lanes(&self.cz) - ez,
+            );
+            let radius = f32x8::ONE / lanes(&self.inv_r);
+            let mut outside = f32x8::ZERO;
+            for n in &frustum.normals {
+                let dot = f32x8::splat(n.x) * vx + f32x8::splat(n.y) * vy + f32x8::splat(n.z) * vz;
+                outside |= dot.cmp_lt(-radius);
+            }
+            let mut keep = !outside.move_mask() as u32 & ((1u32 << len) - 1);
+            while keep != 0 {
+                let k = keep.trailing_zeros() as usize;
+                out.push(ids[start + k]);
+                keep &= keep - 1;
+            }
+            start += len;
+        }
     }
 
     /// The balls of `tree.balls[first..first + ids.len()]` (`ids`, a leaf's list) whose
