@@ -22,11 +22,12 @@ use std::cell::RefCell;
 use std::sync::{Arc, OnceLock};
 
 // Tiles of primary rays traced as one packet through the Fitted BVH.
-#[cfg(test)]
-mod lanes_tests;
 mod packet;
 #[cfg(test)]
 mod packet_tests;
+// The packets' vector steps against their single-ray operations.
+#[cfg(test)]
+mod lanes_tests;
 // Shadow rays towards one point light traced as one packet.
 mod shadows;
 
