@@ -9,6 +9,30 @@ use crate::scenes::DemoScene;
 use glam::Vec3;
 use std::sync::Arc;
 
+/// Rays from `demo`'s camera through every `step`-th pixel of each row and column, each with
+/// a range from `ranges` in turn (fractions of the distance from the eye to the target):
+/// the eye, the rays, and `(ray, lo, hi)` for each.
+#[allow(clippy::type_complexity)]
+fn camera_grid(
+    demo: DemoScene,
+    prepared: &crate::scene::PreparedScene,
+    step: usize,
+    ranges: &[(f32, f32)],
+) -> (Vec3, Vec<Ray>, Vec<(u32, f32, f32)>) {
+    let rays = prepared.primary_rays(&demo.default_camera(), WIDTH, HEIGHT);
+    let origin = rays.through_pixel(0, 0).origin;
+    let reach = (demo.default_camera().target - origin).length();
+    let (mut grid, mut crossing) = (Vec::new(), Vec::new());
+    for y in (0..HEIGHT).step_by(step) {
+        for x in (0..WIDTH).step_by(step) {
+            let (lo, hi) = ranges[grid.len() % ranges.len()];
+            crossing.push((grid.len() as u32, lo * reach, hi * reach));
+            grid.push(rays.through_pixel(x, y));
+        }
+    }
+    (origin, grid, crossing)
+}
+
 /// The structure-of-arrays gather of a packet leaf gives, for every ray from the shared
 /// origin, the balls the single ray's gather gives, field for field to the bit: every demo's
 /// spheres, rays from its camera through a grid over the image in groups of 1 to 8 lanes (the
@@ -20,23 +44,8 @@ fn the_shared_origin_gather_is_the_single_rays_bit_for_bit() {
     let (mut compared, mut in_small_leaves) = (0usize, 0usize);
     for (demo, prepared, m) in demos() {
         let all: Vec<u32> = (0..m.balls.len() as u32).collect();
-        let rays = prepared.primary_rays(&demo.default_camera(), WIDTH, HEIGHT);
-        let origin = rays.through_pixel(0, 0).origin;
-        let reach = (demo.default_camera().target - origin).length();
-        let ranges = [
-            (0.0, 2.0 * reach),
-            (0.8 * reach, 1.1 * reach),
-            (0.0, 0.9 * reach),
-        ];
-        let mut grid: Vec<Ray> = Vec::new();
-        let mut crossing: Vec<(u32, f32, f32)> = Vec::new();
-        for y in (0..HEIGHT).step_by(3) {
-            for x in (0..WIDTH).step_by(3) {
-                let (lo, hi) = ranges[grid.len() % ranges.len()];
-                crossing.push((grid.len() as u32, lo, hi));
-                grid.push(rays.through_pixel(x, y));
-            }
-        }
+        let (origin, grid, crossing) =
+            camera_grid(*demo, prepared, 3, &[(0.0, 2.0), (0.8, 1.1), (0.0, 0.9)]);
         for (r, leaf) in [all.len(), 1, 3, 7].into_iter().enumerate() {
             // Leaves of few balls from the first 84 balls (enough of them, quick).
             let pool = if r == 0 {
@@ -92,25 +101,9 @@ fn the_lanes_stretch_bound_decides_as_the_search() {
     use crate::kinds::metaballs::roots::tests::whole_stretch_bound;
     let (mut yes, mut no, mut carving, mut covered) = (0usize, 0usize, 0usize, 0usize);
     for (demo, prepared, m) in demos() {
-        let rays = prepared.primary_rays(&demo.default_camera(), WIDTH, HEIGHT);
-        let origin = rays.through_pixel(0, 0).origin;
-        let reach = (demo.default_camera().target - origin).length();
         // Short ranges too, which some balls cover whole (a carving ball counts only then).
-        let ranges = [
-            (0.0, 2.0 * reach),
-            (0.8 * reach, 1.1 * reach),
-            (0.97 * reach, 0.98 * reach),
-            (reach, 1.005 * reach),
-        ];
-        let mut grid: Vec<Ray> = Vec::new();
-        let mut crossing: Vec<(u32, f32, f32)> = Vec::new();
-        for y in (0..HEIGHT).step_by(2) {
-            for x in (0..WIDTH).step_by(2) {
-                let (lo, hi) = ranges[grid.len() % ranges.len()];
-                crossing.push((grid.len() as u32, lo, hi));
-                grid.push(rays.through_pixel(x, y));
-            }
-        }
+        let ranges = [(0.0, 2.0), (0.8, 1.1), (0.97, 0.98), (1.0, 1.005)];
+        let (origin, grid, crossing) = camera_grid(*demo, prepared, 2, &ranges);
         let all: Vec<u32> = (0..m.balls.len().min(200) as u32).collect();
         for carve in [false, true] {
             let mut records = m.balls.clone();
