@@ -74,8 +74,13 @@ impl Aabb {
 }
 
 /// The slab test: the range of `origin + t·dir` (given `inv_dir = 1/dir`) inside the box
-/// `[lo, hi]`, clamped to `[t_min, t_max]`, if not empty. `f32::min`/`max` drop a NaN
-/// (`0 · ∞` on a box face parallel to the ray), so such a face constrains nothing.
+/// `[lo, hi]`, clamped to `[t_min, t_max]`, if not empty. A ray parallel to a face and lying
+/// in its plane gives a NaN slab (`0 · ∞`): glam's `min`/`max` are `a < b ? a : b`, which
+/// keep a NaN only as the second operand, so by the axis and the face such a slab constrains
+/// nothing, leaves the ray out, or drops the other axes' near bounds (the range then starts
+/// at `t_min`); the final `f32::max`/`min` against `[t_min, t_max]` drop a NaN. Deterministic,
+/// and only for rays exactly in a face's plane. The packets' lanes
+/// (`kinds::metaballs::engine::slabs`) copy these operations bit for bit.
 #[inline(always)]
 pub fn slab(
     lo: Vec3,
