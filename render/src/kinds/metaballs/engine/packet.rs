@@ -16,8 +16,9 @@
 //!    lies outside the pyramid of the rectangle's rays (widened by a pixel,
 //!    [`crate::geom::tile::Frustum`]) is missed by every one of them, so no ray would gather it
 //!    (a Fitted BVH leaf of Pool holds 33 balls of which a ray gathers 3). Then each ray of the
-//!    rectangle not yet done, from the first active one on, gets its own slab test; those
-//!    that cross the leaf gather its remaining balls eight rays at a time
+//!    rectangle not yet done, from the first active one on, gets its own slab test (eight rays
+//!    at a time, [`TileInverses`]); those that cross the leaf gather its remaining balls eight
+//!    rays at a time
 //!    ([`SharedOriginBalls::gather_rays`]; the same balls in the same order, to the bit, as
 //!    the single ray's gather on the same `[near, far]`), and in the same lanes the bound the
 //!    leaf search starts with (the most the field can be over the ray's range,

@@ -66,9 +66,10 @@ pub(super) struct SharedOriginBalls {
     /// Strength `q` of each loaded ball.
     q: Vec<f32>,
     /// The lanes of the last [`SharedOriginBalls::gather_rays`] whose field may reach the
-    /// isovalue on their range, as bits (all of them when no bound was asked), and the
-    /// bound of each lane.
+    /// isovalue on their range, as bits (all of them when no bound was asked), and (kept
+    /// for the tests only) the bound of each lane.
     reach: u8,
+    #[cfg(test)]
     bounds: [f32; RAY_LANES],
     /// The loaded balls some ray of the last [`SharedOriginBalls::gather_rays`] crosses
     /// within its range, in the loaded order: (ball's place in the load, its lanes as bits).
@@ -245,7 +246,10 @@ impl SharedOriginBalls {
                 s_min.to_array(),
             ]);
         }
-        self.bounds = sum.to_array();
+        #[cfg(test)]
+        {
+            self.bounds = sum.to_array();
+        }
         self.reach = match bound {
             Some(bound) => (!sum.cmp_lt(f32x8::splat(bound.isovalue))).move_mask() as u8,
             None => u8::MAX,
