@@ -21,6 +21,7 @@
 pub mod bezier;
 pub mod counters;
 pub mod engine;
+mod events;
 pub mod kernel;
 pub mod kind;
 pub mod lanes;

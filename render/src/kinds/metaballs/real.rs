@@ -27,6 +27,8 @@ pub trait Real:
     /// tie-break, for sorting a root search's entry/exit events.
     type EventKey: Ord + Copy + Debug + Default;
     fn event_key(self, code: u32) -> Self::EventKey;
+    /// A key above the key of every value but NaN with a code below `u32::MAX`: "no event".
+    const NO_EVENT: Self::EventKey;
     /// The value (`-0` read as `+0`) and code of an [`Real::event_key`].
     fn of_event_key(key: Self::EventKey) -> (Self, u32);
 }
@@ -35,6 +37,7 @@ macro_rules! real {
     ($t:ty, $bits:ty, $key:ty) => {
         impl Real for $t {
             type EventKey = $key;
+            const NO_EVENT: $key = <$key>::MAX;
             #[inline(always)]
             fn event_key(self, code: u32) -> $key {
                 const SIGN: $bits = 1 << (<$bits>::BITS - 1);
@@ -134,5 +137,12 @@ mod tests {
                 }
             }
         }
+    }
+
+    #[test]
+    fn no_event_is_above_every_key_of_a_value() {
+        assert!(f32::INFINITY.event_key(u32::MAX - 1) < f32::NO_EVENT);
+        assert!(f64::INFINITY.event_key(u32::MAX - 1) < f64::NO_EVENT);
+        assert!(f32::MAX.event_key(u32::MAX - 1) < f32::NO_EVENT);
     }
 }

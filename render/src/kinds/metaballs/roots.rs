@@ -36,6 +36,7 @@
 use crate::kinds::metaballs::bezier::{first_root_or_piece, power_to_bernstein, Piece};
 pub use crate::kinds::metaballs::bezier::{HalfStack, ITERATION_CAP, MAX_DEGREE};
 pub use crate::kinds::metaballs::counters::Found;
+use crate::kinds::metaballs::events::{Event, Events};
 pub use crate::kinds::metaballs::kernel::KernelPoly;
 use crate::kinds::metaballs::one_ball;
 pub use crate::kinds::metaballs::real::Real;
@@ -200,8 +201,7 @@ pub struct FindParams<R> {
 /// Reusable buffers, one set per thread.
 #[derive(Debug, Default)]
 pub struct Scratch<R: Real> {
-    events: Vec<R::EventKey>,
-    active: Vec<u32>,
+    events: Events<R>,
     samples: Vec<R>,
     domains: Vec<(R, R)>,
     section: SectionScratch<R>,
@@ -383,10 +383,10 @@ fn stretch_bound<R: Real, const W: usize>(
     bound
 }
 
-/// Sorts the entry/exit points in `[lo, hi]` and calls `section` on each stretch between
-/// consecutive ones with the balls active there (the tutorial's active list).
-/// `section` is a generic parameter rather than a function pointer so that each finder's
-/// section search is compiled into its own copy of this walk.
+/// Takes the entry/exit points in `[lo, hi]` in order ([`Events`]: the entries sorted, the
+/// exits as they come) and calls `section` on each stretch between consecutive ones with the
+/// balls active there (the tutorial's active list).
+/// `section` is generic (not a function pointer): each finder's search is its own copy.
 #[inline(always)]
 fn walk_sections<R: Real, const W: usize, S>(
     p: &FindParams<R>,
@@ -413,40 +413,41 @@ where
     let events = &mut scratch.events;
     events.clear();
     for (i, b) in balls.iter().enumerate() {
-        let (t0, t1) = (b.t0.max(lo), b.t1.min(hi));
-        if t0 < t1 {
-            events.push(t0.event_key((i as u32) << 1));
-            events.push(t1.event_key(((i as u32) << 1) | 1));
+        let t0 = b.t0.max(lo);
+        if t0 < b.t1.min(hi) {
+            events.push_entry(t0.event_key((i as u32) << 1));
         }
     }
-    // By parameter, then ball and kind (the order `partial_cmp` then code gives: no NaN here).
-    events.sort_unstable();
+    events.sort();
     let falling = all_falling::<R, W>(p, balls);
-    let active = &mut scratch.active;
-    active.clear();
     let mut owners = 0u32;
     let mut found = Found::default();
-    let mut e = 0;
-    while e < events.len() {
-        let (t, _) = R::of_event_key(events[e]);
+    let (mut key, mut from) = events.next();
+    while key != R::NO_EVENT {
+        let (t, _) = R::of_event_key(key);
         // Apply every event at this parameter.
-        while e < events.len() && !(t < R::of_event_key(events[e]).0) {
-            let (_, code) = R::of_event_key(events[e]);
-            let i = code >> 1;
-            let owner = balls[i as usize].owner;
-            if code & 1 == 0 {
-                active.push(i);
-                owners += owner as u32;
-            } else if let Some(pos) = active.iter().position(|&a| a == i) {
-                active.swap_remove(pos);
-                owners -= owner as u32;
+        let next = loop {
+            let (at, code) = R::of_event_key(key);
+            if t < at || key == R::NO_EVENT {
+                break at;
             }
-            e += 1;
-        }
-        if e >= events.len() || active.is_empty() || (p.owners_only && owners == 0) {
+            let ball = &balls[(code >> 1) as usize];
+            match from {
+                Event::Entry => {
+                    events.enter(code >> 1, ball.t1.min(hi).event_key(code | 1));
+                    owners += ball.owner as u32;
+                }
+                Event::Exit(pos) => {
+                    events.leave(pos);
+                    owners -= ball.owner as u32;
+                }
+            }
+            (key, from) = events.next();
+        };
+        let active = events.active();
+        if key == R::NO_EVENT || active.is_empty() || (p.owners_only && owners == 0) {
             continue;
         }
-        let next = R::of_event_key(events[e]).0;
         if !may_reach::<R, W>(p, balls, active, t, next, falling) {
             continue;
         }
