@@ -170,8 +170,8 @@ mod tests {
         }
     }
 
-    /// Parameters drawn from a few values half the time, so that ties (and `-0` against
-    /// `+0`) are common.
+    /// Parameters drawn mostly from a few values (four arms in five), so that ties, and `-0`
+    /// against `+0`, are common.
     fn span() -> impl Strategy<Value = (f32, f32)> {
         let value = prop_oneof![
             Just(-0.0f32),
