@@ -199,7 +199,8 @@ fn the_shadow_rays_gather_is_the_single_rays_bit_for_bit() {
 /// ([`super::soa::TreeSpheres`]) appends the balls, owner flags included, that gathering ball
 /// by ball gives, field for field to the bit: every demo's Fitted BVH, and Blobs under the
 /// BVH with split metaballs (whose leaves mark owners), rays from the camera through a grid,
-/// every leaf each ray crosses.
+/// every leaf each ray crosses, over its range and the first half of it, with both ways of
+/// listing the balls met (for rays outside the solid and inside it).
 #[test]
 fn the_tree_leaf_gather_is_the_ball_by_ball_gather_bit_for_bit() {
     use super::Accel;
@@ -215,7 +216,7 @@ fn the_tree_leaf_gather_is_the_ball_by_ball_gather_bit_for_bit() {
         .with_accel(AccelKind::Tree(BuildOptions::bvh()));
     let bvh = PreparedMetaballs::new(blobs.2.scene().clone(), options);
     states.push((DemoScene::Blobs, Arc::new(bvh)));
-    let (mut compared, mut owners) = (0usize, [0usize; 2]);
+    let (mut compared, mut owners, mut cut) = (0usize, [0usize; 2], 0usize);
     let prepared = &demos()[0].1;
     for (demo, m) in &states {
         let (Accel::Tree(tree), Some(soa)) = (&m.accel, &m.spheres) else {
@@ -232,23 +233,35 @@ fn the_tree_leaf_gather_is_the_ball_by_ball_gather_bit_for_bit() {
                         continue;
                     };
                     let leaf = tree.leaf_balls(node);
-                    let (mut single, mut stored) = (Vec::new(), Vec::new());
-                    for (k, &b) in leaf.iter().enumerate() {
-                        let owner = !owners_only || k < node.owned as usize;
-                        m.gather(&ray, b, owner, range.0, range.1, &mut single);
-                    }
-                    let first = node.first as usize;
-                    let own = (node.owned as usize, owners_only);
-                    soa.gather(&m.balls, leaf, first, own, &ray, range, &mut stored);
-                    compared += assert_same_balls(&single, &stored, || format!("{demo:?} {x},{y}"));
-                    for s in &single {
-                        owners[s.owner as usize] += 1;
+                    // The leaf's range, and its first half (which cuts balls off), with the
+                    // gather's listing for rays outside the solid and for rays inside it.
+                    let half = (range.0, 0.5 * (range.0 + range.1));
+                    for (range, crowded) in
+                        [(range, false), (range, true), (half, false), (half, true)]
+                    {
+                        let (mut single, mut stored) = (Vec::new(), Vec::new());
+                        for (k, &b) in leaf.iter().enumerate() {
+                            let owner = !owners_only || k < node.owned as usize;
+                            m.gather(&ray, b, owner, range.0, range.1, &mut single);
+                        }
+                        let first = node.first as usize;
+                        let own = (node.owned as usize, owners_only);
+                        let listed = (range, crowded);
+                        soa.gather(&m.balls, leaf, first, own, &ray, listed, &mut stored);
+                        let at = || format!("{demo:?} {x},{y} {range:?} crowded {crowded}");
+                        let n = assert_same_balls(&single, &stored, at);
+                        compared += n;
+                        cut += (range == half && n < leaf.len()) as usize;
+                        for s in &single {
+                            owners[s.owner as usize] += 1;
+                        }
                     }
                 }
             }
         }
     }
     assert!(compared > 10_000, "{compared} gathered balls compared");
+    assert!(cut > 1000, "only {cut} half ranges left balls out");
     assert!(
         owners[0] > 0 && owners[1] > 0,
         "owners and split balls both seen: {owners:?}"

@@ -82,7 +82,9 @@ impl PreparedMetaballs {
                 match spheres {
                     Some(soa) => {
                         let (first, all) = (node.first as usize, (leaf.len(), false));
-                        soa.gather(&self.balls, leaf, first, all, ray, range, leaf_balls);
+                        // Inside the solid most of a leaf's balls cover the ray.
+                        let at = (range, state.inside);
+                        soa.gather(&self.balls, leaf, first, all, ray, at, leaf_balls);
                     }
                     None => {
                         for &b in leaf {

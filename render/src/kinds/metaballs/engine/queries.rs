@@ -279,7 +279,9 @@ impl PreparedMetaballs {
                 gathered.clear();
                 let owners = (node.owned as usize, params.owners_only);
                 let first = node.first as usize;
-                soa.gather(&self.balls, leaf, first, owners, ray, (near, far), gathered);
+                // A way-out search (negated isovalue) runs inside the solid.
+                let at = ((near, far), params.isovalue < 0.0);
+                soa.gather(&self.balls, leaf, first, owners, ray, at, gathered);
                 search_gathered(params, finder, near, far, gathered, scratch, counters)
             }
             None => self.search_leaf(

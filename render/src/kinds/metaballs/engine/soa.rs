@@ -490,7 +490,11 @@ impl TreeSpheres {
     /// The balls of `tree.balls[first..first + ids.len()]` (`ids`, a leaf's list) whose
     /// support `ray` crosses within `[lo, hi]`, appended to `out` in the leaf's order, the
     /// first `owned` of them owners (all of them unless `owners_only`): what
-    /// `PreparedMetaballs::gather` appends for each, bit for bit.
+    /// `PreparedMetaballs::gather` appends for each, bit for bit. `crowded` says the ray runs
+    /// inside the solid, where most of the balls cover it; they are then listed without a
+    /// branch per ball (whose outcome the predictor cannot guess there: Molecule's and Pool's
+    /// transparency frames 5% faster), elsewhere with one (nearly always "missed", and
+    /// cheaper: hard shadows 10–15% slower listed without).
     #[allow(clippy::too_many_arguments)]
     pub(super) fn gather(
         &self,
@@ -499,7 +503,7 @@ impl TreeSpheres {
         first: usize,
         (owned, owners_only): (usize, bool),
         ray: &Ray,
-        (lo, hi): (f32, f32),
+        ((lo, hi), crowded): ((f32, f32), bool),
         out: &mut Vec<RayBall<f32>>,
     ) {
         let (o, d) = (ray.origin, ray.dir);
@@ -522,12 +526,31 @@ impl TreeSpheres {
                 (a_of[k], tc_of[k], s_of[k]) = (a, tc, s_min);
                 half_of[k] = half_width(a, s_min);
             }
-            for k in 0..len {
-                let (a, tc, s_min) = (a_of[k], tc_of[k], s_of[k]);
-                if let Some(span) = support_span_of(a, tc, s_min, half_of[k], lo, hi) {
+            if crowded {
+                let (mut met, mut n_met) = ([0u8; LANES], 0);
+                for k in 0..len {
+                    let (tc, half) = (tc_of[k], half_of[k]);
+                    let apart = (tc + half < lo) | (tc - half > hi);
+                    met[n_met] = k as u8;
+                    n_met += ((a_of[k] > 0.0) & (s_of[k] < 1.0) & !apart) as usize;
+                }
+                for &k in &met[..n_met] {
+                    let k = k as usize;
+                    let (a, tc, s_min, half) = (a_of[k], tc_of[k], s_of[k], half_of[k]);
+                    let span = (tc - half, tc + half, a, tc, s_min);
                     let i = ids[start + k];
                     let owner = !owners_only || start + k < owned;
-                    out.push(records[i as usize].seen(i, (span.0, span.1, a, tc, s_min), owner));
+                    out.push(records[i as usize].seen(i, span, owner));
+                }
+            } else {
+                for k in 0..len {
+                    let (a, tc, s_min) = (a_of[k], tc_of[k], s_of[k]);
+                    if let Some(span) = support_span_of(a, tc, s_min, half_of[k], lo, hi) {
+                        let i = ids[start + k];
+                        let owner = !owners_only || start + k < owned;
+                        let span = (span.0, span.1, a, tc, s_min);
+                        out.push(records[i as usize].seen(i, span, owner));
+                    }
                 }
             }
             start += len;
