@@ -296,8 +296,8 @@ pub fn find_first_deferring<R: Real>(
 ///
 /// When every term is `≤ 0` (`falling`: the way-out search's negated field with no carving
 /// ball) the sum only falls, in floating point too (adding a term `≤ 0` never raises a
-/// rounded sum), so the answer is "no" as soon as a partial sum is below `T`: deep inside a
-/// union of balls the first term usually settles it. The answer is the full sum's.
+/// rounded sum), so the answer is "no" once a partial sum (taken every fourth term; after each
+/// one, Molecule's transparency took 2–3% longer) is below `T`: the full sum's answer.
 #[inline(always)]
 fn may_reach<R: Real, const W: usize>(
     p: &FindParams<R>,
@@ -309,9 +309,9 @@ fn may_reach<R: Real, const W: usize>(
 ) -> bool {
     let peak = p.kernel.at_w_of::<W>(R::of(1.0));
     let mut bound = R::default();
-    for &i in active {
+    for (n, &i) in active.iter().enumerate() {
         bound = bound + term_bound::<R, W>(p, peak, &balls[i as usize], a, b);
-        if falling && bound < p.isovalue {
+        if falling && n % 4 == 3 && bound < p.isovalue {
             return false;
         }
     }
