@@ -306,11 +306,11 @@ fn may_reach<R: Real, const W: usize>(
 ) -> bool {
     let peak = p.kernel.at_w_of::<W>(R::of(1.0));
     let term = |i: &u32| term_bound::<R, W>(p, peak, &balls[*i as usize], a, b);
-    let mut bound = R::default();
     if !falling {
-        bound = active.iter().fold(bound, |sum, i| sum + term(i));
+        return !(active.iter().fold(R::default(), |sum, i| sum + term(i)) < p.isovalue);
     }
-    for four in active.chunks(4).filter(|_| falling) {
+    let mut bound = R::default();
+    for four in active.chunks(4) {
         bound = four.iter().fold(bound, |sum, i| sum + term(i));
         if bound < p.isovalue {
             return false;
@@ -320,8 +320,8 @@ fn may_reach<R: Real, const W: usize>(
 }
 
 /// Whether every one of `balls`' terms is `≤ 0` everywhere under `p`'s kernel (one-signed on
-/// the support, as every kernel is): asked of way-out searches only (a negated kernel), where
-/// [`may_reach`] can then stop early; a way-in search answers `false` without looking.
+/// the support): asked of way-out searches only (a negated kernel), where [`may_reach`] can
+/// then stop early; a way-in search answers `false` without looking.
 #[inline(always)]
 fn all_falling<R: Real, const W: usize>(p: &FindParams<R>, balls: &[RayBall<R>]) -> bool {
     let peak = p.kernel.at_w_of::<W>(R::of(1.0));
