@@ -97,9 +97,15 @@ impl PreparedMetaballs {
                     if !(lo < far) {
                         break;
                     }
-                    // The balls a fresh query from `lo` would gather, in the same order.
-                    gathered.clear();
-                    gathered.extend(leaf_balls.iter().filter(|b| !(b.t1 < lo)));
+                    // The balls a fresh query from `lo` would gather, in the same order: the
+                    // leaf's own while `lo` is where they were gathered from.
+                    let gathered: &[RayBall<f32>] = if lo == range.0 {
+                        leaf_balls
+                    } else {
+                        gathered.clear();
+                        gathered.extend(leaf_balls.iter().filter(|b| !(b.t1 < lo)));
+                        gathered
+                    };
                     if gathered.is_empty() {
                         break;
                     }
