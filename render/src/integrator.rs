@@ -602,9 +602,38 @@ impl<'a> Tracer<'a> {
             // `layers` of them block. The ray leaves its surface outside the solid, and each
             // stretch beyond the clip box starts afresh (its cut face is open).
             let most = self.plan.layers as usize + 1;
+            let (segments, n) = self.segments(ray, 0.0, t_max);
+            let opacity = match fixed_material {
+                Some(m) => Some(self.lighting.material(m).opacity),
+                None => self.lighting.uniform_opacity(),
+            };
+            if let Some(opacity) = opacity {
+                // One opacity for every crossing: their number is enough.
+                let mut count = 0;
+                for &(lo, hi) in &segments[..n] {
+                    count += self.scene.crossing_count(
+                        ray,
+                        lo,
+                        hi,
+                        isovalue,
+                        false,
+                        most - count,
+                        &mut self.counters,
+                    );
+                    if count >= most {
+                        break;
+                    }
+                }
+                for _ in 0..count {
+                    transmitted *= 1.0 - opacity.clamp(0.0, 1.0);
+                }
+                if count >= most || transmitted <= 1e-3 {
+                    return 0.0;
+                }
+                continue;
+            }
             let mut hits = std::mem::take(&mut self.hits);
             hits.clear();
-            let (segments, n) = self.segments(ray, 0.0, t_max);
             for &(lo, hi) in &segments[..n] {
                 self.scene.crossings_counted(
                     ray,

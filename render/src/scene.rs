@@ -292,6 +292,24 @@ impl PreparedScene {
             .crossings(ray, t_min, t_max, isovalue, inside, max, out, counters)
     }
 
+    /// How many crossings [`PreparedScene::crossings_counted`] finds, at most `max` (see
+    /// [`PreparedKind::crossing_count`](crate::kinds::contract::PreparedKind::crossing_count)).
+    #[allow(clippy::too_many_arguments)]
+    #[inline]
+    pub fn crossing_count(
+        &self,
+        ray: &Ray,
+        t_min: f32,
+        t_max: f32,
+        isovalue: f32,
+        inside: bool,
+        max: usize,
+        counters: &mut impl Tally,
+    ) -> usize {
+        self.prepared
+            .crossing_count(ray, t_min, t_max, isovalue, inside, max, counters)
+    }
+
     /// `∫ density dt` over `[t_min, t_max]`: the field for metaballs, 0 for tets.
     #[inline]
     pub fn optical_depth(&self, ray: &Ray, t_min: f32, t_max: f32) -> f32 {

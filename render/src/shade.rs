@@ -290,6 +290,17 @@ impl Lighting {
             .unwrap_or(&DEFAULT_MATERIAL)
     }
 
+    /// The opacity every primitive's material has, when they all have the same one
+    /// (materials no primitive uses aside).
+    pub fn uniform_opacity(&self) -> Option<f32> {
+        let first = self.material(0).opacity;
+        let same = |m: u16| self.material(m).opacity.to_bits() == first.to_bits();
+        self.groups
+            .iter()
+            .all(|g| same(g.material))
+            .then_some(first)
+    }
+
     /// Index of the material of primitive `primitive`.
     #[inline]
     pub fn material_of(&self, primitive: u32) -> u16 {

@@ -80,6 +80,29 @@ pub trait PreparedKind {
         )
     }
 
+    /// How many crossings [`PreparedKind::crossings`] finds, at most `max`, for callers that
+    /// need only their number (shadow rays through surfaces of one opacity). A kind may count
+    /// without shading them, and may count two crossings closer together than
+    /// [`surface_offset`] that the walk with hits steps over as none. This default counts
+    /// [`PreparedKind::crossings`]'s hits.
+    #[allow(clippy::too_many_arguments)]
+    fn crossing_count(
+        &self,
+        ray: &Ray,
+        t_min: f32,
+        t_max: f32,
+        isovalue: f32,
+        inside: bool,
+        max: usize,
+        counters: &mut Self::Counters,
+    ) -> usize {
+        let mut hits = Vec::new();
+        self.crossings(
+            ray, t_min, t_max, isovalue, inside, max, &mut hits, counters,
+        );
+        hits.len()
+    }
+
     /// Whether the isosurface blocks `[t_min, t_max]` of `ray`: [`settle`] of
     /// [`PreparedKind::any_hit`]'s root. `hint` is what this caller's earlier queries left
     /// (a tile's shadow rays, in order); a kind may search first where the last blocked ray

@@ -321,6 +321,27 @@ impl PreparedGeometry {
         }
     }
 
+    /// [`PreparedKind::crossing_count`] of the kind.
+    #[allow(clippy::too_many_arguments)]
+    #[inline]
+    pub fn crossing_count<C: Tally>(
+        &self,
+        ray: &Ray,
+        t_min: f32,
+        t_max: f32,
+        isovalue: f32,
+        inside: bool,
+        max: usize,
+        counters: &mut C,
+    ) -> usize {
+        let span = (t_min, t_max, isovalue, inside, max);
+        match self {
+            PreparedGeometry::Metaballs(m) => crossing_count(m.as_ref(), ray, span, counters),
+            PreparedGeometry::Tets(t) => crossing_count(t.as_ref(), ray, span, counters),
+            PreparedGeometry::Surfels(s) => crossing_count(s.as_ref(), ray, span, counters),
+        }
+    }
+
     #[inline]
     pub fn optical_depth(&self, ray: &Ray, t_min: f32, t_max: f32) -> f32 {
         match self {
@@ -462,6 +483,16 @@ fn crossings<K: PreparedKind, C: Tally>(
     counters: &mut C,
 ) {
     counters.count::<K, _>(|c| k.crossings(ray, t_min, t_max, isovalue, inside, max, out, c))
+}
+
+#[inline]
+fn crossing_count<K: PreparedKind, C: Tally>(
+    k: &K,
+    ray: &Ray,
+    (t_min, t_max, isovalue, inside, max): (f32, f32, f32, bool, usize),
+    counters: &mut C,
+) -> usize {
+    counters.count::<K, _>(|c| k.crossing_count(ray, t_min, t_max, isovalue, inside, max, c))
 }
 
 fn primary_tile<K: PreparedKind, C: Tally>(

@@ -114,6 +114,20 @@ impl PreparedKind for PreparedMetaballs {
     }
 
     #[inline]
+    fn crossing_count(
+        &self,
+        ray: &Ray,
+        t_min: f32,
+        t_max: f32,
+        isovalue: f32,
+        inside: bool,
+        max: usize,
+        counters: &mut MetaballCounters,
+    ) -> usize {
+        self.crossing_count_counted(ray, t_min, t_max, isovalue, inside, max, counters)
+    }
+
+    #[inline]
     fn optical_depth(&self, ray: &Ray, t_min: f32, t_max: f32) -> f32 {
         PreparedMetaballs::optical_depth(self, ray, t_min, t_max)
     }
