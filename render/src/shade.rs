@@ -290,8 +290,8 @@ impl Lighting {
             .unwrap_or(&DEFAULT_MATERIAL)
     }
 
-    /// The opacity every primitive's material has, when they all have the same one
-    /// (materials no primitive uses aside).
+    /// The opacity of every primitive's material, when `materials[0]` and the material of
+    /// each group (a group of no primitive included) have the same one.
     pub fn uniform_opacity(&self) -> Option<f32> {
         let first = self.material(0).opacity;
         let same = |m: u16| self.material(m).opacity.to_bits() == first.to_bits();

@@ -11,6 +11,11 @@ use crate::kinds::counters::SceneCounters;
 use crate::ray::{surface_offset, Hit, Ray, INSIDE_EPS};
 use glam::Vec3;
 
+thread_local! {
+    /// The hits [`PreparedKind::crossing_count`]'s default counts.
+    static COUNTED: std::cell::Cell<Vec<Hit>> = const { std::cell::Cell::new(Vec::new()) };
+}
+
 /// A prepared state of one primitive kind, ready to trace.
 pub trait PreparedKind {
     /// The kind's own work counters.
@@ -84,7 +89,7 @@ pub trait PreparedKind {
     /// need only their number (shadow rays through surfaces of one opacity). A kind may count
     /// without shading them, and may count two crossings closer together than
     /// [`surface_offset`] that the walk with hits steps over as none. This default counts
-    /// [`PreparedKind::crossings`]'s hits.
+    /// [`PreparedKind::crossings`]'s hits (in a per-thread list kept between calls).
     #[allow(clippy::too_many_arguments)]
     fn crossing_count(
         &self,
@@ -96,11 +101,17 @@ pub trait PreparedKind {
         max: usize,
         counters: &mut Self::Counters,
     ) -> usize {
-        let mut hits = Vec::new();
-        self.crossings(
-            ray, t_min, t_max, isovalue, inside, max, &mut hits, counters,
-        );
-        hits.len()
+        COUNTED.with(|cell| {
+            // `take`: a kind's `crossings` that asked for a count itself would find it empty.
+            let mut hits = cell.take();
+            hits.clear();
+            self.crossings(
+                ray, t_min, t_max, isovalue, inside, max, &mut hits, counters,
+            );
+            let n = hits.len();
+            cell.replace(hits);
+            n
+        })
     }
 
     /// Whether the isosurface blocks `[t_min, t_max]` of `ray`: [`settle`] of
