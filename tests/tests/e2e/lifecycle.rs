@@ -154,3 +154,23 @@ async fn shutdown_while_streaming_closes_every_session_with_a_reason() {
     assert_eq!(state.sessions().count(), 0);
     assert_eq!(state.scheduler().tracked(), (0, 0), "no share or job left");
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_test_server_keeps_its_scenes_out_of_the_users_store() {
+    // The servers these tests start take a store of their own (the default would be the
+    // user's `~/.local/share/isoray`, where a pushed scene would outlive the test); a test
+    // that names one keeps it.
+    let server = TestServer::start(&[]).await;
+    let dir = server.state.config().data_dir.clone().expect("a store");
+    assert!(dir.starts_with(std::env::temp_dir()), "{}", dir.display());
+    assert_ne!(Some(dir), isoray_server::config::default_data_dir());
+    server.stop().await;
+    let named = tempfile::tempdir().expect("temp dir");
+    let path = named.path().to_str().expect("utf-8 temp path");
+    let server = TestServer::start(&["--data-dir", path]).await;
+    assert_eq!(
+        server.state.config().data_dir.as_deref(),
+        Some(named.path())
+    );
+    server.stop().await;
+}

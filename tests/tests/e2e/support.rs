@@ -23,6 +23,9 @@ pub struct TestServer {
     pub state: AppState,
     shutdown: Option<oneshot::Sender<()>>,
     handle: Option<JoinHandle<std::io::Result<()>>>,
+    /// The server's scene store, unless `args` named one: a test never opens the user's own
+    /// (`~/.local/share/isoray`, the default), nor another test's.
+    _store: Option<tempfile::TempDir>,
 }
 
 impl TestServer {
@@ -39,6 +42,13 @@ impl TestServer {
     pub fn start_on(listener: tokio::net::TcpListener, args: &[&str]) -> TestServer {
         let mut argv = vec!["isoray", "--listen", "127.0.0.1:0"];
         argv.extend_from_slice(args);
+        let names_store = args
+            .iter()
+            .any(|a| matches!(*a, "--data-dir" | "--demos-only"));
+        let store = (!names_store).then(|| tempfile::tempdir().expect("temp dir"));
+        if let Some(dir) = &store {
+            argv.extend(["--data-dir", dir.path().to_str().expect("utf-8 temp path")]);
+        }
         let config = <Config as clap::Parser>::parse_from(argv);
         let state = AppState::new(config).expect("valid test config");
         let addr = listener.local_addr().expect("local addr");
@@ -51,6 +61,7 @@ impl TestServer {
             state,
             shutdown: Some(tx),
             handle: Some(handle),
+            _store: store,
         }
     }
 
