@@ -3,9 +3,9 @@
 //! frame to a new camera. They run on the render pool, never on the async runtime.
 //!
 //! JPEG comes from the fastest encoder the build offers: libjpeg-turbo through the
-//! `turbojpeg` crate when the `turbojpeg` feature is on (the default; its bundled source needs
-//! cmake and nasm to build), else the pure-Rust `jpeg-encoder` with its SIMD colour
-//! conversion. Both use 4:2:0 chroma below quality 90 and 4:4:4 from 90 up, so their outputs
+//! `turbojpeg` crate when the `turbojpeg` feature is on (not a default feature: its bundled
+//! source needs cmake and nasm to build; `.ci/run` tests it), else the pure-Rust
+//! `jpeg-encoder` with its SIMD colour conversion. Both use 4:2:0 chroma below quality 90 and 4:4:4 from 90 up, so their outputs
 //! are comparable. H.264 (feature `h264`, OpenH264 built from source) is a stateful stream
 //! per session: [`H264Stream`].
 
