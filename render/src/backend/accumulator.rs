@@ -9,7 +9,6 @@ use crate::framebuffer::Framebuffer;
 use crate::geom::counters::RayTotals;
 use crate::kinds::counters::SceneCounters;
 use crate::scene::PreparedScene;
-use crate::shade::linear_to_srgb8;
 use crate::view::View;
 use glam::Vec3;
 
@@ -71,6 +70,11 @@ pub trait TracePasses {
     /// One pass of `plan` (pass `pass` seeds the per-pixel random streams), blocking.
     fn trace_pass(&self, scene: &PreparedScene, view: &View, plan: &EffectsPlan, pass: u32)
         -> Pass;
+    /// Linear colours to 8-bit sRGB, three bytes a colour into `rgb`, blocking; a backend
+    /// with a pool of its own converts in parallel there.
+    fn encode_srgb(&self, colors: &[Vec3], rgb: &mut [u8]) {
+        crate::srgb::encode8_pixels(colors, rgb);
+    }
 }
 
 /// The plan of `effects` on `scene`.
@@ -100,9 +104,7 @@ pub fn render_effects(
     }
     let pass = backend.trace_pass(scene, view, &plan, 0);
     let mut fb = Framebuffer::new(view.width, view.height);
-    for (i, c) in pass.color.iter().enumerate() {
-        fb.rgb[i * 3..i * 3 + 3].copy_from_slice(&[c.x, c.y, c.z].map(linear_to_srgb8));
-    }
+    backend.encode_srgb(&pass.color, &mut fb.rgb);
     fb.depth = pass.depth;
     (fb, pass.rays)
 }
@@ -260,7 +262,7 @@ impl Accumulator {
         let inv = 1.0 / self.passes as f32;
         for (i, s) in self.sum.iter().enumerate() {
             let c = *s * inv;
-            fb.rgb[i * 3..i * 3 + 3].copy_from_slice(&[c.x, c.y, c.z].map(linear_to_srgb8));
+            fb.rgb[i * 3..i * 3 + 3].copy_from_slice(&crate::srgb::encode8_rgb(c.to_array()));
         }
         fb.depth.clone_from(&self.depth);
         fb

@@ -14,7 +14,6 @@ use crate::geom::rng::PixelRng;
 use crate::integrator::{shade_primary, Tracer, T_MAX};
 use crate::kinds::counters::SceneCounters;
 use crate::scene::PreparedScene;
-use crate::shade::linear_to_srgb8;
 use crate::view::View;
 use glam::Vec3;
 use rayon::prelude::*;
@@ -104,6 +103,17 @@ impl TracePasses for CpuBackend {
         self.pool
             .install(|| trace_pass(scene, view, plan, pass, true))
     }
+
+    fn encode_srgb(&self, colors: &[Vec3], rgb: &mut [u8]) {
+        // Blocks of pixels on the pool: a frame's conversion is no serial tail after its
+        // parallel trace.
+        const BLOCK: usize = 4096;
+        self.pool.install(|| {
+            rgb.par_chunks_mut(BLOCK * 3)
+                .zip(colors.par_chunks(BLOCK))
+                .for_each(|(out, block)| crate::srgb::encode8_pixels(block, out));
+        });
+    }
 }
 
 /// A tile's pixels `x0..x1 × y0..y1`.
@@ -169,7 +179,7 @@ fn render_tiles(scene: &PreparedScene, view: &View) -> Framebuffer {
         let mut counters = SceneCounters::default();
         for (ray, hit) in scene.primary_hits(&rays, rect, view.isovalue, T_MAX, &mut counters) {
             let (color, t) = shade_primary(scene, &ray, hit.as_ref(), view.isovalue);
-            rgb.extend([color.x, color.y, color.z].map(linear_to_srgb8));
+            rgb.extend(crate::srgb::encode8_rgb(color.to_array()));
             depth.push(t * ray.dir.dot(forward));
         }
         (rgb, depth, ())

@@ -16,7 +16,6 @@ use crate::effects::plan::EffectsPlan;
 use crate::effects::rays::RayKind;
 use crate::framebuffer::Framebuffer;
 use crate::scene::PreparedScene;
-use crate::shade::linear_to_srgb8;
 use crate::view::View;
 use glam::Vec3;
 use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering};
@@ -212,7 +211,7 @@ impl TracePasses for GpuBackend {
                 let mut fb = Framebuffer::new(view.width, view.height);
                 for (i, p) in pixels.iter().enumerate() {
                     fb.rgb[i * 3..i * 3 + 3]
-                        .copy_from_slice(&[p[0], p[1], p[2]].map(linear_to_srgb8));
+                        .copy_from_slice(&crate::srgb::encode8_rgb([p[0], p[1], p[2]]));
                     fb.depth[i] = if p[3] < 0.0 { f32::INFINITY } else { p[3] };
                 }
                 (fb, times)
