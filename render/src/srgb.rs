@@ -5,9 +5,9 @@
 //! it gives never decreases as `v` grows, so it is fixed by the 255 least values at which it
 //! steps up (`Tables::steps`, found once by bisection over the `f32` bit patterns with the formula
 //! itself); a value's code is the number of steps at or below it, counted from a table
-//! indexed by the value's top 16 bits: at most two steps lie above a prefix's least value
-//! within it, so two comparisons finish the count, without a branch (the data-dependent
-//! walk they replace was mispredicted about every other pixel). The test
+//! indexed by the value's top 16 bits: at most one step lies above a prefix's least value
+//! within it, so one comparison finishes the count, without a branch (the data-dependent
+//! walk it replaces was mispredicted about every other pixel). The test
 //! `the_fast_code_is_the_formulas_for_every_f32_in_0_1` compares the two for every `f32`
 //! from 0 to 1 (about 1.07 billion values), so the images do not change by a bit.
 
@@ -25,11 +25,11 @@ pub fn encode8_formula(v: f32) -> u8 {
     (s * 255.0 + 0.5) as u8
 }
 
-/// The least values, for `k = 1..=255`, whose code is at least `k` (then two infinities, so
-/// that the two comparisons after any prefix's code stay in the array), and the code of the
+/// The least values, for `k = 1..=255`, whose code is at least `k` (then an infinity, so
+/// that the comparison after any prefix's code stays in the array), and the code of the
 /// least value with each top-16-bit prefix in `[0, 1]`.
 struct Tables {
-    steps: [f32; 257],
+    steps: [f32; 256],
     by_prefix: Vec<u8>,
 }
 
@@ -43,7 +43,7 @@ fn tables() -> &'static Tables {
     static TABLES: OnceLock<Tables> = OnceLock::new();
     TABLES.get_or_init(|| {
         let one = 1.0f32.to_bits();
-        let mut steps = [f32::INFINITY; 257];
+        let mut steps = [f32::INFINITY; 256];
         for (k, step) in steps[..255].iter_mut().enumerate() {
             let code = k as u8 + 1;
             // The least bit pattern in [0, 1] whose code is at least `code` (1.0's is 255).
@@ -97,12 +97,10 @@ fn code_of(t: &Tables, v: f32) -> u8 {
     if v >= 1.0 {
         return 255;
     }
-    // At most two steps above the prefix's least value lie within the prefix (the test
-    // checks it), and the steps past 255 are infinite.
+    // At most one step above the prefix's least value lies within the prefix (the test
+    // checks it), and the step past the 255th is infinite.
     let base = t.by_prefix[prefix(v)];
-    let k = base as usize;
-    let up = u8::from(v >= t.steps[k]) + u8::from(v >= t.steps[k + 1]);
-    base + up
+    base + u8::from(v >= t.steps[base as usize])
 }
 
 #[cfg(test)]
@@ -146,11 +144,11 @@ mod tests {
             seen[encode8(s) as usize] = true;
         }
         assert!(seen[1..].iter().all(|&s| s));
-        // From a prefix's code the walk takes at most two steps.
+        // Within a prefix the code rises by at most one step.
         let t = tables();
         for (p, &least) in t.by_prefix.iter().enumerate().take(t.by_prefix.len() - 1) {
             let most = encode8(f32::from_bits(((p as u32) << 16) | 0xFFFF));
-            assert!(most - least <= 2, "prefix {p}: codes {least}..={most}");
+            assert!(most - least <= 1, "prefix {p}: codes {least}..={most}");
         }
     }
 
