@@ -27,13 +27,16 @@ pub fn encode8_formula(v: f32) -> u8 {
 
 /// The least values, for `k = 1..=255`, whose code is at least `k` (then an infinity, so
 /// that the comparison after any prefix's code stays in the array), and the code of the
-/// least value with each top-16-bit prefix in `[0, 1]`.
+/// least value with each top-16-bit prefix from `first` (the one below the first step's) to
+/// 1.0's. Below `first` every value's code is 0, so the table starts there: 1.6 KB instead
+/// of 16 KB, which stays in the first-level cache beside the tracer's data.
 struct Tables {
     steps: [f32; 256],
+    first: usize,
     by_prefix: Vec<u8>,
 }
 
-/// Index into [`Tables::by_prefix`] of a value in `[0, 1]`.
+/// The top 16 bits of a value in `[0, 1]`.
 #[inline(always)]
 fn prefix(v: f32) -> usize {
     (v.to_bits() >> 16) as usize
@@ -58,13 +61,19 @@ fn tables() -> &'static Tables {
             }
             *step = f32::from_bits(lo);
         }
-        let by_prefix = (0..=prefix(1.0))
+        // One prefix below the first step's: its least value is below that step (code 0).
+        let first = prefix(steps[0]) - 1;
+        let by_prefix = (first..=prefix(1.0))
             .map(|p| {
                 let least = f32::from_bits((p as u32) << 16);
                 steps[..255].partition_point(|&s| s <= least) as u8
             })
             .collect();
-        Tables { steps, by_prefix }
+        Tables {
+            steps,
+            first,
+            by_prefix,
+        }
     })
 }
 
@@ -98,8 +107,9 @@ fn code_of(t: &Tables, v: f32) -> u8 {
         return 255;
     }
     // At most one step above the prefix's least value lies within the prefix (the test
-    // checks it), and the step past the 255th is infinite.
-    let base = t.by_prefix[prefix(v)];
+    // checks it), and the step past the 255th is infinite. A value below `first` is below
+    // the first step: the clamped index's code (0) and the comparison give its 0.
+    let base = t.by_prefix[prefix(v).saturating_sub(t.first)];
     base + u8::from(v >= t.steps[base as usize])
 }
 
@@ -146,7 +156,11 @@ mod tests {
         assert!(seen[1..].iter().all(|&s| s));
         // Within a prefix the code rises by at most one step.
         let t = tables();
-        for (p, &least) in t.by_prefix.iter().enumerate().take(t.by_prefix.len() - 1) {
+        assert!(t.by_prefix.len() < 2_000, "{}", t.by_prefix.len());
+        assert_eq!(t.by_prefix[0], 0);
+        for (i, &least) in t.by_prefix.iter().enumerate().take(t.by_prefix.len() - 1) {
+            let p = t.first + i;
+            assert_eq!(encode8_formula(f32::from_bits((p as u32) << 16)), least);
             let most = encode8(f32::from_bits(((p as u32) << 16) | 0xFFFF));
             assert!(most - least <= 1, "prefix {p}: codes {least}..={most}");
         }
