@@ -138,8 +138,14 @@ fn trace_tiles<P: Copy + Send, S: Send>(
 ) {
     let tiles_x = width.div_ceil(TILE);
     let tiles_y = height.div_ceil(TILE);
+    // Split down to single tiles: rayon's adaptive splitting otherwise stops after about
+    // `log2(threads) + 1` halvings unless a piece is stolen, and runs a quarter of the image
+    // (on two threads) in one sequential piece that no idle thread can take a tile from; a
+    // scene whose work sits in that quarter then keeps the other thread idle (Tornado-128k's
+    // ray cast at 1920×1080 ran 1.3 times faster on two threads than on one).
     let tiles: Vec<TracedTile<P, S>> = (0..tiles_x * tiles_y)
         .into_par_iter()
+        .with_max_len(1)
         .map(|tile| {
             let x0 = (tile % tiles_x) * TILE;
             let y0 = (tile / tiles_x) * TILE;
