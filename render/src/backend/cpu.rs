@@ -334,6 +334,51 @@ mod tests {
     use crate::View;
     use std::sync::Arc;
 
+    /// No thread holds a run of tiles that another thread could trace: while the first tile
+    /// is held up, the other worker traces every other tile. Rayon's default splitting left
+    /// a quarter of the image (tiles 1 to 3 of 16 here) queued behind the first tile on its
+    /// thread, and this test then fails at its guard.
+    #[test]
+    fn a_tile_held_up_keeps_no_other_tile_waiting() {
+        use std::sync::{Condvar, Mutex};
+        use std::time::Duration;
+        let (width, height) = (4 * TILE, 4 * TILE);
+        let tiles = (width / TILE * (height / TILE)) as usize;
+        let traced = (Mutex::new(0usize), Condvar::new());
+        let trace = |rect: Rect| {
+            let (lock, changed) = &traced;
+            let mut count = lock.lock().expect("count");
+            if rect.0 == 0 && rect.1 == 0 {
+                // A guard against a hang, not a timing: the other worker needs no more than
+                // the time to trace 15 empty tiles.
+                let (count, waited) = changed
+                    .wait_timeout_while(count, Duration::from_secs(120), |c| *c < tiles - 1)
+                    .expect("count");
+                assert!(
+                    !waited.timed_out(),
+                    "{} of {} other tiles traced while the first was held up",
+                    *count,
+                    tiles - 1
+                );
+            } else {
+                *count += 1;
+                changed.notify_all();
+            }
+            (
+                vec![0u8; (TILE * TILE) as usize],
+                vec![0.0f32; (TILE * TILE) as usize],
+                (),
+            )
+        };
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(2)
+            .build()
+            .expect("pool");
+        let (mut pixels, mut depth) = (vec![1u8; tiles * 256], vec![1.0f32; tiles * 256]);
+        pool.install(|| trace_tiles(width, height, 1, trace, &mut pixels, &mut depth, |()| {}));
+        assert!(pixels.iter().all(|&p| p == 0), "every tile written");
+    }
+
     #[test]
     fn render_is_deterministic_across_thread_counts() {
         let demo = DemoScene::Blobs;
