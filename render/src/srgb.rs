@@ -86,16 +86,20 @@ pub fn encode8(v: f32) -> u8 {
 /// [`encode8`] of each channel of `rgb`, the tables looked up once.
 #[inline]
 pub fn encode8_rgb(rgb: [f32; 3]) -> [u8; 3] {
-    let t = tables();
-    [code_of(t, rgb[0]), code_of(t, rgb[1]), code_of(t, rgb[2])]
+    codes_of(tables(), rgb)
 }
 
 /// [`encode8`] of every channel of `colors` into `out` (three bytes a colour).
 pub fn encode8_pixels(colors: &[glam::Vec3], out: &mut [u8]) {
     let t = tables();
     for (c, px) in colors.iter().zip(out.chunks_exact_mut(3)) {
-        px.copy_from_slice(&[code_of(t, c.x), code_of(t, c.y), code_of(t, c.z)]);
+        px.copy_from_slice(&codes_of(t, c.to_array()));
     }
+}
+
+#[inline(always)]
+fn codes_of(t: &Tables, rgb: [f32; 3]) -> [u8; 3] {
+    rgb.map(|v| code_of(t, v))
 }
 
 #[inline(always)]

@@ -364,17 +364,15 @@ mod tests {
                 *count += 1;
                 changed.notify_all();
             }
-            (
-                vec![0u8; (TILE * TILE) as usize],
-                vec![0.0f32; (TILE * TILE) as usize],
-                (),
-            )
+            let per_tile = (TILE * TILE) as usize;
+            (vec![0u8; per_tile], vec![0.0f32; per_tile], ())
         };
         let pool = rayon::ThreadPoolBuilder::new()
             .num_threads(2)
             .build()
             .expect("pool");
-        let (mut pixels, mut depth) = (vec![1u8; tiles * 256], vec![1.0f32; tiles * 256]);
+        let per_tile = (TILE * TILE) as usize;
+        let (mut pixels, mut depth) = (vec![1u8; tiles * per_tile], vec![1.0f32; tiles * per_tile]);
         pool.install(|| trace_tiles(width, height, 1, trace, &mut pixels, &mut depth, |()| {}));
         assert!(pixels.iter().all(|&p| p == 0), "every tile written");
     }
