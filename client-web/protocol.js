@@ -10,6 +10,10 @@ export const CODEC_H264 = 3;
 export const CODECS = { [CODEC_JPEG]: 'image/jpeg', [CODEC_PNG]: 'image/png' };
 /** Codec names as `stream` messages and `info.codecs` spell them. */
 export const CODEC_NAMES = { [CODEC_JPEG]: 'jpeg', [CODEC_PNG]: 'png', [CODEC_H264]: 'h264' };
+/** Codec names as people read them (the stats overlay). */
+export const CODEC_LABELS = { [CODEC_JPEG]: 'JPEG', [CODEC_PNG]: 'PNG', [CODEC_H264]: 'H.264' };
+/** A frame header's codec number as people read it; a number the page does not know stays a number. */
+export const codecLabel = (codec) => CODEC_LABELS[codec] ?? `codec ${codec}`;
 export const FLAG_STILL = 1;
 export const FLAG_KEYFRAME = 2;
 export const FLAG_DEPTH = 4;

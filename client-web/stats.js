@@ -3,6 +3,8 @@
 // and as a live plot of the last 30 seconds. Every number is measured from the frames this
 // page received; nothing is estimated.
 
+import { codecLabel } from './protocol.js';
+
 const WINDOW_MS = 1000; // frames and bytes per second are counted over the last second
 const HISTORY_MS = 30000; // span of the plot
 const SAMPLE_MS = 250;
@@ -63,7 +65,7 @@ export class Stats {
       `bitrate  ${s ? s.mbps.toFixed(2) : '0.00'} Mbit/s`,
     ];
     if (h) {
-      lines.push(`size     ${h.width}×${h.height} ${h.codec === 2 ? 'PNG' : h.codec === 1 ? 'JPEG' : `codec ${h.codec}`}${h.flags & 1 ? ' still' : ''}`);
+      lines.push(`size     ${h.width}×${h.height} ${codecLabel(h.codec)}${h.flags & 1 ? ' still' : ''}`);
       for (const [name, key] of STAGES) lines.push(`${name.padEnd(8)} ${ms(h[key] / 1000)}`);
     }
     this.text.textContent = lines.join('\n');

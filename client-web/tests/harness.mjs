@@ -84,12 +84,20 @@ export async function openBrowser() {
   return { browser, context, page, problems, network: state };
 }
 
-/** Counts binary websocket messages (frames) the page receives, independently of the app. */
+/**
+ * Counts binary websocket messages (frames) the page receives, independently of the app: when
+ * each arrived, its bytes and the codec byte of its header.
+ */
 export function countWireFrames(page) {
-  const counter = { frames: 0, times: [], bytes: [] };
+  const counter = { frames: 0, times: [], bytes: [], codecs: [] };
   page.on('websocket', (ws) => {
     ws.on('framereceived', ({ payload }) => {
-      if (typeof payload !== 'string') { counter.frames += 1; counter.times.push(Date.now()); counter.bytes.push(payload.length); }
+      if (typeof payload !== 'string') {
+        counter.frames += 1;
+        counter.times.push(Date.now());
+        counter.bytes.push(payload.length);
+        counter.codecs.push(payload[32]); // the header's codec byte
+      }
     });
   });
   return counter;

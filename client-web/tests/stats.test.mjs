@@ -26,6 +26,7 @@ test('the stats overlay shows the frame rate the page really receives', async (t
     // that crossed the wire in the second before the reading.
     const pairs = [];
     const rates = [];
+    const codecs = []; // [codec the overlay names, codec numbers on the wire in the second before]
     for (let i = 0; i < 8; i++) {
       // Read each new sample as soon as the overlay shows it, so it and the wire count cover
       // the same second.
@@ -37,6 +38,9 @@ test('the stats overlay shows the frame rate the page really receives', async (t
       const recent = wire.times.map((t, k) => [t, wire.bytes[k]]).filter(([t]) => t > now - 1000);
       pairs.push([Number(/fps\s+(\d+)/.exec(text)[1]), recent.length]);
       rates.push([Number(/bitrate\s+([\d.]+)/.exec(text)[1]), recent.reduce((a, [, b]) => a + b, 0) * 8 / 1e6]);
+      const shown = /^size\s+\d+×\d+ (.+?)( still)?$/m.exec(text);
+      assert.ok(shown, `the overlay shows the frame's size and codec (${text})`);
+      codecs.push([shown[1], [...new Set(wire.codecs.filter((_, k) => wire.times[k] > now - 1000))]]);
     }
     const meanShown = pairs.slice(2).reduce((a, [s]) => a + s, 0) / (pairs.length - 2);
     const meanWire = pairs.slice(2).reduce((a, [, w]) => a + w, 0) / (pairs.length - 2);
@@ -46,6 +50,14 @@ test('the stats overlay shows the frame rate the page really receives', async (t
     // frame near the edge of the second can fall on either side; averaged, within 20% or 2 fps.
     assert.ok(Math.abs(meanShown - meanWire) <= Math.max(2, 0.2 * meanWire),
       `overlay fps ${meanShown.toFixed(1)} vs ${meanWire.toFixed(1)} frames per second on the wire (${JSON.stringify(pairs)})`);
+
+    // The codec by its name, one that crossed the wire in the second before (an animated demo
+    // goes from JPEG to H.264 once its motion is sustained, where the browser decodes H.264).
+    const names = { 1: 'JPEG', 2: 'PNG', 3: 'H.264' };
+    t.diagnostic(`overlay codec vs codecs on the wire: ${JSON.stringify(codecs)}`);
+    for (const [shown, onWire] of codecs) {
+      assert.ok(onWire.map((c) => names[c]).includes(shown), `the overlay names "${shown}", the wire carried codecs ${JSON.stringify(onWire)}`);
+    }
 
     // The other figures are there and plausible: latency in ms, bit rate from the bytes.
     const text = await page.locator('#stats-text').textContent();
