@@ -142,6 +142,18 @@ test('controls are labelled and reachable by keyboard; render size follows canva
     }));
     assert.ok(layout.scrollWidth <= layout.width, `no sideways scrolling (${layout.scrollWidth} > ${layout.width})`);
     assert.ok(layout.panelTop >= layout.viewBottom - 1, 'the controls sit below the view');
+    // With the controls hidden the view fills the window below the header (no empty page under
+    // it), and frames follow its new size.
+    before = await frameCount(page);
+    await page.locator('#panel-toggle').click();
+    await page.waitForFunction(() => {
+      const r = document.getElementById('view').getBoundingClientRect();
+      return Math.abs(r.bottom - innerHeight) <= 1 && document.documentElement.scrollHeight <= innerHeight;
+    });
+    await settledPixels(page, { from: before });
+    const s3 = await size();
+    const full = await page.evaluate(() => [document.getElementById('view').width, document.getElementById('view').height]);
+    assert.deepEqual(full, s3.css.map((v) => Math.round(v * s3.dpr * 0.5)), 'the view without the controls gets frames of its size');
   });
 });
 
