@@ -144,7 +144,10 @@ pub fn parse(text: &str) -> Result<ClientMessage, ErrorMessage> {
             };
             error(
                 "invalid_message",
-                format!("`{kind}` message{field}: {}", e.into_inner()),
+                format!(
+                    "`{kind}` message{field}: {}",
+                    crate::api::request::plain_words(&e.into_inner().to_string())
+                ),
                 input_id,
             )
         })
@@ -394,6 +397,14 @@ mod tests {
             "unknown_type"
         );
         assert_eq!(parse("[1,2]").expect_err("array").code, "invalid_message");
+        // A nested object of the wrong type, in a client's words, not the server's type names.
+        let e = parse(r#"{"type":"effects","input_id":4,"effects":7}"#).expect_err("number");
+        assert!(
+            e.message.contains("field `effects`") && e.message.contains("expected a JSON object"),
+            "{}",
+            e.message
+        );
+        assert!(!e.message.contains("struct"), "{}", e.message);
     }
 
     #[test]

@@ -31,20 +31,52 @@ pub fn parse_json<T: serde::de::DeserializeOwned>(bytes: &[u8]) -> Result<T, App
         let inner = e.into_inner();
         // serde_json reports line and column; for a one-line body the column is the offset.
         let offset = (inner.line() == 1).then(|| inner.column().saturating_sub(1) as u64);
-        let mut err = AppError::bad_request("invalid_json", format!("{path}: {inner}"));
-        if path != "." {
-            err = err.field(path);
+        let what = plain_words(&inner.to_string());
+        let mut err = match known_field(&path) {
+            Some(field) => {
+                AppError::bad_request("invalid_json", format!("{field}: {what}")).field(field)
+            }
+            None if bytes.iter().all(u8::is_ascii_whitespace) => {
+                AppError::bad_request("invalid_json", "the body is empty: send a JSON object")
+            }
+            None => AppError::bad_request("invalid_json", format!("the body: {what}")),
+        };
+        if let Some(o) = offset.filter(|_| inner.column() > 0) {
+            err = err.offset(o);
         }
-        match offset {
-            Some(o) if inner.column() > 0 => err.offset(o),
-            _ => err,
-        }
+        err
     })?;
     de.end().map_err(|e| {
         AppError::bad_request("invalid_json", format!("after the JSON value: {e}"))
             .offset(e.column().saturating_sub(1) as u64)
     })?;
     Ok(value)
+}
+
+/// The field a `serde_path_to_error` path names, up to its first segment the parser could not
+/// name (`?`: an error while reading a key, such as a trailing comma); `None` for the whole
+/// body (`.`, or nothing known).
+fn known_field(path: &str) -> Option<&str> {
+    let known = match path.find('?') {
+        Some(at) => path[..at].trim_end_matches('.'),
+        None => path,
+    };
+    (!known.is_empty() && known != ".").then_some(known)
+}
+
+/// serde's error text without the server's type names: "expected struct CreateScene" means a
+/// JSON object to a client.
+pub(crate) fn plain_words(text: &str) -> String {
+    let mut out = String::with_capacity(text.len());
+    let mut rest = text;
+    while let Some(at) = rest.find("expected struct ") {
+        out.push_str(&rest[..at]);
+        out.push_str("expected a JSON object");
+        rest = &rest[at + "expected struct ".len()..];
+        rest = rest.trim_start_matches(|c: char| c.is_alphanumeric() || c == '_');
+    }
+    out.push_str(rest);
+    out
 }
 
 /// A JSON body must say so: `Content-Type: application/json` (parameters such as
@@ -195,4 +227,93 @@ pub fn declared_length(headers: &HeaderMap) -> Option<u64> {
         .get(header::CONTENT_LENGTH)
         .and_then(|v| v.to_str().ok())
         .and_then(|v| v.parse::<u64>().ok())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use serde::Deserialize;
+
+    #[derive(Debug, Deserialize)]
+    #[serde(deny_unknown_fields)]
+    #[allow(dead_code)]
+    struct Body {
+        name: String,
+        inner: Option<Inner>,
+    }
+
+    #[derive(Debug, Deserialize)]
+    #[serde(deny_unknown_fields)]
+    #[allow(dead_code)]
+    struct Inner {
+        size: u32,
+    }
+
+    /// (message, field, offset) of the error `parse_json::<Body>` gives for `body`.
+    fn error_of(body: &str) -> (String, Option<String>, Option<u64>) {
+        let err = parse_json::<Body>(body.as_bytes()).expect_err(body);
+        (err.message.clone(), err.field.clone(), err.offset)
+    }
+
+    #[test]
+    fn json_errors_name_the_field_or_the_body_in_plain_words() {
+        let (message, field, offset) = error_of(r#"{"name": 5}"#);
+        assert!(
+            message.starts_with("name: invalid type: integer `5`, expected a string"),
+            "{message}"
+        );
+        assert_eq!((field.as_deref(), offset), (Some("name"), Some(9)));
+
+        let (message, field, _) = error_of(r#"{"name": "a", "inner": {"size": -1}}"#);
+        assert!(
+            message.starts_with("inner.size: invalid value"),
+            "{message}"
+        );
+        assert_eq!(field.as_deref(), Some("inner.size"));
+
+        // The whole body of the wrong type: no server type name, no field.
+        let (message, field, offset) = error_of("5");
+        assert!(
+            message.starts_with("the body: invalid type: integer `5`, expected a JSON object"),
+            "{message}"
+        );
+        assert!(!message.contains("Body"), "{message}");
+        assert_eq!((field, offset), (None, Some(0)));
+
+        // A key that cannot be read (a trailing comma, a missing one): the object it is in.
+        let (message, field, offset) = error_of(r#"{"name": "a",}"#);
+        assert!(message.starts_with("the body: trailing comma"), "{message}");
+        assert_eq!((field, offset), (None, Some(13)));
+        let (message, field, _) = error_of(r#"{"name": "a", "inner": {"size": 1,}}"#);
+        assert!(message.starts_with("inner: trailing comma"), "{message}");
+        assert_eq!(field.as_deref(), Some("inner"));
+        let (message, _, _) = error_of(r#"{"name": "a" "inner": null}"#);
+        assert!(
+            message.starts_with("the body: expected `,` or `}`"),
+            "{message}"
+        );
+
+        let (message, field, _) = error_of("  ");
+        assert_eq!(
+            (message.as_str(), field),
+            ("the body is empty: send a JSON object", None)
+        );
+        let (message, _, _) = error_of(r#"{"name": "a""#);
+        assert!(
+            message.starts_with("the body: EOF while parsing an object"),
+            "{message}"
+        );
+    }
+
+    #[test]
+    fn plain_words_drops_every_struct_name() {
+        assert_eq!(
+            plain_words("expected struct CreateScene, or expected struct Step_2 at line 1"),
+            "expected a JSON object, or expected a JSON object at line 1"
+        );
+        assert_eq!(plain_words("expected a string"), "expected a string");
+        assert_eq!(known_field("surfels.nodes[3].?"), Some("surfels.nodes[3]"));
+        assert_eq!(known_field("?"), None);
+        assert_eq!(known_field("."), None);
+    }
 }
