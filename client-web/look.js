@@ -29,6 +29,23 @@ export function linearOf(hex) {
 
 const fmt = (v) => String(+Number(v).toPrecision(5));
 
+/**
+ * Decimals of the clip fields: a thousandth of the scene's largest extent (or finer), so a
+ * field holds about six characters whatever the scene's units ("-4.465" for a box 9 across,
+ * "-46.83" for one 90 across) instead of five significant digits ("-0.039019").
+ */
+const clipDecimals = (bounds) => {
+  const extent = bounds ? Math.max(...bounds.max.map((v, i) => v - bounds.min[i])) : 2;
+  return Number.isFinite(extent) && extent > 0 ? Math.min(6, Math.max(0, -Math.floor(Math.log10(extent / 1000)))) : 3;
+};
+
+/** `v` to `decimals`, rounded towards `-Infinity` (`dir` -1), `+Infinity` (1) or the nearest (0). */
+const roundTo = (v, decimals, dir = 0) => {
+  const scale = 10 ** decimals;
+  const round = dir < 0 ? Math.floor : dir > 0 ? Math.ceil : Math.round;
+  return +(round(v * scale) / scale).toFixed(decimals);
+};
+
 export class Look {
   /** `send(changes)` sends an `effects` message body; `saved()` writes the URL. */
   constructor(settings, { send, saved }) {
@@ -70,12 +87,14 @@ export class Look {
   /** The scene's bounds (from `GET /api/v1/scenes/{id}`), the ranges of the clip fields. */
   setBounds(bounds) {
     this.bounds = bounds;
+    const d = clipDecimals(bounds);
     for (const [i, input] of this.clipInputs.entries()) {
       const axis = i % 3;
       const pad = bounds ? (bounds.max[axis] - bounds.min[axis]) * 0.05 : 0;
-      input.min = bounds ? fmt(bounds.min[axis] - pad) : '';
-      input.max = bounds ? fmt(bounds.max[axis] + pad) : '';
+      input.min = bounds ? String(roundTo(bounds.min[axis] - pad, d, -1)) : '';
+      input.max = bounds ? String(roundTo(bounds.max[axis] + pad, d, 1)) : '';
     }
+    this.#showClip();
   }
 
   /** A new session: restores the look from the settings. */
@@ -106,10 +125,14 @@ export class Look {
 
   #defaultClip() {
     // The half of the scene's box nearest +z cut away, so switching it on shows an effect.
+    // Its corners at the fields' decimals (outwards), so the fields show the box exactly.
     const b = this.bounds ?? { min: [-1, -1, -1], max: [1, 1, 1] };
+    const d = clipDecimals(this.bounds);
     const mid = (b.min[2] + b.max[2]) / 2;
     const pad = b.max.map((v, i) => (v - b.min[i]) * 0.05);
-    return [b.min[0] - pad[0], b.min[1] - pad[1], mid, b.max[0] + pad[0], b.max[1] + pad[1], b.max[2] + pad[2]];
+    const lo = [b.min[0] - pad[0], b.min[1] - pad[1]].map((v) => roundTo(v, d, -1));
+    const hi = [0, 1, 2].map((i) => roundTo(b.max[i] + pad[i], d, 1));
+    return [...lo, roundTo(mid, d), ...hi];
   }
 
   #clipChanges(box) {
@@ -131,7 +154,7 @@ export class Look {
     this.clipOn.checked = Boolean(box);
     for (const [i, input] of this.clipInputs.entries()) {
       input.disabled = !box;
-      if (box) input.value = fmt(box[i]);
+      if (box) input.value = String(roundTo(box[i], clipDecimals(this.bounds)));
     }
     for (const fn of this.listeners) fn(box);
   }

@@ -44,6 +44,9 @@ test('dragging a clip-box handle in the view changes the image and the URL', asy
     await page.waitForURL(/clip=/);
     const box = clipOf(page.url());
     assert.ok(meanAbsDiff(plain, clipped) > CHANGED, 'switching the clip box on cuts the blobs');
+    const fields = () => page.evaluate(() => [...document.querySelectorAll('#panel .clip-grid input')]
+      .map((i) => ({ id: i.id, value: i.value, text: i.scrollWidth, room: i.clientWidth })));
+    assert.deepEqual((await fields()).map((f) => Number(f.value)), box, 'the fields show the box of the URL');
 
     // Drag the max-x face's handle to the left, along -x as drawn: the right part of the
     // front half comes back.
@@ -65,7 +68,9 @@ test('dragging a clip-box handle in the view changes the image and the URL', asy
     const diff = meanAbsDiff(clipped, dragged);
     t.diagnostic(`mean abs diff ${diff.toFixed(2)}`);
     assert.ok(diff > CHANGED, `the image changed (mean abs diff ${diff.toFixed(2)})`);
-    assert.equal(Number(await page.locator('#clip-max-x').inputValue()), +moved[3].toPrecision(5), 'and the numeric field follows');
+    const extent = Math.max(...bounds.max.map((v, i) => v - bounds.min[i]));
+    const shown = Number(await page.locator('#clip-max-x').inputValue());
+    assert.ok(Math.abs(shown - moved[3]) <= extent / 1000, `and the numeric field follows (${shown} for ${moved[3]})`);
 
     // A typed value moves the box too, and a reload keeps it.
     before = await frameCount(page);
@@ -73,6 +78,13 @@ test('dragging a clip-box handle in the view changes the image and the URL', asy
     await page.locator('#clip-max-y').press('Enter');
     await settledPixels(page, { from: before });
     await page.waitForURL((url) => clipOf(url)[4] === +(box[4] - 1).toFixed(3));
+
+    // In a desktop window's side panel every field shows its whole number.
+    await page.setViewportSize({ width: 1280, height: 720 });
+    await page.waitForFunction(() => document.getElementById('panel').getBoundingClientRect().left > 640);
+    const shownFields = await fields();
+    t.diagnostic(`clip fields ${JSON.stringify(shownFields)}`);
+    for (const f of shownFields) assert.ok(f.text <= f.room, `${f.id} shows all of "${f.value}" (${f.text} px of text in ${f.room} px)`);
   });
 });
 
