@@ -191,7 +191,9 @@ export class Timeline {
     if (t !== null) slider.value = String(this.#positionOf(t));
     if (isLive && this.steps) slider.value = slider.max;
     const label = this.steps
-      ? (count ? `step ${this.steps[Number(slider.value)]?.index ?? '–'} of ${count} (t = ${fmt(this.#timeAt(Number(slider.value)))})` : 'no steps yet')
+      // The step's own index as pushed (a simulation may number them 0, 10, 20, …) and where it
+      // stands among the stored steps.
+      ? (count ? `step ${this.steps[Number(slider.value)]?.index ?? '–'} (${Number(slider.value) + 1} of ${count}, t = ${fmt(this.#timeAt(Number(slider.value)))})` : 'no steps yet')
       : `${fmt(t ?? 0)} s`;
     out.textContent = isLive ? `live · ${label}` : label;
     slider.setAttribute('aria-valuetext', out.textContent);

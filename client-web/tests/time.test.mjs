@@ -69,7 +69,7 @@ test('a pushed scene: the picker shows its steps, the scrubber walks them, live 
     const option = page.locator(`#scene option[value="${id}"]`);
     assert.match(await option.textContent(), /Pushed ring \(metaballs · 6 balls · 3 time steps\)/);
     const step0 = await settledPixels(page);
-    assert.match(await page.locator('#time-out').textContent(), /step 0 of 3/);
+    assert.match(await page.locator('#time-out').textContent(), /step 0 \(1 of 3, t = 0\)/);
 
     let before = await frameCount(page);
     await page.locator('#time').fill('2');
@@ -84,7 +84,7 @@ test('a pushed scene: the picker shows its steps, the scrubber walks them, live 
     // resampled to one size.
     const liveBefore = await canvasPixels(page, [160, 120]);
     await api(server, 'PUT', `/api/v1/scenes/${id}/steps/3?time=1.5`, step(7), token);
-    await page.waitForFunction(() => /step 3 of 4/.test(document.getElementById('time-out').textContent), null, { timeout: 10000 });
+    await page.waitForFunction(() => /step 3 \(4 of 4, t = 1\.50\)/.test(document.getElementById('time-out').textContent), null, { timeout: 10000 });
     before = await frameCount(page);
     await waitForFrames(page, 2, { from: before });
     const liveAfter = await canvasPixels(page, [160, 120]);
