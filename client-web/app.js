@@ -319,7 +319,9 @@ async function selectScene(id) {
   const scene = scenes.find((s) => s.id === id);
   settings.scene = id;
   sceneSelect.value = id;
-  $('scene-details').textContent = scene ? `${describe(scene)}. ${scene.description}` : '';
+  const details = $('scene-details');
+  details.textContent = scene ? `${describe(scene)}. ${scene.description}` : '';
+  details.title = details.textContent; // the whole line where the header cuts it short
   let steps = null;
   try {
     steps = scene ? await loadSteps(scene) : null;

@@ -157,6 +157,34 @@ test('controls are labelled and reachable by keyboard; render size follows canva
   });
 });
 
+test('the header keeps its buttons together on the right at every width', async () => {
+  await withPage('header', async ({ server, page }) => {
+    await page.goto(`${server.url}?scene=blobs&t=3&scale=0.25`);
+    await waitForFrames(page, 1);
+    for (const width of [1600, 1280, 1000, 720, 390]) {
+      await page.setViewportSize({ width, height: 700 });
+      await page.waitForFunction((w) => innerWidth === w, width);
+      const layout = await page.evaluate(() => {
+        const rect = (id) => document.getElementById(id).getBoundingClientRect();
+        const header = document.querySelector('header');
+        const details = document.getElementById('scene-details');
+        return {
+          tops: ['screenshot', 'stats-toggle', 'panel-toggle'].map((id) => Math.round(rect(id).top)),
+          right: rect('panel-toggle').right,
+          headerRight: header.getBoundingClientRect().right - parseFloat(getComputedStyle(header).paddingRight),
+          cut: details.scrollWidth > details.clientWidth,
+          title: details.title,
+          text: details.textContent,
+        };
+      });
+      assert.equal(new Set(layout.tops).size, 1, `${width} px: the three buttons on one row (${layout.tops})`);
+      assert.ok(Math.abs(layout.right - layout.headerRight) <= 1, `${width} px: the buttons end at the header's right (${layout.right} vs ${layout.headerRight})`);
+      assert.equal(layout.title, layout.text, `${width} px: the description's tooltip holds all of it`);
+      assert.ok(layout.text.length > 0, 'the scene is described');
+    }
+  });
+});
+
 test('the render size is capped by the server limit', async () => {
   await withPage('size-cap', async ({ server, page }) => {
     await page.goto(`${server.url}?scene=blobs&t=3&scale=2`);
