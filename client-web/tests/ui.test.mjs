@@ -160,7 +160,7 @@ test('controls are labelled and reachable by keyboard; render size follows canva
 test('the header keeps its buttons together on the right at every width', async () => {
   await withPage('header', async ({ server, page }) => {
     await page.goto(`${server.url}?scene=blobs&t=3&scale=0.25`);
-    await waitForFrames(page, 1);
+    await waitForFrames(page, 1, { from: 0 });
     for (const width of [1600, 1280, 1000, 720, 390]) {
       await page.setViewportSize({ width, height: 700 });
       await page.waitForFunction((w) => innerWidth === w, width);
