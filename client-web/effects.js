@@ -44,8 +44,10 @@ export class EffectsPanel {
       const offered = q ? q[2].some((e) => available.includes(e)) : available.includes(key);
       if (!offered) delete this.settings.fx[key];
     }
-    this.section.hidden = available.length === 0;
-    const rows = available.map((name) => {
+    // The clip box has its own section (the look's), which switches `clip_box` too.
+    const toggles = available.filter((name) => name !== 'clip_box');
+    this.section.hidden = toggles.length === 0;
+    const rows = toggles.map((name) => {
       const label = document.createElement('label');
       label.className = 'check';
       const box = document.createElement('input');

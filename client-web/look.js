@@ -56,15 +56,15 @@ export class Look {
     this.bounds = null; // { min, max } of the scene
     this.listeners = new Set();
     this.clipOn = $('clip-on');
-    this.clipOn.addEventListener('change', () => this.setClip(this.clipOn.checked ? (this.settings.clip ?? this.#defaultClip()) : null));
+    this.clipOn.addEventListener('change', () => this.#switchClip(this.clipOn.checked));
     this.clipInputs = [];
     for (const [i, end] of [['min', 0], ['max', 3]].map(([end, o]) => [o, end])) {
       AXES.forEach((axis, k) => {
         const input = $(`clip-${end}-${axis}`);
         input.addEventListener('change', () => {
           const v = Number(input.value);
-          if (!Number.isFinite(v) || !this.settings.clip) return;
-          const box = [...this.settings.clip];
+          if (!Number.isFinite(v) || !this.clip) return;
+          const box = [...this.clip];
           box[i + k] = v;
           if (box[k] < box[k + 3]) this.setClip(box); else this.#showClip();
         });
@@ -139,22 +139,61 @@ export class Look {
     return box ? { clip_box: true, clip: { min: box.slice(0, 3), max: box.slice(3) } } : { clip_box: false };
   }
 
-  /** Sets the clip box (`null`: off), sends it and keeps it in the URL. */
+  /** The scene's own clip box (`info.effects.clip`) as `[min…, max…]`, or null. */
+  #sceneClip() {
+    const c = this.info?.effects?.clip;
+    return c ? [...c.min, ...c.max] : null;
+  }
+
+  /**
+   * Switches clipping on or off: on, the viewer's box if it set one, else the scene's own
+   * (the effect `clip_box`, kept in the URL's effects where it differs from the scene's
+   * start), else a box of its own; off, the viewer's box is dropped.
+   */
+  #switchClip(on) {
+    if (!on || this.settings.clip || !this.#sceneClip()) {
+      if (this.#sceneClip()) this.#keepEffect(on);
+      this.setClip(on ? (this.settings.clip ?? this.#defaultClip()) : null);
+      return;
+    }
+    this.#keepEffect(true);
+    this.send({ clip_box: true });
+    this.saved();
+    this.#showClip();
+  }
+
+  /** Notes `clip_box` in the URL's effects where it differs from the scene's start. */
+  #keepEffect(on) {
+    if (on === this.info?.effects?.settings?.clip_box) delete this.settings.fx.clip_box;
+    else this.settings.fx.clip_box = on;
+  }
+
+  /** Sets the viewer's own clip box (`null`: off), sends it and keeps it in the URL. */
   setClip(box) {
+    if (box && this.#sceneClip()) this.#keepEffect(true);
     this.settings.clip = box;
     this.send(this.#clipChanges(box));
     this.saved();
     this.#showClip();
   }
 
-  get clip() { return this.settings.clip; }
+  /**
+   * The box that cuts the view, or null when nothing does: the viewer's own, else the scene's
+   * while its `clip_box` effect is on.
+   */
+  get clip() {
+    if (this.settings.clip) return this.settings.clip;
+    const own = this.#sceneClip();
+    const on = this.settings.fx.clip_box ?? this.info?.effects?.settings?.clip_box;
+    return own && on ? own : null;
+  }
 
   #showClip() {
-    const box = this.settings.clip;
+    const box = this.clip;
     this.clipOn.checked = Boolean(box);
     for (const [i, input] of this.clipInputs.entries()) {
       input.disabled = !box;
-      if (box) input.value = String(roundTo(box[i], clipDecimals(this.bounds)));
+      input.value = box ? String(roundTo(box[i], clipDecimals(this.bounds))) : '';
     }
     for (const fn of this.listeners) fn(box);
   }

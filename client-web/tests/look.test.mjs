@@ -22,6 +22,15 @@ async function settledAfterInputs(page) {
   return settledPixels(page);
 }
 
+/** The share of pixels whose colour moves by more than 32 in some channel. */
+const changedShare = (a, b) => {
+  let changed = 0;
+  for (let i = 0; i < a.data.length; i += 4) {
+    if ([0, 1, 2].some((c) => Math.abs(a.data[i + c] - b.data[i + c]) > 32)) changed += 1;
+  }
+  return changed / (a.data.length / 4);
+};
+
 /** The clip box in the page's URL, or null. */
 const clipOf = (url) => {
   const v = new URL(url).searchParams.get('clip');
@@ -85,6 +94,61 @@ test('dragging a clip-box handle in the view changes the image and the URL', asy
     const shownFields = await fields();
     t.diagnostic(`clip fields ${JSON.stringify(shownFields)}`);
     for (const f of shownFields) assert.ok(f.text <= f.room, `${f.id} shows all of "${f.value}" (${f.text} px of text in ${f.room} px)`);
+  });
+});
+
+test('a scene\'s own clip box is the clip section\'s: shown, switched off and on, replaced by the viewer\'s', async (t) => {
+  await withPage('scene-clip', async ({ server, page }) => {
+    // The scene's box as the server states it, read off the wire (not from the app).
+    const infos = [];
+    page.on('websocket', (ws) => ws.on('framereceived', ({ payload }) => {
+      if (typeof payload === 'string' && payload.includes('"type":"info"')) infos.push(JSON.parse(payload));
+    }));
+    // A desktop window, where the shells fill more of the frame than in the harness's.
+    await page.setViewportSize({ width: 1280, height: 720 });
+    await page.goto(`${server.url}?scene=shells&t=2&scale=0.5`);
+    const cut = await settledAfterInputs(page);
+    assert.equal(infos.length, 1);
+    const own = infos[0].effects.clip;
+    assert.ok(own && infos[0].effects.settings.clip_box, `Shells starts cut by its own box: ${JSON.stringify(infos[0].effects)}`);
+    const shown = () => page.evaluate(() => ({
+      on: document.getElementById('clip-on').checked,
+      fields: [...document.querySelectorAll('#panel .clip-grid input')].map((i) => (i.disabled ? null : Number(i.value))),
+    }));
+    const near = (a, b) => a.every((v, i) => Math.abs(v - b[i]) <= 0.01);
+    let s = await shown();
+    assert.ok(s.on && near(s.fields, [...own.min, ...own.max]), `the section shows the scene's box: ${JSON.stringify(s)}`);
+    assert.equal(await page.locator('#fx-clip_box').count(), 0, 'no second clip-box switch among the effects');
+
+    // Off: the cut is gone, the effect noted in the URL.
+    await page.locator('#clip-on').uncheck();
+    const whole = await settledAfterInputs(page);
+    // The cut is a small part of the frame: count the pixels it changes.
+    t.diagnostic(`cut vs whole: ${(100 * changedShare(cut, whole)).toFixed(1)}% of ${cut.width}×${cut.height} pixels changed`);
+    assert.ok(changedShare(cut, whole) > 0.01, 'switching the box off shows the whole shells');
+    s = await shown();
+    assert.ok(!s.on && s.fields.every((v) => v === null), `off: ${JSON.stringify(s)}`);
+    assert.match(page.url(), /fx=[^&]*-clip_box/);
+
+    // On again: the scene's own box, not one of the viewer's.
+    await page.locator('#clip-on').check();
+    const again = await settledAfterInputs(page);
+    t.diagnostic(`cut vs cut again: mean difference ${meanAbsDiff(cut, again).toFixed(2)}`);
+    assert.ok(meanAbsDiff(cut, again) < SAME, 'the scene\'s box cuts as before');
+    s = await shown();
+    assert.ok(s.on && near(s.fields, [...own.min, ...own.max]), `on again: ${JSON.stringify(s)}`);
+    assert.equal(clipOf(page.url()), null, 'no viewer box in the URL');
+
+    // A typed face makes the box the viewer's, which a reload restores.
+    const top = +(own.max[1] - 0.5).toFixed(3);
+    await page.locator('#clip-max-y').fill(String(top));
+    await page.locator('#clip-max-y').press('Enter');
+    await page.waitForURL((url) => clipOf(url) && clipOf(url)[4] === top);
+    await settledAfterInputs(page);
+    await page.reload();
+    await settledAfterInputs(page);
+    s = await shown();
+    assert.ok(s.on && s.fields[4] === top && near(s.fields, [...own.min, own.max[0], top, own.max[2]]), `after a reload: ${JSON.stringify(s)}`);
   });
 });
 

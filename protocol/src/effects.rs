@@ -122,6 +122,10 @@ pub struct EffectsInfo {
     pub max_samples: u32,
     /// Refinement passes a still view accumulates at most.
     pub max_passes: u32,
+    /// The scene's own clip box (`lighting.clip_box`), which `clip_box` switches until the
+    /// viewer sets a `clip` of its own; absent when the scene has none.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub clip: Option<ClipBoxSpec>,
 }
 
 /// The `effects` client message: switch effects and set their quality.

@@ -1,7 +1,7 @@
 //! Effects at the server's edge: the configured limits, checking and applying a client's (or a
 //! scene description's) effect changes, and the `effects` part of `info`.
 
-use isoray_protocol::effects::{EffectChanges, EffectSettings, EffectsInfo};
+use isoray_protocol::effects::{ClipBoxSpec, EffectChanges, EffectSettings, EffectsInfo};
 use isoray_render::effects::available_effects;
 use isoray_render::{Effects, Lighting};
 
@@ -139,6 +139,10 @@ pub fn info(
         max_depth: limits.max_depth,
         max_samples: limits.max_samples,
         max_passes: limits.max_passes,
+        clip: lighting.clip_box.map(|c| ClipBoxSpec {
+            min: c.min.to_array().map(f64::from),
+            max: c.max.to_array().map(f64::from),
+        }),
     }
 }
 
@@ -163,6 +167,24 @@ mod tests {
         max_samples: 16,
         max_passes: 8,
     };
+
+    #[test]
+    fn info_gives_the_scene_clip_box_where_it_has_one() {
+        let mut lighting = Lighting::default();
+        assert_eq!(info(&lighting, 1, &Effects::OFF, &LIMITS).clip, None);
+        lighting.clip_box = Some(isoray_render::geom::clip::ClipBox {
+            min: glam::Vec3::new(-1.0, -2.0, 0.5),
+            max: glam::Vec3::new(1.0, 2.0, 3.25),
+        });
+        let clip = info(&lighting, 1, &Effects::OFF, &LIMITS).clip;
+        assert_eq!(
+            clip,
+            Some(ClipBoxSpec {
+                min: [-1.0, -2.0, 0.5],
+                max: [1.0, 2.0, 3.25],
+            })
+        );
+    }
 
     #[test]
     fn changes_apply_or_name_the_field_and_change_nothing() {
