@@ -157,7 +157,10 @@ export class Look {
       return;
     }
     this.#keepEffect(true);
-    this.send({ clip_box: true });
+    // The scene's box by value: a box this viewer set earlier in the session would still
+    // stand in for it on the server.
+    const own = this.#sceneClip();
+    this.send({ clip_box: true, clip: { min: own.slice(0, 3), max: own.slice(3) } });
     this.saved();
     this.#showClip();
   }

@@ -139,12 +139,26 @@ test('a scene\'s own clip box is the clip section\'s: shown, switched off and on
     assert.ok(s.on && near(s.fields, [...own.min, ...own.max]), `on again: ${JSON.stringify(s)}`);
     assert.equal(clipOf(page.url()), null, 'no viewer box in the URL');
 
-    // A typed face makes the box the viewer's, which a reload restores.
+    // A typed face makes the box the viewer's; off and on again gives the scene's back.
     const top = +(own.max[1] - 0.5).toFixed(3);
-    await page.locator('#clip-max-y').fill(String(top));
-    await page.locator('#clip-max-y').press('Enter');
-    await page.waitForURL((url) => clipOf(url) && clipOf(url)[4] === top);
+    const typeTop = async () => {
+      await page.locator('#clip-max-y').fill(String(top));
+      await page.locator('#clip-max-y').press('Enter');
+      await page.waitForURL((url) => clipOf(url) && clipOf(url)[4] === top);
+      return settledAfterInputs(page);
+    };
+    const lower = await typeTop();
+    assert.ok(changedShare(cut, lower) > 0.001, 'the lower face cuts more');
+    await page.locator('#clip-on').uncheck();
     await settledAfterInputs(page);
+    await page.locator('#clip-on').check();
+    const back = await settledAfterInputs(page);
+    assert.ok(meanAbsDiff(cut, back) < SAME, 'switched on again, the scene\'s own box cuts');
+    s = await shown();
+    assert.ok(s.on && near(s.fields, [...own.min, ...own.max]) && clipOf(page.url()) === null, `on again: ${JSON.stringify(s)}`);
+
+    // The viewer's box survives a reload.
+    await typeTop();
     await page.reload();
     await settledAfterInputs(page);
     s = await shown();
