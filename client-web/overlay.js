@@ -85,8 +85,22 @@ export class Overlay {
     }
   }
 
-  #drawClip(cam, w, h) {
+  /**
+   * The clip box as drawn and dragged: clamped to the scene's bounds widened by the clip
+   * fields' margin, so a box that reaches far past the scene (Shells' own cuts a quadrant
+   * with faces at ±100) shows its faces where they cut, with handles in view.
+   */
+  #shownBox() {
     const box = this.look.clip;
+    const b = this.look.bounds;
+    if (!box || !b) return box;
+    const pad = [0, 1, 2].map((k) => (b.max[k] - b.min[k]) * 0.05);
+    const [lo, hi] = [(k) => b.min[k] - pad[k], (k) => b.max[k] + pad[k]];
+    return [0, 1, 2, 3, 4, 5].map((i) => Math.min(hi(i % 3), Math.max(lo(i % 3), box[i])));
+  }
+
+  #drawClip(cam, w, h) {
+    const box = this.#shownBox();
     this.edges.replaceChildren();
     for (const b of this.handles) b.hidden = !box;
     if (!box) return;
@@ -128,10 +142,12 @@ export class Overlay {
   }
 
   #move(index, k, delta) {
+    // The dragged face moves from where it is drawn; the others keep their values.
     const box = [...this.look.clip];
-    const size = box[k + 3] - box[k];
+    const shown = this.#shownBox();
+    const size = shown[k + 3] - shown[k];
     const gap = Math.max(1e-4, Math.abs(size) * 1e-3);
-    box[index] += delta;
+    box[index] = shown[index] + delta;
     if (index < 3) box[index] = Math.min(box[index], box[k + 3] - gap);
     else box[index] = Math.max(box[index], box[k] + gap);
     box[index] = +box[index].toPrecision(6);
@@ -151,7 +167,7 @@ export class Overlay {
     });
     button.addEventListener('pointermove', (e) => {
       if (!last || !this.look.clip) return;
-      const [sx, sy] = this.#screenAxis(this.look.clip, index);
+      const [sx, sy] = this.#screenAxis(this.#shownBox(), index);
       const len2 = sx * sx + sy * sy;
       const dx = e.clientX - last[0], dy = e.clientY - last[1];
       last = [e.clientX, e.clientY];
@@ -172,7 +188,7 @@ export class Overlay {
       const sign = { ArrowUp: 1, ArrowRight: 1, ArrowDown: -1, ArrowLeft: -1 }[e.key];
       if (!sign || !this.look.clip) return;
       e.preventDefault();
-      const box = this.look.clip;
+      const box = this.#shownBox();
       this.#move(index, k, sign * 0.02 * (box[k + 3] - box[k]));
     });
   }

@@ -120,6 +120,23 @@ test('a scene\'s own clip box is the clip section\'s: shown, switched off and on
     assert.ok(s.on && near(s.fields, [...own.min, ...own.max]), `the section shows the scene's box: ${JSON.stringify(s)}`);
     assert.equal(await page.locator('#fx-clip_box').count(), 0, 'no second clip-box switch among the effects');
 
+    // Its faces drawn where they cut the scene (the box reaches ±100, far past it), and the
+    // face at y = 0.3 dragged down by its handle; the faces far out keep their values.
+    await page.waitForFunction(() => window.isoray.look.bounds !== null);
+    const handle = page.locator('#handle-max-y');
+    await handle.waitFor({ state: 'visible' });
+    const hb = await handle.boundingBox();
+    const [hx, hy] = [hb.x + hb.width / 2, hb.y + hb.height / 2];
+    await page.mouse.move(hx, hy);
+    await page.mouse.down();
+    await page.mouse.move(hx, hy + 40, { steps: 8 });
+    await page.mouse.up();
+    await page.waitForURL((url) => clipOf(url) && clipOf(url)[4] < own.max[1] - 0.05);
+    const dragged = clipOf(page.url());
+    t.diagnostic(`dragged box ${JSON.stringify(dragged)}`);
+    assert.ok(near([...dragged.slice(0, 4), dragged[5]], [...own.min, own.max[0], own.max[2]]), 'only the dragged face moved');
+    await settledAfterInputs(page);
+
     // Off: the cut is gone, the effect noted in the URL.
     await page.locator('#clip-on').uncheck();
     const whole = await settledAfterInputs(page);
