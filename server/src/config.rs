@@ -11,7 +11,7 @@ use std::path::PathBuf;
     name = "isoray",
     version,
     about,
-    after_help = "Other commands: `isoray push --help` (push .npy steps or a .vtu series to a server), \
+    after_help = "Other commands: `isoray push --help` (push .npy, particle, VTK, molecule, point-cloud or mesh files to a server as a scene's steps), \
                   `isoray render --help` (one image of a scene, offline)."
 )]
 pub struct Config {

@@ -5,13 +5,14 @@ use clap::Parser;
 use isoray_server::api::client::{Body, Client};
 use std::path::PathBuf;
 
-/// Push `.npy` files to an isoray server as the time steps of a scene.
+/// Push simulation files to an isoray server as the time steps of a scene.
 ///
 /// Files are pushed in the order given, as steps `--start`, `--start + 1`, ... Without
 /// `--scene`, a metaball scene is created first (from `--spec`, a JSON file with the body of
 /// `POST /api/v1/scenes`, or `{"kind": "metaballs"}`), and its id and write token are printed.
 /// A VTK series (`.vtu` files of tetrahedra, or a `.pvd` collection of them) makes a tet
-/// scene: the first file's mesh, then one step per file from a point scalar array.
+/// scene: the first file's mesh, then one step per file from a point scalar array; a point
+/// cloud or triangle mesh makes a surfel scene, a molecule file a metaball scene of its atoms.
 #[derive(Clone, Debug, Parser)]
 #[command(name = "isoray push")]
 pub struct PushArgs {
