@@ -88,13 +88,20 @@ export class Look {
   setBounds(bounds) {
     this.bounds = bounds;
     const d = clipDecimals(bounds);
+    const range = this.clipRange();
     for (const [i, input] of this.clipInputs.entries()) {
-      const axis = i % 3;
-      const pad = bounds ? (bounds.max[axis] - bounds.min[axis]) * 0.05 : 0;
-      input.min = bounds ? String(roundTo(bounds.min[axis] - pad, d, -1)) : '';
-      input.max = bounds ? String(roundTo(bounds.max[axis] + pad, d, 1)) : '';
+      input.min = range ? String(roundTo(range.lo[i % 3], d, -1)) : '';
+      input.max = range ? String(roundTo(range.hi[i % 3], d, 1)) : '';
     }
     this.#showClip();
+  }
+
+  /** Where a clip box is useful: the scene's bounds widened by a twentieth per axis, or null. */
+  clipRange() {
+    const b = this.bounds;
+    if (!b) return null;
+    const pad = b.max.map((v, k) => (v - b.min[k]) * 0.05);
+    return { lo: b.min.map((v, k) => v - pad[k]), hi: b.max.map((v, k) => v + pad[k]) };
   }
 
   /** A new session: restores the look from the settings. */
@@ -127,11 +134,11 @@ export class Look {
     // The half of the scene's box nearest +z cut away, so switching it on shows an effect.
     // Its corners at the fields' decimals (outwards), so the fields show the box exactly.
     const b = this.bounds ?? { min: [-1, -1, -1], max: [1, 1, 1] };
+    const r = this.clipRange() ?? { lo: [-1.1, -1.1, -1.1], hi: [1.1, 1.1, 1.1] };
     const d = clipDecimals(this.bounds);
     const mid = (b.min[2] + b.max[2]) / 2;
-    const pad = b.max.map((v, i) => (v - b.min[i]) * 0.05);
-    const lo = [b.min[0] - pad[0], b.min[1] - pad[1]].map((v) => roundTo(v, d, -1));
-    const hi = [0, 1, 2].map((i) => roundTo(b.max[i] + pad[i], d, 1));
+    const lo = r.lo.slice(0, 2).map((v) => roundTo(v, d, -1));
+    const hi = r.hi.map((v) => roundTo(v, d, 1));
     return [...lo, roundTo(mid, d), ...hi];
   }
 
@@ -165,9 +172,14 @@ export class Look {
     this.#showClip();
   }
 
+  /** Whether the session started with `clip_box` on (the scene's choice). */
+  #clipAtStart() {
+    return this.info?.effects?.settings?.clip_box;
+  }
+
   /** Notes `clip_box` in the URL's effects where it differs from the scene's start. */
   #keepEffect(on) {
-    if (on === this.info?.effects?.settings?.clip_box) delete this.settings.fx.clip_box;
+    if (on === this.#clipAtStart()) delete this.settings.fx.clip_box;
     else this.settings.fx.clip_box = on;
   }
 
@@ -187,7 +199,7 @@ export class Look {
   get clip() {
     if (this.settings.clip) return this.settings.clip;
     const own = this.#sceneClip();
-    const on = this.settings.fx.clip_box ?? this.info?.effects?.settings?.clip_box;
+    const on = this.settings.fx.clip_box ?? this.#clipAtStart();
     return own && on ? own : null;
   }
 

@@ -92,11 +92,9 @@ export class Overlay {
    */
   #shownBox() {
     const box = this.look.clip;
-    const b = this.look.bounds;
-    if (!box || !b) return box;
-    const pad = [0, 1, 2].map((k) => (b.max[k] - b.min[k]) * 0.05);
-    const [lo, hi] = [(k) => b.min[k] - pad[k], (k) => b.max[k] + pad[k]];
-    return [0, 1, 2, 3, 4, 5].map((i) => Math.min(hi(i % 3), Math.max(lo(i % 3), box[i])));
+    const range = this.look.clipRange();
+    if (!box || !range) return box;
+    return box.map((v, i) => Math.min(range.hi[i % 3], Math.max(range.lo[i % 3], v)));
   }
 
   #drawClip(cam, w, h) {

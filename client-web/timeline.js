@@ -190,10 +190,11 @@ export class Timeline {
     const t = isLive ? this.shownTime : this.settings.time;
     if (t !== null) slider.value = String(this.#positionOf(t));
     if (isLive && this.steps) slider.value = slider.max;
+    const at = Number(slider.value);
     const label = this.steps
       // The step's own index as pushed (a simulation may number them 0, 10, 20, …) and where it
       // stands among the stored steps.
-      ? (count ? `step ${this.steps[Number(slider.value)]?.index ?? '–'} (${Number(slider.value) + 1} of ${count}, t = ${fmt(this.#timeAt(Number(slider.value)))})` : 'no steps yet')
+      ? (count ? `step ${this.steps[at]?.index ?? '–'} (${at + 1} of ${count}, t = ${fmt(this.#timeAt(at))})` : 'no steps yet')
       : `${fmt(t ?? 0)} s`;
     out.textContent = isLive ? `live · ${label}` : label;
     slider.setAttribute('aria-valuetext', out.textContent);

@@ -154,3 +154,32 @@ impl IntoResponse for AppError {
         response
     }
 }
+
+/// serde's error text without the server's type names, for the REST API's JSON bodies and the
+/// stream's messages alike: "expected struct CreateScene" means a JSON object to a client.
+pub fn plain_words(text: &str) -> String {
+    let mut out = String::with_capacity(text.len());
+    let mut rest = text;
+    while let Some(at) = rest.find("expected struct ") {
+        out.push_str(&rest[..at]);
+        out.push_str("expected a JSON object");
+        rest = &rest[at + "expected struct ".len()..];
+        rest = rest.trim_start_matches(|c: char| c.is_alphanumeric() || c == '_');
+    }
+    out.push_str(rest);
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::plain_words;
+
+    #[test]
+    fn plain_words_drops_every_struct_name() {
+        assert_eq!(
+            plain_words("expected struct CreateScene, or expected struct Step_2 at line 1"),
+            "expected a JSON object, or expected a JSON object at line 1"
+        );
+        assert_eq!(plain_words("expected a string"), "expected a string");
+    }
+}

@@ -146,7 +146,7 @@ pub fn parse(text: &str) -> Result<ClientMessage, ErrorMessage> {
                 "invalid_message",
                 format!(
                     "`{kind}` message{field}: {}",
-                    crate::api::request::plain_words(&e.into_inner().to_string())
+                    crate::error::plain_words(&e.into_inner().to_string())
                 ),
                 input_id,
             )

@@ -344,6 +344,7 @@ mod tests {
         use std::time::Duration;
         let (width, height) = (4 * TILE, 4 * TILE);
         let tiles = (width / TILE * (height / TILE)) as usize;
+        let per_tile = (TILE * TILE) as usize;
         let traced = (Mutex::new(0usize), Condvar::new());
         let trace = |rect: Rect| {
             let (lock, changed) = &traced;
@@ -364,14 +365,12 @@ mod tests {
                 *count += 1;
                 changed.notify_all();
             }
-            let per_tile = (TILE * TILE) as usize;
             (vec![0u8; per_tile], vec![0.0f32; per_tile], ())
         };
         let pool = rayon::ThreadPoolBuilder::new()
             .num_threads(2)
             .build()
             .expect("pool");
-        let per_tile = (TILE * TILE) as usize;
         let (mut pixels, mut depth) = (vec![1u8; tiles * per_tile], vec![1.0f32; tiles * per_tile]);
         pool.install(|| trace_tiles(width, height, 1, trace, &mut pixels, &mut depth, |()| {}));
         assert!(pixels.iter().all(|&p| p == 0), "every tile written");

@@ -31,7 +31,7 @@ pub fn parse_json<T: serde::de::DeserializeOwned>(bytes: &[u8]) -> Result<T, App
         let inner = e.into_inner();
         // serde_json reports line and column; for a one-line body the column is the offset.
         let offset = (inner.line() == 1).then(|| inner.column().saturating_sub(1) as u64);
-        let what = plain_words(&inner.to_string());
+        let what = crate::error::plain_words(&inner.to_string());
         let mut err = match known_field(&path) {
             Some(field) => {
                 AppError::bad_request("invalid_json", format!("{field}: {what}")).field(field)
@@ -62,21 +62,6 @@ fn known_field(path: &str) -> Option<&str> {
         None => path,
     };
     (!known.is_empty() && known != ".").then_some(known)
-}
-
-/// serde's error text without the server's type names: "expected struct CreateScene" means a
-/// JSON object to a client.
-pub(crate) fn plain_words(text: &str) -> String {
-    let mut out = String::with_capacity(text.len());
-    let mut rest = text;
-    while let Some(at) = rest.find("expected struct ") {
-        out.push_str(&rest[..at]);
-        out.push_str("expected a JSON object");
-        rest = &rest[at + "expected struct ".len()..];
-        rest = rest.trim_start_matches(|c: char| c.is_alphanumeric() || c == '_');
-    }
-    out.push_str(rest);
-    out
 }
 
 /// A JSON body must say so: `Content-Type: application/json` (parameters such as
@@ -306,12 +291,7 @@ mod tests {
     }
 
     #[test]
-    fn plain_words_drops_every_struct_name() {
-        assert_eq!(
-            plain_words("expected struct CreateScene, or expected struct Step_2 at line 1"),
-            "expected a JSON object, or expected a JSON object at line 1"
-        );
-        assert_eq!(plain_words("expected a string"), "expected a string");
+    fn known_field_stops_at_the_first_unnamed_segment() {
         assert_eq!(known_field("surfels.nodes[3].?"), Some("surfels.nodes[3]"));
         assert_eq!(known_field("?"), None);
         assert_eq!(known_field("."), None);
