@@ -45,6 +45,13 @@ pub struct Config {
     #[arg(long, env = "ISORAY_MIN_SCALE", default_value_t = 0.125)]
     pub min_scale: f64,
 
+    /// Share of the render pool that the interactive frames of all viewers together are
+    /// sized to use, in (0, 1). Higher gives many viewers larger frames at the cost of their
+    /// tail latency (README, "Load"); a lone viewer's frame takes at most 0.6 of its interval
+    /// whatever this is.
+    #[arg(long, env = "ISORAY_POOL_SHARE", default_value_t = 0.6)]
+    pub pool_share: f64,
+
     /// Milliseconds without input after which a still view gets its lossless frame.
     #[arg(long, env = "ISORAY_STILL_AFTER_MS", default_value_t = 150)]
     pub still_after_ms: u64,
@@ -276,6 +283,12 @@ impl Config {
         if !(self.min_scale > 0.0 && self.min_scale <= 1.0) {
             return Err(format!("--min-scale {} must be in (0, 1]", self.min_scale));
         }
+        if !(self.pool_share > 0.0 && self.pool_share < 1.0) {
+            return Err(format!(
+                "--pool-share {} must be in (0, 1): a pool planned full leaves inputs waiting",
+                self.pool_share
+            ));
+        }
         if self.max_sessions == 0 {
             return Err("--max-sessions must be at least 1".into());
         }
@@ -370,7 +383,21 @@ impl Config {
 
 #[cfg(test)]
 mod tests {
-    use super::validate_origin;
+    use super::{validate_origin, Config};
+    use clap::Parser;
+
+    #[test]
+    fn the_pool_share_is_inside_zero_to_one() {
+        let with =
+            |v: &str| Config::parse_from(["isoray", &format!("--pool-share={v}")]).validate();
+        assert!(Config::default().validate().is_ok());
+        assert_eq!(Config::default().pool_share, 0.6);
+        with("0.85").expect("0.85");
+        for bad in ["0", "1", "1.5", "-0.2", "NaN", "inf"] {
+            let err = with(bad).expect_err(bad);
+            assert!(err.contains("--pool-share"), "{bad}: {err}");
+        }
+    }
 
     #[test]
     fn origins_are_scheme_host_and_port() {

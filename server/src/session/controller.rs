@@ -5,10 +5,10 @@ use crate::input::{Settings, StreamSettings};
 use crate::schedule::JobCost;
 use isoray_protocol::Codec;
 
-/// Share of a session's frame interval (divided among the sessions competing for the pool)
-/// that tracing and encoding an interactive frame may take. Below 1 so that an input waits
-/// for less than a frame interval behind the frame already in progress.
-const FRAME_BUDGET_SHARE: f64 = 0.6;
+/// Share of its own frame interval that tracing and encoding one interactive frame may take
+/// on the pool. Below 1 so that an input waits for less than a frame interval behind the
+/// frame already in progress; it is what holds a lone viewer's frames down.
+const FRAME_SHARE: f64 = 0.6;
 
 /// Share of the measured bandwidth interactive frames may use.
 const BANDWIDTH_SHARE: f64 = 0.8;
@@ -42,7 +42,9 @@ pub enum Quality {
 /// The adaptive controller of one session: picks the size and JPEG quality of interactive
 /// frames from what the previous frames cost and the bandwidth the client receives.
 ///
-/// - Time: a frame may take `FRAME_BUDGET_SHARE / (fps × sessions competing)` of pool time.
+/// - Time: a frame may take `min(pool_share / sessions competing, FRAME_SHARE) / fps` of
+///   pool time: the sessions' frames together plan to keep the pool `pool_share` busy
+///   (`--pool-share`), and a lone viewer's frame takes at most [`FRAME_SHARE`] of its interval.
 ///   The controller learns the pool time per pixel from every interactive frame and picks the
 ///   scale whose pixel count fits, moving halfway there each frame (steady under noise, quick
 ///   to follow a change in load).
@@ -55,6 +57,8 @@ pub struct Controller {
     pub quality: u8,
     pub max_quality: u8,
     pub min_scale: f64,
+    /// Share of the pool all sessions' interactive frames are sized to use (`--pool-share`).
+    pub pool_share: f64,
     /// Pool seconds per pixel of recent interactive frames.
     pub pool_s_per_pixel: Option<f64>,
     /// Scale the bandwidth allows (1 when it does not limit).
@@ -67,12 +71,13 @@ pub struct Controller {
 }
 
 impl Controller {
-    pub fn new(max_quality: u8, min_scale: f64) -> Controller {
+    pub fn new(max_quality: u8, min_scale: f64, pool_share: f64) -> Controller {
         Controller {
             scale: 1.0,
             quality: max_quality,
             max_quality,
             min_scale,
+            pool_share,
             pool_s_per_pixel: None,
             bandwidth_scale: 1.0,
             motion_frames: 0,
@@ -101,7 +106,7 @@ impl Controller {
             self.scale = self.scale.min((1.0 / sessions.max(1) as f64).sqrt());
         }
         if let Some(per_pixel) = self.pool_s_per_pixel {
-            let budget_s = FRAME_BUDGET_SHARE / (fps * sessions.max(1) as f64);
+            let budget_s = (self.pool_share / sessions.max(1) as f64).min(FRAME_SHARE) / fps;
             let full_pixels = full.0 as f64 * full.1 as f64;
             let wanted = (budget_s / (per_pixel * full_pixels)).sqrt();
             self.scale = if std::mem::take(&mut self.seeded) {
@@ -270,7 +275,7 @@ mod tests {
 
     #[test]
     fn controller_lowers_quality_then_scale_when_bandwidth_is_short() {
-        let mut c = Controller::new(80, 0.25);
+        let mut c = Controller::new(80, 0.25, 0.6);
         let cost = JobCost {
             pool_s: 0.001,
             ..JobCost::default()
@@ -293,34 +298,43 @@ mod tests {
 
     #[test]
     fn controller_scale_fits_the_pools_share_of_the_frame_interval() {
-        let mut c = Controller::new(80, 0.01);
-        // 1 µs of pool time per pixel; a million-pixel frame at 30 fps alone: 20 ms → 0.14.
-        let cost = JobCost {
-            pool_s: 0.1,
-            ..JobCost::default()
+        // 1 µs of pool time per pixel; scales after twenty frames of a million-pixel view at
+        // 30 fps among `sessions`, with the pool share `share`.
+        let settle = |share: f64, sessions: usize| {
+            let mut c = Controller::new(80, 0.01, share);
+            let cost = JobCost {
+                pool_s: 0.1,
+                ..JobCost::default()
+            };
+            c.observe(100_000, cost, 1, Codec::Jpeg, None, 30.0);
+            let mut scale = 0.0;
+            for _ in 0..20 {
+                scale = c.plan_scale((1000, 1000), 30.0, sessions);
+            }
+            scale
         };
-        c.observe(100_000, cost, 1, Codec::Jpeg, None, 30.0);
-        let mut alone = 0.0;
-        for _ in 0..20 {
-            alone = c.plan_scale((1000, 1000), 30.0, 1);
+        // Alone: 0.6 of 33.3 ms, 20,000 pixels → 0.1414, whatever the pool share.
+        for share in [0.6, 0.85] {
+            let alone = settle(share, 1);
+            assert!((alone - 0.1414).abs() < 0.001, "alone at {share}: {alone}");
         }
-        assert!((alone - 0.1414).abs() < 0.01, "{alone}");
-        let mut shared = 0.0;
-        for _ in 0..20 {
-            shared = c.plan_scale((1000, 1000), 30.0, 4);
-        }
-        assert!(
-            (shared - alone / 2.0).abs() < 0.01,
-            "four sessions: half the scale"
-        );
+        // Four sessions share 0.6 of the pool: 5 ms a frame, half the lone viewer's scale.
+        let four = settle(0.6, 4);
+        assert!((four - 0.0707).abs() < 0.001, "four at 0.6: {four}");
+        // At 0.85: 7.08 ms, 7,083 pixels → 0.0842; two sessions 0.425 of the interval each,
+        // still under a lone frame's 0.6: 14,167 pixels → 0.1190.
+        let four = settle(0.85, 4);
+        assert!((four - 0.0842).abs() < 0.001, "four at 0.85: {four}");
+        let two = settle(0.85, 2);
+        assert!((two - 0.1190).abs() < 0.001, "two at 0.85: {two}");
     }
 
     #[test]
     fn a_controller_seeded_by_other_sessions_plans_its_first_frame_to_fit() {
-        // 1 µs of pool time per pixel, sixteen sessions at 10 fps: 3.75 ms a frame, 3,750
-        // pixels of a million: scale 0.061.
+        // 1 µs of pool time per pixel, sixteen sessions at 10 fps sharing 0.6 of the pool:
+        // 3.75 ms a frame, 3,750 pixels of a million: scale 0.061.
         let wanted = (0.6f64 / (10.0 * 16.0) / 1e-6 / 1e6).sqrt();
-        let mut seeded = Controller::new(80, 0.01).starting_from(Some(1e-6));
+        let mut seeded = Controller::new(80, 0.01, 0.6).starting_from(Some(1e-6));
         let first = seeded.plan_scale((1000, 1000), 10.0, 16);
         assert!((first - wanted).abs() < 1e-9, "{first} against {wanted}");
         // Later frames move halfway, as every controller does.
@@ -340,17 +354,17 @@ mod tests {
         // Without a measurement to start from, the first frame takes its share of the pixels:
         // full size alone, a quarter of the width among sixteen; a cost that is no cost seeds
         // nothing.
-        let mut alone = Controller::new(80, 0.01).starting_from(None);
+        let mut alone = Controller::new(80, 0.01, 0.6).starting_from(None);
         assert_eq!(alone.plan_scale((1000, 1000), 10.0, 1), 1.0);
-        let mut fresh = Controller::new(80, 0.01).starting_from(None);
+        let mut fresh = Controller::new(80, 0.01, 0.6).starting_from(None);
         assert_eq!(fresh.plan_scale((1000, 1000), 10.0, 16), 0.25);
-        let mut zero = Controller::new(80, 0.01).starting_from(Some(0.0));
+        let mut zero = Controller::new(80, 0.01, 0.6).starting_from(Some(0.0));
         assert_eq!(zero.plan_scale((1000, 1000), 10.0, 16), 0.25);
     }
 
     #[test]
     fn codec_follows_the_clients_list_and_sustained_motion() {
-        let mut c = Controller::new(80, 0.25);
+        let mut c = Controller::new(80, 0.25, 0.6);
         let all = StreamSettings::new(&Codec::ALL, 30.0);
         assert_eq!(c.codec(Quality::Still, &all), Codec::Png);
         assert_eq!(c.codec(Quality::Interactive, &all), Codec::Jpeg);

@@ -251,8 +251,8 @@ pub async fn render_loop(
     // Scene time steps: every session of a scene sees the same grid, so they share states.
     let time_step_fps = config.max_fps;
     let still_delay = Duration::from_millis(config.still_after_ms);
-    let mut controller =
-        Controller::new(config.jpeg_quality, config.min_scale).starting_from(entry.pixel_cost());
+    let mut controller = Controller::new(config.jpeg_quality, config.min_scale, config.pool_share)
+        .starting_from(entry.pixel_cost());
     let mut video: VideoState = None;
     // What the last frame showed: settings version, state key, and whether it was the still.
     let mut last: Option<(u64, u128, Quality)> = None;
