@@ -44,8 +44,9 @@ export class EffectsPanel {
       const offered = q ? q[2].some((e) => available.includes(e)) : available.includes(key);
       if (!offered) delete this.settings.fx[key];
     }
-    // The clip box has its own section (the look's), which switches `clip_box` too.
-    const toggles = available.filter((name) => name !== 'clip_box');
+    // The clip box and the further isosurfaces have their own sections (the look's), which
+    // switch `clip_box` and `isosurfaces` too.
+    const toggles = available.filter((name) => name !== 'clip_box' && name !== 'isosurfaces');
     this.section.hidden = toggles.length === 0;
     const rows = toggles.map((name) => {
       const label = document.createElement('label');

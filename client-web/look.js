@@ -1,6 +1,7 @@
 // The viewer's own look of a scene, as ParaView users expect to set it: a clip box (numeric
 // fields over the scene's bounds from `GET /api/v1/scenes/{id}`, and handles dragged in the
-// view, see overlay.js), further isosurfaces added and removed with a colour and opacity each,
+// view, see overlay.js), further isosurfaces (the scene's own, switched and edited, or the
+// viewer's) added and removed with a colour and opacity each,
 // and a colour map of the isovalue with its legend. Each goes to the server as the `clip`,
 // `surfaces` and `color_map` fields of an `effects` message, and lives in the URL.
 import { $ } from './ui.js';
@@ -25,6 +26,15 @@ export function linearOf(hex) {
     const s = parseInt(hex.slice(i, i + 2), 16) / 255;
     return s <= 0.04045 ? s / 12.92 : ((s + 0.055) / 1.055) ** 2.4;
   });
+}
+
+/** Linear-light channels in [0, 1] as an sRGB hex colour (what `linearOf` reads back). */
+export function hexOf(linear) {
+  return linear.map((l) => {
+    const c = Math.min(1, Math.max(0, l));
+    const s = c <= 0.0031308 ? c * 12.92 : 1.055 * c ** (1 / 2.4) - 0.055;
+    return Math.round(s * 255).toString(16).padStart(2, '0');
+  }).join('');
 }
 
 const fmt = (v) => String(+Number(v).toPrecision(5));
@@ -72,6 +82,7 @@ export class Look {
       });
     }
     $('surface-add').addEventListener('click', () => this.#addSurface());
+    $('surfaces-on').addEventListener('change', () => this.#switchSurfaces($('surfaces-on').checked));
     this.list = $('further');
     this.mapSelect = $('cmap');
     this.mapSelect.replaceChildren(new Option('None (scene colours)', ''), ...COLOR_MAPS.map((m) => new Option(MAP_LABELS[m], m)));
@@ -214,6 +225,45 @@ export class Look {
   }
 
   // --- further isosurfaces -------------------------------------------------------------------
+  //
+  // The section lists the further isosurfaces in effect: the viewer's own (`settings.surf`),
+  // else the scene's (`info.effects.surfaces`), which the switch `#surfaces-on` (the effect
+  // `isosurfaces`) shows or hides. A change to a scene's surface makes the list the viewer's,
+  // by value; switching off drops the viewer's list, and on again shows the scene's own.
+
+  /** The scene's own further isosurfaces as rows `{ v, c, o }`, or `[]`. */
+  #sceneSurfaces() {
+    return (this.info?.effects?.surfaces ?? []).map((s) => ({ v: s.isovalue, c: hexOf(s.color), o: s.opacity }));
+  }
+
+  /** Whether the session started with the scene's further isosurfaces on. */
+  #surfacesAtStart() {
+    return Boolean(this.info?.effects?.settings?.isosurfaces);
+  }
+
+  /** Whether further isosurfaces are drawn: the viewer's whenever it has some, else the scene's while on. */
+  #surfacesOn() {
+    return this.settings.surf.length > 0 || (this.settings.fx.isosurfaces ?? this.#surfacesAtStart());
+  }
+
+  /** Notes `isosurfaces` in the URL's effects where it differs from the scene's start. */
+  #keepSurfaces(on) {
+    if (on === this.#surfacesAtStart()) delete this.settings.fx.isosurfaces;
+    else this.settings.fx.isosurfaces = on;
+  }
+
+  /** Before the viewer changes a scene's surface: the scene's list, by value, becomes the viewer's. */
+  #adopt() {
+    if (this.settings.surf.length === 0 && this.#surfacesOn()) this.settings.surf = this.#sceneSurfaces();
+  }
+
+  #switchSurfaces(on) {
+    this.settings.surf = [];
+    this.#keepSurfaces(on);
+    this.send({ isosurfaces: on, scene_surfaces: true });
+    this.saved();
+    this.#buildSurfaces();
+  }
 
   #surfaceChanges() {
     const surfaces = this.settings.surf.map((s) => ({ isovalue: s.v, color: linearOf(s.c), opacity: s.o }));
@@ -224,12 +274,23 @@ export class Look {
   }
 
   #surfacesChanged() {
-    this.send(this.#surfaceChanges());
+    if (this.#sceneSurfaces().length === 0) {
+      this.send(this.#surfaceChanges());
+    } else if (this.settings.surf.length) {
+      this.#keepSurfaces(true);
+      this.send(this.#surfaceChanges());
+    } else {
+      // The last one removed: the scene's own again, switched off.
+      this.#switchSurfaces(false);
+      return;
+    }
     this.saved();
   }
 
   #addSurface() {
     if (!this.info || this.settings.surf.length >= MAX_SURFACES) return;
+    this.#adopt();
+    if (this.settings.surf.length >= MAX_SURFACES) return;
     const [lo, hi] = this.info.isovalue_slider;
     const main = this.settings.iso ? this.settings.iso[0] : this.info.isovalue;
     // Half way between the main surface and the low end of the slider: an enclosing shell.
@@ -243,32 +304,48 @@ export class Look {
 
   #buildSurfaces() {
     if (!this.info) return;
+    const scene = this.#sceneSurfaces();
+    const own = this.settings.surf.length === 0 && scene.length > 0;
+    const on = this.#surfacesOn();
+    $('surfaces-own').hidden = scene.length === 0;
+    $('surfaces-on').checked = on;
     $('surface-add').hidden = false;
     $('surface-add').disabled = this.settings.surf.length >= MAX_SURFACES;
-    this.list.replaceChildren(...this.settings.surf.map((s, i) => {
+    // A scene's surface is the viewer's once changed: `edit` adopts the list, then changes it.
+    const edit = (i, change) => {
+      const adopting = this.settings.surf.length === 0;
+      this.#adopt();
+      change(this.settings.surf[i]);
+      if (adopting) this.#buildSurfaces();
+      this.#surfacesChanged();
+    };
+    const noun = own ? 'scene isosurface' : scene.length ? 'further isosurface' : 'added isosurface';
+    const rows = own ? scene : this.settings.surf;
+    this.list.replaceChildren(...rows.map((s, i) => {
+      const name = `${noun} ${i + 1}`;
       const row = document.createElement('fieldset');
       row.className = 'further';
       row.id = `further-${i}`;
+      row.disabled = !on;
       const legend = document.createElement('legend');
-      legend.textContent = `Added isosurface ${i + 1}`;
+      legend.textContent = name[0].toUpperCase() + name.slice(1);
       const value = document.createElement('input');
       value.type = 'number';
       value.step = 'any';
       value.min = String(this.info.isovalue_range[0]);
       value.max = String(this.info.isovalue_range[1]);
       value.value = fmt(s.v);
-      value.setAttribute('aria-label', `Isovalue of added isosurface ${i + 1}`);
+      value.setAttribute('aria-label', `Isovalue of ${name}`);
       value.addEventListener('change', () => {
         const v = Number(value.value);
         if (!(v > this.info.isovalue_range[0] && v < this.info.isovalue_range[1])) { value.value = fmt(s.v); return; }
-        s.v = v;
-        this.#surfacesChanged();
+        edit(i, (t) => { t.v = v; });
       });
       const color = document.createElement('input');
       color.type = 'color';
       color.value = `#${s.c}`;
-      color.setAttribute('aria-label', `Colour of added isosurface ${i + 1}`);
-      color.addEventListener('change', () => { s.c = color.value.slice(1).toLowerCase(); this.#surfacesChanged(); });
+      color.setAttribute('aria-label', `Colour of ${name}`);
+      color.addEventListener('change', () => edit(i, (t) => { t.c = color.value.slice(1).toLowerCase(); }));
       const opacityId = `further-opacity-${i}`;
       const opacityLabel = document.createElement('label');
       opacityLabel.htmlFor = opacityId;
@@ -280,13 +357,14 @@ export class Look {
       opacity.max = '1';
       opacity.step = '0.05';
       opacity.value = String(s.o);
-      opacity.addEventListener('change', () => { s.o = Number(opacity.value); this.#surfacesChanged(); });
+      opacity.addEventListener('change', () => edit(i, (t) => { t.o = Number(opacity.value); }));
       const remove = document.createElement('button');
       remove.type = 'button';
       remove.className = 'remove';
       remove.textContent = 'Remove';
-      remove.setAttribute('aria-label', `Remove added isosurface ${i + 1}`);
+      remove.setAttribute('aria-label', `Remove ${name}`);
       remove.addEventListener('click', () => {
+        this.#adopt();
         this.settings.surf.splice(i, 1);
         this.#buildSurfaces();
         this.#surfacesChanged();

@@ -261,3 +261,72 @@ test('a colour map recolours the tet surfaces and its legend shows the range', a
     assert.ok(meanAbsDiff(own, back) < SAME, 'no map: the scene\'s own colours again');
   });
 });
+
+test('a scene\'s own further isosurfaces are the section\'s: listed, switched off and on, edited, and back', async (t) => {
+  await withPage('scene-surfaces', async ({ server, page }) => {
+    // The scene's surfaces as the server states them, read off the wire (not from the app).
+    const infos = [];
+    page.on('websocket', (ws) => ws.on('framereceived', ({ payload }) => {
+      if (typeof payload === 'string' && payload.includes('"type":"info"')) infos.push(JSON.parse(payload));
+    }));
+    await page.goto(`${server.url}?scene=shells&t=2&scale=0.5`);
+    const own = await settledAfterInputs(page);
+    const listed = infos[0].effects.surfaces;
+    assert.ok(listed && listed.length === 2 && infos[0].effects.settings.isosurfaces, `Shells has two of its own, on: ${JSON.stringify(infos[0].effects)}`);
+    const rows = () => page.evaluate(() => [...document.querySelectorAll('#further fieldset')].map((f) => ({
+      legend: f.querySelector('legend').textContent,
+      value: Number(f.querySelector('input[type=number]').value),
+      disabled: f.disabled,
+    })));
+    const surfParam = () => new URL(page.url()).searchParams.get('surf');
+    const fxParam = () => new URL(page.url()).searchParams.get('fx') ?? '';
+    let r = await rows();
+    assert.deepEqual(r.map((x) => x.legend), ['Scene isosurface 1', 'Scene isosurface 2']);
+    assert.deepEqual(r.map((x) => x.value), listed.map((s) => s.isovalue), 'the rows show the scene\'s isovalues');
+    assert.ok(await page.locator('#surfaces-on').isChecked(), 'switched on, as the scene starts');
+    assert.equal(await page.locator('#fx-isosurfaces').count(), 0, 'no second switch among the effects');
+
+    // Off: the shells are gone, the rows greyed, the effect noted in the URL; on: as before.
+    await page.locator('#surfaces-on').uncheck();
+    const off = await settledAfterInputs(page);
+    t.diagnostic(`own vs off: ${(100 * changedShare(own, off)).toFixed(1)}% of the pixels changed`);
+    assert.ok(changedShare(own, off) > 0.01, 'switching off hides the scene\'s further isosurfaces');
+    assert.ok((await rows()).every((x) => x.disabled), 'the rows are greyed while off');
+    assert.match(fxParam(), /-isosurfaces/);
+    await page.locator('#surfaces-on').check();
+    const on = await settledAfterInputs(page);
+    assert.ok(meanAbsDiff(own, on) < SAME, 'on again, the scene\'s own');
+    assert.doesNotMatch(fxParam(), /isosurfaces/);
+
+    // Editing the core's isovalue makes the list the viewer's, both surfaces kept.
+    await page.locator('#further-1 input[type=number]').fill('1.5');
+    await page.locator('#further-1 input[type=number]').press('Enter');
+    await page.waitForURL(() => (surfParam() ?? '').split(',').length === 2);
+    const edited = await settledAfterInputs(page);
+    assert.ok(changedShare(own, edited) > 0.001, 'a larger core shows');
+    r = await rows();
+    assert.deepEqual(r.map((x) => [x.legend, x.value]), [['Further isosurface 1', listed[0].isovalue], ['Further isosurface 2', 1.5]]);
+    // Added: three, the scene's two among them.
+    await page.locator('#surface-add').click();
+    await page.waitForURL(() => (surfParam() ?? '').split(',').length === 3);
+
+    // Off and on again: the scene's own, not the viewer's.
+    await page.locator('#surfaces-on').uncheck();
+    await page.locator('#surfaces-on').check();
+    const back = await settledAfterInputs(page);
+    assert.ok(meanAbsDiff(own, back) < SAME, 'off and on again gives the scene\'s own back');
+    assert.equal(surfParam(), null, 'no viewer surfaces in the URL');
+    assert.deepEqual((await rows()).map((x) => x.legend), ['Scene isosurface 1', 'Scene isosurface 2']);
+
+    // Removing both: the scene's own again, switched off.
+    await page.locator('#further-0 button.remove').click();
+    await page.waitForURL(() => (surfParam() ?? '').split(',').length === 1);
+    assert.deepEqual((await rows()).map((x) => x.value), [listed[1].isovalue], 'the core is left');
+    await page.locator('#further-0 button.remove').click();
+    await page.waitForURL(() => surfParam() === null && /-isosurfaces/.test(fxParam()));
+    const none = await settledAfterInputs(page);
+    assert.ok(meanAbsDiff(off, none) < SAME, 'nothing further is drawn');
+    assert.ok(!(await page.locator('#surfaces-on').isChecked()));
+    assert.ok((await rows()).every((x) => x.disabled));
+  });
+});

@@ -58,6 +58,11 @@ pub struct EffectChanges {
     /// description (that has `lighting.isosurfaces`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub surfaces: Option<Vec<SurfaceStyleSpec>>,
+    /// `true`: the scene's own further isosurfaces again in place of the viewer's `surfaces`
+    /// (not with `surfaces` in the same message); `false` changes nothing. Not in a scene
+    /// description.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub scene_surfaces: Option<bool>,
     /// Colour every isosurface by its value through a colour map; `{"name": "none"}` returns
     /// to the scene's own colours. Not in a scene description.
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -126,6 +131,12 @@ pub struct EffectsInfo {
     /// viewer sets a `clip` of its own; absent when the scene has none.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub clip: Option<ClipBoxSpec>,
+    /// The scene's own further isosurfaces (`lighting.isosurfaces`), which `isosurfaces`
+    /// switches until the viewer sets `surfaces` of its own: each one's isovalue, its
+    /// material's diffuse colour (the scene's own colours multiply it) and opacity. Absent
+    /// when the scene has none.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub surfaces: Option<Vec<SurfaceStyleSpec>>,
 }
 
 /// The `effects` client message: switch effects and set their quality.

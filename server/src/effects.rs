@@ -1,7 +1,9 @@
 //! Effects at the server's edge: the configured limits, checking and applying a client's (or a
 //! scene description's) effect changes, and the `effects` part of `info`.
 
-use isoray_protocol::effects::{ClipBoxSpec, EffectChanges, EffectSettings, EffectsInfo};
+use isoray_protocol::effects::{
+    ClipBoxSpec, EffectChanges, EffectSettings, EffectsInfo, SurfaceStyleSpec,
+};
 use isoray_render::effects::available_effects;
 use isoray_render::{Effects, Lighting};
 
@@ -140,10 +142,30 @@ pub fn info(
         max_samples: limits.max_samples,
         max_passes: limits.max_passes,
         clip: lighting.clip_box.map(|c| ClipBoxSpec {
-            min: c.min.to_array().map(f64::from),
-            max: c.max.to_array().map(f64::from),
+            min: c.min.to_array().map(decimal),
+            max: c.max.to_array().map(decimal),
+        }),
+        surfaces: (!lighting.isosurfaces.is_empty()).then(|| {
+            lighting
+                .isosurfaces
+                .iter()
+                .map(|s| {
+                    let material = lighting.material(s.material);
+                    SurfaceStyleSpec {
+                        isovalue: decimal(s.isovalue),
+                        color: s.color.unwrap_or(material.diffuse).to_array().map(decimal),
+                        opacity: decimal(material.opacity),
+                    }
+                })
+                .collect()
         }),
     }
+}
+
+/// `v` as the shortest decimal that reads back as it (`0.15f32` as `0.15`, not
+/// `0.15000000596046448`), for values a client shows.
+fn decimal(v: f32) -> f64 {
+    v.to_string().parse().unwrap_or(f64::from(v))
 }
 
 /// A scene's starting effects, clamped to `limits` (a scene may ask for more than a server
@@ -161,6 +183,7 @@ pub fn clamp(effects: &Effects, limits: &EffectLimits) -> Effects {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use isoray_render::shade::{Isosurface, Material};
 
     const LIMITS: EffectLimits = EffectLimits {
         max_depth: 4,
@@ -183,6 +206,48 @@ mod tests {
                 min: [-1.0, -2.0, 0.5],
                 max: [1.0, 2.0, 3.25],
             })
+        );
+    }
+
+    #[test]
+    fn info_lists_the_scenes_own_isosurfaces() {
+        let mut lighting = Lighting::default();
+        assert_eq!(info(&lighting, 1, &Effects::OFF, &LIMITS).surfaces, None);
+        lighting.materials = vec![
+            Material::default(),
+            Material {
+                diffuse: glam::Vec3::new(0.25, 0.5, 1.0),
+                opacity: 0.3,
+                ..Material::default()
+            },
+        ];
+        lighting.isosurfaces = vec![
+            Isosurface {
+                isovalue: 0.15,
+                material: 1,
+                color: None,
+            },
+            Isosurface {
+                isovalue: 2.0,
+                material: 0,
+                color: Some(glam::Vec3::new(0.0, 1.0, 0.5)),
+            },
+        ];
+        let surfaces = info(&lighting, 1, &Effects::OFF, &LIMITS).surfaces;
+        assert_eq!(
+            surfaces,
+            Some(vec![
+                SurfaceStyleSpec {
+                    isovalue: 0.15,
+                    color: [0.25, 0.5, 1.0],
+                    opacity: 0.3,
+                },
+                SurfaceStyleSpec {
+                    isovalue: 2.0,
+                    color: [0.0, 1.0, 0.5],
+                    opacity: 1.0,
+                },
+            ])
         );
     }
 

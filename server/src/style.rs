@@ -87,6 +87,16 @@ pub fn apply(
     if let Some(clip) = &changes.clip {
         out.clip = Some(clip_box(clip)?);
     }
+    if changes.scene_surfaces == Some(true) {
+        if changes.surfaces.is_some() {
+            return Err(relational(
+                "scene_surfaces",
+                "scene_surfaces: true returns to the scene's own isosurfaces; send it without surfaces"
+                    .into(),
+            ));
+        }
+        out.surfaces = None;
+    }
     if let Some(surfaces) = &changes.surfaces {
         out.surfaces = Some(surface_looks(surfaces, isovalue_range)?);
     }
@@ -237,6 +247,12 @@ pub fn refuse_in_scene(changes: &EffectChanges) -> Result<(), EffectError> {
             "surfaces is a viewer's setting; a scene's are lighting.isosurfaces".into(),
         ));
     }
+    if changes.scene_surfaces.is_some() {
+        return Err(error(
+            "scene_surfaces",
+            "scene_surfaces is a viewer's setting; a scene's are lighting.isosurfaces".into(),
+        ));
+    }
     if changes.color_map.is_some() {
         return Err(error(
             "color_map",
@@ -331,6 +347,46 @@ mod tests {
             assert_eq!(e.field, field, "{json}: {}", e.message);
         }
         assert!(refuse_in_scene(&changes(r#"{"color_map":{"name":"grey"}}"#)).is_err());
+        assert!(refuse_in_scene(&changes(r#"{"scene_surfaces":true}"#)).is_err());
         assert!(refuse_in_scene(&changes(r#"{"shadows":true}"#)).is_ok());
+    }
+
+    #[test]
+    fn scene_surfaces_returns_to_the_scenes_own() {
+        let scene = Lighting {
+            isosurfaces: vec![Isosurface {
+                isovalue: 0.2,
+                material: 0,
+                color: None,
+            }],
+            ..Lighting::default()
+        };
+        let range = ((0.0, 1.0), (0.0, 1.0));
+        let added = changes(r#"{"surfaces":[{"isovalue":0.7}],"color_map":{"name":"grey"}}"#);
+        let s = apply(&Style::default(), &added, range.0, range.1).expect("valid");
+        let l = s.lighting(&scene).expect("a style");
+        assert_eq!(
+            l.isosurfaces.iter().map(|i| i.isovalue).collect::<Vec<_>>(),
+            [0.7]
+        );
+        // Back to the scene's own surface; the colour map stays the viewer's.
+        let reset =
+            apply(&s, &changes(r#"{"scene_surfaces":true}"#), range.0, range.1).expect("valid");
+        assert_eq!(reset.surfaces, None);
+        let l = reset.lighting(&scene).expect("the map is still a style");
+        assert_eq!(l.isosurfaces, scene.isosurfaces);
+        assert_eq!(l.materials, scene.materials);
+        // `false` changes nothing; with `surfaces` in the same message it is refused, and the
+        // style stays as it was.
+        let kept = apply(
+            &s,
+            &changes(r#"{"scene_surfaces":false}"#),
+            range.0,
+            range.1,
+        );
+        assert_eq!(kept.expect("valid"), s);
+        let both = changes(r#"{"scene_surfaces":true,"surfaces":[{"isovalue":0.3}]}"#);
+        let e = apply(&s, &both, range.0, range.1).expect_err("both");
+        assert_eq!((e.field, e.relational), ("scene_surfaces", true));
     }
 }

@@ -446,11 +446,12 @@ fn constrain_schemas(doc: &mut Value, config: &Config) {
                 {"type": "object", "properties": {
                     "clip": {"type": "null"},
                     "surfaces": {"type": "null"},
+                    "scene_surfaces": {"type": "null"},
                     "color_map": {"type": "null"}
                 }}
             ]},
             {"type": "null"}
-        ], "description": "The effects viewers start with (default: none); not the viewer-only `clip`, `surfaces` and `color_map`."});
+        ], "description": "The effects viewers start with (default: none); not the viewer-only `clip`, `surfaces`, `scene_surfaces` and `color_map`."});
     }
 }
 
