@@ -160,7 +160,8 @@ let histogramTimer = null;
 function refreshHistogram(delayMs = 300) {
   clearTimeout(histogramTimer);
   histogramTimer = setTimeout(async () => {
-    if (!info || !connection.isOpen) return;
+    // Drawn behind the isovalue slider, which a surfel scene has none of.
+    if (!info || !connection.isOpen || info.scalar_field === false) return;
     const scene = info.scene.id;
     const query = new URLSearchParams({ bins: '128' });
     if (settings.time !== null) query.set('time', String(settings.time));
@@ -228,6 +229,10 @@ function onInfo(message) {
   info = message;
   // The camera the user had (from the URL, or before a reconnect) wins over the scene's own.
   if (!settings.cam) settings.cam = orbitFromPose(message.camera, settings.up);
+  // A surfel surface is no isosurface: no isovalue, further isosurfaces or colour map.
+  const field = message.scalar_field !== false;
+  for (const id of ['h-surfaces', 'h-colors']) $(id).closest('section').hidden = !field;
+  if (!field) Object.assign(settings, { iso: null, surf: [], cmap: null });
   surfaces.setInfo(message);
   quality.setInfo(message);
   effects.setInfo(message);

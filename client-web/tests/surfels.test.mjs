@@ -36,3 +36,30 @@ test('a surfel demo shows frames, animates, and a drag changes the image', async
     assert.ok(diff > CHANGED, `a drag orbits the camera (mean abs diff ${diff.toFixed(2)})`);
   });
 });
+
+test('a surfel scene offers no isovalue, further isosurfaces or colour map; a metaball scene does', async () => {
+  await withPage('surfels-controls', async ({ server, page }) => {
+    const infos = [];
+    const histograms = [];
+    page.on('websocket', (ws) => ws.on('framereceived', ({ payload }) => {
+      if (typeof payload === 'string' && payload.includes('"type":"info"')) infos.push(JSON.parse(payload));
+    }));
+    page.on('request', (r) => { if (r.url().includes('/histogram')) histograms.push(r.url()); });
+    const shown = () => page.evaluate(() => ['h-surfaces', 'h-colors']
+      .map((id) => document.getElementById(id).closest('section').checkVisibility()));
+
+    await page.goto(`${server.url}?scene=surfel-heads&t=1.5&scale=0.25`);
+    await waitForFrames(page, 1, { timeout: 60000 });
+    assert.equal(infos.at(-1).scalar_field, false, 'the server says a surfel surface has no field');
+    assert.deepEqual(await shown(), [false, false], 'no isovalue or colour-map controls');
+    // The controls of the panel that stay: time and effects.
+    assert.ok(await page.locator('#h-time').isVisible());
+
+    await page.goto(`${server.url}?scene=blobs&t=1.5&scale=0.25`);
+    await waitForFrames(page, 1, { timeout: 60000 });
+    assert.equal(infos.at(-1).scalar_field, true);
+    assert.deepEqual(await shown(), [true, true], 'a metaball scene has both');
+    await page.waitForFunction(() => document.querySelector('#surfaces canvas.histogram')?.dataset.bins === '128');
+    assert.ok(histograms.length > 0 && histograms.every((u) => u.includes('/scenes/blobs/')), `histograms asked for blobs only: ${histograms}`);
+  });
+});

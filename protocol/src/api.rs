@@ -55,6 +55,13 @@ impl SceneKind {
             SceneKind::Tets => "tets",
         }
     }
+
+    /// Whether the kind's surface is an isosurface of a scalar field (metaballs, tets), which
+    /// an isovalue, further isosurfaces and a colour map of the isovalue change; a surfel
+    /// surface is none.
+    pub fn has_field(self) -> bool {
+        !matches!(self, SceneKind::Surfels)
+    }
 }
 
 /// Body of `POST /api/v1/scenes`.

@@ -122,6 +122,10 @@ pub enum ServerMessage {
     Error(ErrorMessage),
 }
 
+fn field_default() -> bool {
+    true
+}
+
 /// What the client needs to know to drive a session.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct SessionInfo {
@@ -138,6 +142,11 @@ pub struct SessionInfo {
     pub isovalue_range: [f64; 2],
     /// A slider range inside `isovalue_range` where the surface changes visibly.
     pub isovalue_slider: [f64; 2],
+    /// Whether the scene's surface is an isosurface of a scalar field (metaballs, tets):
+    /// `false` for surfels, whose surface no isovalue, further isosurface or colour map of
+    /// the isovalue changes, so a client offers none. Absent from older servers: `true`.
+    #[serde(default = "field_default")]
+    pub scalar_field: bool,
     /// A camera that frames the whole scene.
     pub camera: CameraPose,
     /// Frames the server sends ahead of the client's `ack`s.

@@ -100,6 +100,7 @@ async fn run_registered(
             limits.isovalue_range.1 as f64,
         ],
         isovalue_slider: [slider.0 as f64, slider.1 as f64],
+        scalar_field: entry.info().kind.has_field(),
         frame_window: FRAME_WINDOW as u32,
         camera: isoray_protocol::CameraPose {
             eye: camera.eye.as_dvec3().to_array(),
