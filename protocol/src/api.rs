@@ -367,6 +367,8 @@ pub struct RenderRequest {
     pub time: Option<f64>,
     #[serde(default)]
     pub camera: Option<ApiCamera>,
+    /// Inside the scene's isovalue range (default: the scene's); refused for a surfel scene,
+    /// which has no scalar field.
     #[serde(default)]
     pub isovalue: Option<f64>,
     /// Image size in pixels (default 640 × 480, at most the server's `--max-size`).

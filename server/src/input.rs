@@ -77,6 +77,9 @@ pub struct Limits {
     pub isovalue_range: (f32, f32),
     /// The isovalue slider's range (a colour map's default range).
     pub isovalue_slider: (f32, f32),
+    /// Whether the scene's surface is an isosurface of a field (not for surfels: they refuse
+    /// an isovalue, further isosurfaces and a colour map, which would change nothing).
+    pub scalar_field: bool,
     /// Largest effect quality settings.
     pub effects: EffectLimits,
     /// The codecs this server can send.
@@ -225,6 +228,11 @@ pub fn apply(
             };
         }
         ClientMessage::Isovalue(IsovalueInput { value, .. }) => {
+            if !limits.scalar_field {
+                return fail(
+                    "isovalue: a surfel scene has no scalar field to take an isovalue of".into(),
+                );
+            }
             let (lo, hi) = limits.isovalue_range;
             let value = *value;
             if !(value.is_finite() && value > lo as f64 && value < hi as f64) {
@@ -266,7 +274,12 @@ pub fn apply(
         ClientMessage::Ack(_) => return Ok(()),
         ClientMessage::Effects(EffectsInput { effects, .. }) => {
             // Both checked in full before either changes.
-            let applied = crate::effects::apply(&settings.effects, effects, &limits.effects)
+            let field = match limits.scalar_field {
+                true => Ok(()),
+                false => crate::style::refuse_without_field(effects),
+            };
+            let applied = field
+                .and_then(|()| crate::effects::apply(&settings.effects, effects, &limits.effects))
                 .and_then(|e| {
                     crate::style::apply(
                         &settings.style,
@@ -370,6 +383,7 @@ mod tests {
             max_size: 4096,
             isovalue_range: (0.0, 2.0),
             isovalue_slider: (0.2, 1.8),
+            scalar_field: true,
             effects: EffectLimits {
                 max_depth: 8,
                 max_samples: 64,
@@ -441,6 +455,47 @@ mod tests {
         let e = parse(r#"{"type":"effects","input_id":11,"effects":{"reflection":true}}"#)
             .expect_err("unknown field");
         assert!(e.message.contains("reflection"), "{}", e.message);
+    }
+
+    #[test]
+    fn a_surfel_session_refuses_the_look_of_a_field() {
+        let surfels = Limits {
+            scalar_field: false,
+            ..limits()
+        };
+        let mut s = settings();
+        let before = s.clone();
+        for (text, field) in [
+            (
+                r#"{"type":"isovalue","input_id":1,"value":1.25}"#,
+                "isovalue",
+            ),
+            (
+                r#"{"type":"effects","input_id":1,"effects":{"shadows":true,"surfaces":[{"isovalue":1}]}}"#,
+                "surfaces",
+            ),
+            (
+                r#"{"type":"effects","input_id":1,"effects":{"color_map":{"name":"grey"}}}"#,
+                "color_map",
+            ),
+        ] {
+            let msg = parse(text).expect("well-formed");
+            let e = apply(&msg, &mut s, &surfels).expect_err(text);
+            assert!(
+                e.code == "invalid_value"
+                    && e.message.contains(field)
+                    && e.message.contains("surfel"),
+                "{text}: {e:?}"
+            );
+            assert_eq!(s, before, "{text} changed the settings");
+        }
+        // The effects that apply to surfels, and the look's resets, pass.
+        let ok = parse(
+            r#"{"type":"effects","input_id":2,"effects":{"shadows":true,"surfaces":[],"color_map":{"name":"none"}}}"#,
+        )
+        .expect("parses");
+        apply(&ok, &mut s, &surfels).expect("valid");
+        assert!(s.effects.shadows);
     }
 
     #[test]

@@ -232,6 +232,25 @@ fn color_map(spec: &ColorMapSpec, slider: (f32, f32)) -> Result<Option<ColorMap>
     Ok(Some(ColorMap { kind, lo, hi }))
 }
 
+/// Refuses the look of a scalar field, further isosurfaces and a colour map of the isovalue,
+/// for a scene that has none (surfels), where they would change nothing; `[]` and `none`,
+/// which ask for nothing, pass.
+pub fn refuse_without_field(changes: &EffectChanges) -> Result<(), EffectError> {
+    if changes.surfaces.as_ref().is_some_and(|s| !s.is_empty()) {
+        return Err(relational(
+            "surfaces",
+            "surfaces: a surfel scene has no scalar field, so no further isosurfaces".into(),
+        ));
+    }
+    if changes.color_map.as_ref().is_some_and(|m| m.name != "none") {
+        return Err(relational(
+            "color_map",
+            "color_map: a surfel scene has no scalar field to colour by".into(),
+        ));
+    }
+    Ok(())
+}
+
 /// Refuses the viewer-only fields in a scene description's `lighting.effects`, naming the
 /// scene's own field for each.
 pub fn refuse_in_scene(changes: &EffectChanges) -> Result<(), EffectError> {
@@ -349,6 +368,27 @@ mod tests {
         assert!(refuse_in_scene(&changes(r#"{"color_map":{"name":"grey"}}"#)).is_err());
         assert!(refuse_in_scene(&changes(r#"{"scene_surfaces":true}"#)).is_err());
         assert!(refuse_in_scene(&changes(r#"{"shadows":true}"#)).is_ok());
+    }
+
+    #[test]
+    fn a_scene_without_a_field_refuses_its_look() {
+        for json in [
+            r#"{"surfaces":[{"isovalue":0.5}]}"#,
+            r#"{"color_map":{"name":"viridis"}}"#,
+        ] {
+            let e = refuse_without_field(&changes(json)).expect_err(json);
+            assert!(
+                e.relational && e.message.contains("surfel"),
+                "{json}: {e:?}"
+            );
+        }
+        for json in [
+            r#"{"surfaces":[]}"#,
+            r#"{"color_map":{"name":"none"}}"#,
+            r#"{"shadows":true,"scene_surfaces":true}"#,
+        ] {
+            refuse_without_field(&changes(json)).expect(json);
+        }
     }
 
     #[test]

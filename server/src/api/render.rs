@@ -67,7 +67,15 @@ pub async fn render(
         Some(c) => convert::camera(c, "camera")?,
         None => look.default_camera(),
     };
+    let field = entry.info().kind.has_field();
     let isovalue = match req.isovalue {
+        Some(_) if !field => {
+            return Err(AppError::relational(
+                "invalid_value",
+                "isovalue: a surfel scene has no scalar field to take an isovalue of",
+            )
+            .field("isovalue"))
+        }
         Some(v) => {
             let (lo, hi) = entry.isovalue_range();
             if !v.is_finite() {
@@ -128,6 +136,9 @@ pub async fn render(
                 false => AppError::bad_request("invalid_value", e.message).field(field),
             }
         };
+        if !field {
+            crate::style::refuse_without_field(changes).map_err(bad)?;
+        }
         fx = crate::effects::apply(&fx, changes, &limits).map_err(bad)?;
         let slider = entry.demo().isovalue_slider();
         style =

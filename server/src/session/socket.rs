@@ -82,6 +82,7 @@ async fn run_registered(
         max_size: config.max_size,
         isovalue_range: entry.isovalue_range(),
         isovalue_slider: demo.isovalue_slider(),
+        scalar_field: entry.info().kind.has_field(),
         effects: crate::effects::EffectLimits::from_config(config),
         codecs: offered.clone(),
         max_fps: config.max_fps,
@@ -100,7 +101,7 @@ async fn run_registered(
             limits.isovalue_range.1 as f64,
         ],
         isovalue_slider: [slider.0 as f64, slider.1 as f64],
-        scalar_field: entry.info().kind.has_field(),
+        scalar_field: limits.scalar_field,
         frame_window: FRAME_WINDOW as u32,
         camera: isoray_protocol::CameraPose {
             eye: camera.eye.as_dvec3().to_array(),

@@ -1,8 +1,8 @@
 //! A viewer's look through the render endpoint (the same `effects` fields the websocket takes):
 //! a colour map recolours a tet scene's isosurfaces, a clip box and an added isosurface change
 //! the image, a look that changes nothing leaves the bytes as they were, bad values are 400s
-//! naming the field, and a scene description refuses them. The scene description endpoint
-//! reports the scene's bounds.
+//! naming the field, a surfel scene (no field) refuses them, and a scene description refuses
+//! them. The scene description endpoint reports the scene's bounds.
 
 use super::tets::post_json;
 use super::*;
@@ -107,6 +107,30 @@ async fn a_viewers_look_through_the_render_endpoint_and_the_scene_bounds() {
             assert_eq!(r.status, status, "{effects}: {}", r.text());
             assert_eq!(json(&r)["field"], field, "{effects}: {}", r.text());
         }
+
+        // A surfel scene has no field: an isovalue, further isosurfaces and a colour map are
+        // 422s naming them; its effects and the look's resets render.
+        let surfel = |body: &str| post_json(&base, "/api/v1/scenes/surfel-heads/render", body);
+        for (body, field) in [
+            (r#"{"width":40,"height":30,"isovalue":0.5}"#, "isovalue"),
+            (
+                r#"{"width":40,"height":30,"effects":{"surfaces":[{"isovalue":0.5}]}}"#,
+                "effects.surfaces",
+            ),
+            (
+                r#"{"width":40,"height":30,"effects":{"color_map":{"name":"grey"}}}"#,
+                "effects.color_map",
+            ),
+        ] {
+            let r = surfel(body);
+            assert_eq!(r.status, 422, "{body}: {}", r.text());
+            assert_eq!(json(&r)["field"], field, "{body}: {}", r.text());
+            assert!(r.text().contains("surfel"), "{body}: {}", r.text());
+        }
+        let r = surfel(
+            r#"{"width":40,"height":30,"effects":{"shadows":true,"surfaces":[],"color_map":{"name":"none"}}}"#,
+        );
+        assert_eq!(r.status, 200, "{}", r.text());
 
         // A scene description has its own clip box and isosurfaces, and no colour map.
         let r = post_json(
