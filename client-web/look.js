@@ -315,6 +315,8 @@ export class Look {
     const edit = (i, change) => {
       const adopting = this.settings.surf.length === 0;
       this.#adopt();
+      // Rows greyed while off take no input; nothing to change if one did.
+      if (!this.settings.surf[i]) return;
       change(this.settings.surf[i]);
       if (adopting) this.#buildSurfaces();
       this.#surfacesChanged();
