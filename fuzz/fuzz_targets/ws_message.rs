@@ -20,6 +20,7 @@ fuzz_target!(|data: &[u8]| {
         max_size: 4096,
         isovalue_range: (0.0, 2.0),
         isovalue_slider: (0.2, 1.8),
+        scalar_field: true,
         effects: EffectLimits {
             max_depth: 8,
             max_samples: 64,
@@ -46,9 +47,22 @@ fuzz_target!(|data: &[u8]| {
         style: Default::default(),
         stream: StreamSettings::new(&Codec::ALL, 30.0),
     };
-    if apply(&message, &mut settings, &limits).is_ok() {
-        // An accepted camera must give a usable view basis.
-        let v = settings.camera;
-        assert!(v.eye.is_finite() && v.target.is_finite() && v.up.is_finite());
+    // A scene with a field, and a surfel scene (which refuses the look of one).
+    let surfels = Limits {
+        scalar_field: false,
+        ..limits.clone()
+    };
+    for limits in [&limits, &surfels] {
+        let mut settings = settings.clone();
+        let before = settings.clone();
+        match apply(&message, &mut settings, limits) {
+            Ok(()) => {
+                // An accepted camera must give a usable view basis.
+                let v = settings.camera;
+                assert!(v.eye.is_finite() && v.target.is_finite() && v.up.is_finite());
+            }
+            // A refused message changes nothing.
+            Err(_) => assert!(settings == before),
+        }
     }
 });
