@@ -89,7 +89,8 @@ pub struct CreateScene {
     /// The camera viewers start with; one looking at the origin when absent.
     #[serde(default)]
     pub camera: Option<ApiCamera>,
-    /// The isovalue viewers start with (default 0.5).
+    /// The isovalue viewers start with (default 0.5); refused for surfels, which have no
+    /// scalar field (as are `isovalue_slider` and `lighting.isosurfaces`).
     #[serde(default)]
     pub isovalue: Option<f64>,
     /// Slider range offered to viewers (default [0.05, 1.5]).

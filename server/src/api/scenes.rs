@@ -126,6 +126,7 @@ pub async fn create_scene(
     }
     // A surfel scene's object is embedded and its hierarchy built here: seconds for a large
     // one, so off the async runtime.
+    crate::kinds::refuse_field_settings(&spec)?;
     let limits = crate::effects::EffectLimits::from_config(app.config());
     let (spec, setup) = blocking(move || {
         let setup = SceneSetup::from_spec(&spec, &limits);

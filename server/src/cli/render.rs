@@ -267,14 +267,16 @@ fn load(spec_path: Option<&Path>, step_path: &Path, model: usize) -> Result<Load
             serde_json::from_str(r#"{"kind":"metaballs"}"#).map_err(|e| e.to_string())?
         }
     };
-    let setup = SceneSetup::from_spec(&spec, &EffectLimits::ENGINE).map_err(|e| {
-        format!(
-            "{}: {}{}",
-            spec_path.map_or("scene".into(), |p| p.display().to_string()),
-            e.field.map(|f| format!("{f}: ")).unwrap_or_default(),
-            e.message
-        )
-    })?;
+    let setup = isoray_server::kinds::refuse_field_settings(&spec)
+        .and_then(|()| SceneSetup::from_spec(&spec, &EffectLimits::ENGINE))
+        .map_err(|e| {
+            format!(
+                "{}: {}{}",
+                spec_path.map_or("scene".into(), |p| p.display().to_string()),
+                e.field.map(|f| format!("{f}: ")).unwrap_or_default(),
+                e.message
+            )
+        })?;
     let shown = step_path.display();
     let (bytes, ext) = match molecule {
         Some((_, npy)) => (npy, Some("npy".to_string())),

@@ -149,6 +149,33 @@ pub struct SceneSetup {
     pub kind: KindSetup,
 }
 
+/// Refuses a new surfel scene description that sets an isovalue, its slider or further
+/// isosurfaces: surfels have no field, so they would go unused, and settings that go unused
+/// are refused like another kind's. Checked where a description comes in (the API, `isoray
+/// render`), not when the store reloads one that an older server took.
+pub fn refuse_field_settings(spec: &CreateScene) -> Result<(), KindError> {
+    if spec.kind != SceneKind::Surfels {
+        return Ok(());
+    }
+    let isosurfaces = spec
+        .lighting
+        .as_ref()
+        .is_some_and(|l| l.isosurfaces.as_ref().is_some_and(|s| !s.is_empty()));
+    let field = [
+        ("isovalue", spec.isovalue.is_some()),
+        ("isovalue_slider", spec.isovalue_slider.is_some()),
+        ("lighting.isosurfaces", isosurfaces),
+    ];
+    match field.into_iter().find(|(_, given)| *given) {
+        Some((name, _)) => Err(KindError::relational(
+            "invalid_value",
+            format!("{name}: a surfel scene has no scalar field to take isovalues of"),
+        )
+        .field(name)),
+        None => Ok(()),
+    }
+}
+
 impl SceneSetup {
     /// Validates a creation request and converts it, with effect quality checked against
     /// `limits` (the server's configured ones, or [`EffectLimits::ENGINE`]); every error names
@@ -399,6 +426,36 @@ mod tests {
         assert_eq!(m.balls.len(), 2);
         assert_eq!(m.balls[0].center, Vec3::new(1.0, 2.0, 3.0));
         assert_eq!(m.balls[1].radius, 0.5);
+    }
+
+    /// A valid surfel scene description with `extra` fields beside its surfels.
+    fn surfels_with(extra: &str) -> String {
+        let surfel = r#"{"centre":[0,0,0],"t1":[0.1,0,0],"t2":[0,0.1,0],"radius":0.1}"#;
+        format!(
+            r#"{{"kind":"surfels","surfels":{{"surfels":[{surfel},{surfel}],"nodes":[[0,0,0],[1,0,0]]}},{extra}}}"#
+        )
+    }
+
+    #[test]
+    fn a_surfel_description_refuses_field_settings() {
+        let ok = surfels_with(r#""name":"two""#);
+        refuse_field_settings(&spec(&ok)).expect("valid");
+        SceneSetup::from_spec(&spec(&ok), &EffectLimits::ENGINE).expect("valid");
+        for (extra, field) in [
+            (r#""isovalue":0.5"#, "isovalue"),
+            (r#""isovalue_slider":[0.1,1]"#, "isovalue_slider"),
+            (
+                r#""lighting":{"isosurfaces":[{"isovalue":0.2,"material":0}]}"#,
+                "lighting.isosurfaces",
+            ),
+        ] {
+            let json = surfels_with(extra);
+            let e = refuse_field_settings(&spec(&json)).expect_err(&json);
+            assert_eq!(e.field.as_deref(), Some(field), "{json}");
+            // A store written by an older server that took them still loads.
+            SceneSetup::from_spec(&spec(&json), &EffectLimits::ENGINE).expect(&json);
+            assert!(e.message.contains("surfel"), "{json}: {}", e.message);
+        }
     }
 
     #[test]

@@ -139,6 +139,11 @@ async fn surfel_scenes_are_validated_stored_rendered_and_streamed() {
         refused(&r, 400, "surfels.update", "fast", &root, &before);
         let r = post(&base, "/api/v1/scenes", &j!({"kind": "surfels"}));
         refused(&r, 422, "surfels", "surfels", &root, &before);
+        // Surfels have no field to take an isovalue of.
+        let mut bad = good.clone();
+        bad["isovalue"] = j!(0.5);
+        let r = post(&base, "/api/v1/scenes", &bad);
+        refused(&r, 422, "isovalue", "no scalar field", &root, &before);
         // Meshes to sample: no faces, a face naming a missing vertex.
         let tetra = j!([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]]);
         let mut bad = good.clone();
