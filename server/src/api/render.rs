@@ -67,7 +67,7 @@ pub async fn render(
         Some(c) => convert::camera(c, "camera")?,
         None => look.default_camera(),
     };
-    let field = entry.info().kind.has_field();
+    let field = entry.kind().has_field();
     let isovalue = match req.isovalue {
         Some(_) if !field => {
             return Err(AppError::relational(

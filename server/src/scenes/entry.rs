@@ -166,6 +166,14 @@ impl SceneEntry {
         }
     }
 
+    /// The scene's primitive kind.
+    pub fn kind(&self) -> SceneKind {
+        match &self.source {
+            Source::Demo { demo, .. } => crate::kinds::demo_kind(*demo),
+            Source::Stored { scene, .. } => scene.meta.kind,
+        }
+    }
+
     /// The scene as the REST API describes it.
     pub fn info(&self) -> SceneInfo {
         match &self.source {
@@ -174,7 +182,7 @@ impl SceneEntry {
             } => SceneInfo {
                 id: self.id.clone(),
                 name: demo.name().to_string(),
-                kind: crate::kinds::demo_kind(*demo),
+                kind: self.kind(),
                 description: demo.description().to_string(),
                 animated: true,
                 source: "demo".into(),
@@ -191,7 +199,7 @@ impl SceneEntry {
                 SceneInfo {
                     id: self.id.clone(),
                     name: spec.name.clone().unwrap_or_else(|| "pushed scene".into()),
-                    kind: scene.meta.kind,
+                    kind: self.kind(),
                     description: spec.description.clone().unwrap_or_default(),
                     animated: true,
                     source: "stored".into(),

@@ -82,7 +82,7 @@ async fn run_registered(
         max_size: config.max_size,
         isovalue_range: entry.isovalue_range(),
         isovalue_slider: demo.isovalue_slider(),
-        scalar_field: entry.info().kind.has_field(),
+        scalar_field: entry.kind().has_field(),
         effects: crate::effects::EffectLimits::from_config(config),
         codecs: offered.clone(),
         max_fps: config.max_fps,
