@@ -125,6 +125,9 @@ export class Look {
       [this.mapLo.value, this.mapHi.value] = info.isovalue_slider.map(fmt);
     }
     this.settings.surf = this.settings.surf.filter((s) => s.v > info.isovalue_range[0] && s.v < info.isovalue_range[1]);
+    // A row drawn like a surface this scene does not have (a link from another scene) is plain.
+    const own = info.effects?.surfaces?.length ?? 0;
+    for (const s of this.settings.surf) if (s.k !== undefined && !(s.k < own)) delete s.k;
     this.#buildSurfaces();
     this.#showClip();
     this.#showMap();
@@ -229,11 +232,12 @@ export class Look {
   // The section lists the further isosurfaces in effect: the viewer's own (`settings.surf`),
   // else the scene's (`info.effects.surfaces`), which the switch `#surfaces-on` (the effect
   // `isosurfaces`) shows or hides. A change to a scene's surface makes the list the viewer's,
-  // by value; switching off drops the viewer's list, and on again shows the scene's own.
+  // by value, each adopted row still drawn with its scene surface's material
+  // (`scene_surface`); switching off drops the viewer's list, and on again shows the scene's own.
 
-  /** The scene's own further isosurfaces as rows `{ v, c, o }`, or `[]`. */
+  /** The scene's own further isosurfaces as rows `{ v, c, o, k }` (`k`: its index), or `[]`. */
   #sceneSurfaces() {
-    return (this.info?.effects?.surfaces ?? []).map((s) => ({ v: s.isovalue, c: hexOf(s.color), o: s.opacity }));
+    return (this.info?.effects?.surfaces ?? []).map((s, k) => ({ v: s.isovalue, c: hexOf(s.color), o: s.opacity, k }));
   }
 
   /** Whether the session started with the scene's further isosurfaces on. */
@@ -266,7 +270,12 @@ export class Look {
   }
 
   #surfaceChanges() {
-    const surfaces = this.settings.surf.map((s) => ({ isovalue: s.v, color: linearOf(s.c), opacity: s.o }));
+    // A scene's surface, adopted, keeps its material (`scene_surface`); an added one is plain.
+    const surfaces = this.settings.surf.map((s) => {
+      const out = { isovalue: s.v, color: linearOf(s.c), opacity: s.o };
+      if (s.k !== undefined) out.scene_surface = s.k;
+      return out;
+    });
     const fx = { isosurfaces: surfaces.length > 0, surfaces };
     // A see-through surface needs transparency on.
     if (this.settings.surf.some((s) => s.o < 1)) fx.transparency = true;

@@ -11,7 +11,7 @@ export function defaults() {
     scene: null,
     cam: null, // { yaw, pitch, distance, target: [x, y, z], fov }
     up: '+y',
-    iso: null, // [value, ...] one per isosurface
+    iso: null, // [value]: the main isosurface's isovalue
     time: null, // pinned scene time in seconds; null follows the live state
     speed: 1, // playback speed: scene seconds per second (demos) or steps per second (stored)
     loop: true,
@@ -22,7 +22,7 @@ export function defaults() {
     stats: false,
     token: null, // view token (servers with --view-token); kept so a reload still works
     clip: null, // the viewer's clip box [minx, miny, minz, maxx, maxy, maxz], on while set
-    surf: [], // added isosurfaces: { v: isovalue, c: 'rrggbb' (sRGB), o: opacity }
+    surf: [], // added isosurfaces: { v: isovalue, c: 'rrggbb' (sRGB), o: opacity, k: the scene surface it is drawn like (optional) }
     cmap: null, // colour map of the isovalue: { name, lo, hi }
     bm: [], // bookmarks: { name, q } where q is the query string of the view they keep
     extra: [], // query parameters this module does not know (other modules' switches), kept as they are
@@ -70,8 +70,13 @@ export function parseSettings(search) {
   const clip = (p.get('clip') || '').split(',').map(finite);
   if (clip.length === 6 && clip.every((v) => v !== null) && [0, 1, 2].every((i) => clip[i] < clip[i + 3])) s.clip = clip;
   for (const item of (p.get('surf') || '').split(',').filter(Boolean).slice(0, 4)) {
-    const m = /^(-?[0-9.e+-]+):([0-9a-f]{6}):([0-9.]+)$/.exec(item);
-    if (m && finite(m[1]) !== null && Number(m[3]) >= 0 && Number(m[3]) <= 1) s.surf.push({ v: Number(m[1]), c: m[2], o: Number(m[3]) });
+    // `v:c:o`, or `v:c:o:k` for one drawn like the scene's own surface k.
+    const m = /^(-?[0-9.e+-]+):([0-9a-f]{6}):([0-9.]+)(?::([0-9]))?$/.exec(item);
+    if (m && finite(m[1]) !== null && Number(m[3]) >= 0 && Number(m[3]) <= 1) {
+      const row = { v: Number(m[1]), c: m[2], o: Number(m[3]) };
+      if (m[4] !== undefined) row.k = Number(m[4]);
+      s.surf.push(row);
+    }
   }
   const cmap = (p.get('cmap') || '').split(',');
   if (cmap.length === 3 && COLOR_MAPS.includes(cmap[0]) && finite(cmap[1]) !== null && finite(cmap[2]) !== null && Number(cmap[1]) < Number(cmap[2])) {
@@ -126,7 +131,7 @@ export function serializeSettings(s) {
   if (s.stats) p.set('stats', '1');
   if (s.token) p.set('token', s.token);
   if (s.clip) p.set('clip', s.clip.map(round).join(','));
-  if (s.surf.length) p.set('surf', s.surf.map((x) => `${round(x.v)}:${x.c}:${round(x.o)}`).join(','));
+  if (s.surf.length) p.set('surf', s.surf.map((x) => `${round(x.v)}:${x.c}:${round(x.o)}${x.k === undefined ? '' : `:${x.k}`}`).join(','));
   if (s.cmap) p.set('cmap', `${s.cmap.name},${round(s.cmap.lo)},${round(s.cmap.hi)}`);
   for (const b of s.bm) p.append('bm', `${b.name}:${b.q}`);
   for (const [k, v] of s.extra) p.append(k, v);

@@ -1,7 +1,7 @@
 // Isosurface controls: one slider per isosurface over the range the server suggests, with the
 // value typed exactly in a number box beside it, and a histogram of the field's values drawn
-// behind the slider when the server provides one. Add and remove appear only when the scene's
-// primitive allows more than one isosurface (`info.max_isosurfaces`); metaballs have one.
+// behind the slider when the server provides one. This is the scene's main isosurface (one
+// isovalue); further isosurfaces are the look's (look.js).
 import { $ } from './ui.js';
 
 export class Surfaces {
@@ -21,9 +21,9 @@ export class Surfaces {
   setInfo(info) {
     const firstInfo = this.info === null || this.info.scene.id !== info.scene.id;
     this.info = info;
-    const max = Math.max(1, info.max_isosurfaces ?? 1);
-    if (!this.settings.iso || (firstInfo && this.settings.iso.length > max)) this.settings.iso = [info.isovalue];
-    this.settings.iso = this.settings.iso.slice(0, max).map((v) => this.#clamp(v));
+    // One isovalue; a link with several (from an older client) starts from the scene's.
+    if (!this.settings.iso || (firstInfo && this.settings.iso.length > 1)) this.settings.iso = [info.isovalue];
+    this.settings.iso = [this.#clamp(this.settings.iso[0])];
     this.#build();
   }
 

@@ -306,6 +306,16 @@ test('a scene\'s own further isosurfaces are the section\'s: listed, switched of
     assert.ok(changedShare(own, edited) > 0.001, 'a larger core shows');
     r = await rows();
     assert.deepEqual(r.map((x) => [x.legend, x.value]), [['Further isosurface 1', listed[0].isovalue], ['Further isosurface 2', 1.5]]);
+    // Each adopted surface keeps its scene surface's material (`:k` in the URL): the core back
+    // at its own isovalue looks as the scene drew it, the translucent shell tinted by the
+    // balls' colours as before, not redrawn plain.
+    assert.match(surfParam(), /^[^,]*:0,[^,]*:1$/, 'both rows drawn like the scene\'s');
+    await page.locator('#further-1 input[type=number]').fill(String(listed[1].isovalue));
+    await page.locator('#further-1 input[type=number]').press('Enter');
+    await page.waitForURL(() => !(surfParam() ?? '1.5:').includes('1.5:'));
+    const restored = await settledAfterInputs(page);
+    t.diagnostic(`own vs restored: mean abs diff ${meanAbsDiff(own, restored).toFixed(3)}`);
+    assert.ok(meanAbsDiff(own, restored) < SAME, 'the core back at its isovalue: the scene\'s look');
     // Added: three, the scene's two among them.
     await page.locator('#surface-add').click();
     await page.waitForURL(() => (surfParam() ?? '').split(',').length === 3);

@@ -21,6 +21,7 @@ fuzz_target!(|data: &[u8]| {
         isovalue_range: (0.0, 2.0),
         isovalue_slider: (0.2, 1.8),
         scalar_field: true,
+        scene_surfaces: 2,
         effects: EffectLimits {
             max_depth: 8,
             max_samples: 64,

@@ -82,6 +82,13 @@ pub struct SurfaceStyleSpec {
     /// `[0, 1]`; below 1 the surface is transparent (with `transparency` on).
     #[serde(default = "one")]
     pub opacity: f64,
+    /// Which of the scene's own further isosurfaces (an index into `info.effects.surfaces`)
+    /// this one is drawn like: with that surface's material at this isovalue, `color` in place
+    /// of the material's diffuse colour (the scene's own colours multiply it, as they do the
+    /// scene's surface) and this opacity. Absent: a plain surface of `color`. Not in
+    /// `info.effects.surfaces`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub scene_surface: Option<u32>,
 }
 
 /// A colour map of the isovalue: `name` is `viridis`, `inferno`, `cool_warm`, `grey` or

@@ -155,6 +155,7 @@ pub fn info(
                         isovalue: decimal(s.isovalue),
                         color: s.color.unwrap_or(material.diffuse).to_array().map(decimal),
                         opacity: decimal(material.opacity),
+                        scene_surface: None,
                     }
                 })
                 .collect()
@@ -241,11 +242,13 @@ mod tests {
                     isovalue: 0.15,
                     color: [0.25, 0.5, 1.0],
                     opacity: 0.3,
+                    scene_surface: None,
                 },
                 SurfaceStyleSpec {
                     isovalue: 2.0,
                     color: [0.0, 1.0, 0.5],
                     opacity: 1.0,
+                    scene_surface: None,
                 },
             ])
         );

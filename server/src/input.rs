@@ -80,6 +80,9 @@ pub struct Limits {
     /// Whether the scene's surface is an isosurface of a field (not for surfels: they refuse
     /// an isovalue, further isosurfaces and a colour map, which would change nothing).
     pub scalar_field: bool,
+    /// How many further isosurfaces the scene has of its own (`surfaces[i].scene_surface`
+    /// names one).
+    pub scene_surfaces: usize,
     /// Largest effect quality settings.
     pub effects: EffectLimits,
     /// The codecs this server can send.
@@ -286,6 +289,7 @@ pub fn apply(
                         effects,
                         limits.isovalue_range,
                         limits.isovalue_slider,
+                        limits.scene_surfaces,
                     )
                     .map(|s| (e, s))
                 });
@@ -384,6 +388,7 @@ mod tests {
             isovalue_range: (0.0, 2.0),
             isovalue_slider: (0.2, 1.8),
             scalar_field: true,
+            scene_surfaces: 0,
             effects: EffectLimits {
                 max_depth: 8,
                 max_samples: 64,

@@ -25,6 +25,8 @@ pub struct SurfaceLook {
     pub isovalue: f32,
     pub color: Vec3,
     pub opacity: f32,
+    /// The scene's own further isosurface whose material it is drawn with.
+    pub scene_surface: Option<u16>,
 }
 
 /// What a viewer chose about the look of a scene; `None` fields keep the scene's own.
@@ -57,14 +59,36 @@ impl Style {
                     // Each added surface gets a material of its own after the scene's: the
                     // scene has at most 64, so the index fits.
                     let material = u16::try_from(l.materials.len()).unwrap_or(u16::MAX);
-                    l.materials.push(Material {
-                        opacity: s.opacity,
-                        ..Material::default()
-                    });
-                    Isosurface {
-                        isovalue: s.isovalue,
-                        material,
-                        color: Some(s.color),
+                    let like = s
+                        .scene_surface
+                        .and_then(|i| scene.isosurfaces.get(usize::from(i)));
+                    match like {
+                        // The scene's surface's material, diffuse colour and opacity changed;
+                        // drawn in the kind's colours as that surface is.
+                        Some(like) => {
+                            let mut m = *scene.material(like.material);
+                            (m.diffuse, m.opacity) = match like.color {
+                                Some(_) => (m.diffuse, s.opacity),
+                                None => (s.color, s.opacity),
+                            };
+                            l.materials.push(m);
+                            Isosurface {
+                                isovalue: s.isovalue,
+                                material,
+                                color: like.color.map(|_| s.color),
+                            }
+                        }
+                        None => {
+                            l.materials.push(Material {
+                                opacity: s.opacity,
+                                ..Material::default()
+                            });
+                            Isosurface {
+                                isovalue: s.isovalue,
+                                material,
+                                color: Some(s.color),
+                            }
+                        }
                     }
                 })
                 .collect();
@@ -82,6 +106,7 @@ pub fn apply(
     changes: &EffectChanges,
     isovalue_range: (f32, f32),
     slider: (f32, f32),
+    scene_surfaces: usize,
 ) -> Result<Style, EffectError> {
     let mut out = style.clone();
     if let Some(clip) = &changes.clip {
@@ -98,7 +123,7 @@ pub fn apply(
         out.surfaces = None;
     }
     if let Some(surfaces) = &changes.surfaces {
-        out.surfaces = Some(surface_looks(surfaces, isovalue_range)?);
+        out.surfaces = Some(surface_looks(surfaces, isovalue_range, scene_surfaces)?);
     }
     if let Some(map) = &changes.color_map {
         out.color_map = color_map(map, slider)?;
@@ -151,6 +176,7 @@ fn clip_box(spec: &ClipBoxSpec) -> Result<ClipBox, EffectError> {
 fn surface_looks(
     surfaces: &[SurfaceStyleSpec],
     (lo, hi): (f32, f32),
+    scene_surfaces: usize,
 ) -> Result<Vec<SurfaceLook>, EffectError> {
     if surfaces.len() > MAX_SURFACES {
         return Err(error(
@@ -187,10 +213,23 @@ fn surface_looks(
                     format!("surfaces[{i}].opacity {} must be in [0, 1]", s.opacity),
                 ));
             }
+            let scene_surface = match s.scene_surface {
+                None => None,
+                Some(k) if (k as usize) < scene_surfaces => u16::try_from(k).ok(),
+                Some(k) => {
+                    return Err(relational(
+                        "surfaces",
+                        format!(
+                            "surfaces[{i}].scene_surface {k} names none of the scene's {scene_surfaces} further isosurfaces (info.effects.surfaces)"
+                        ),
+                    ))
+                }
+            };
             Ok(SurfaceLook {
                 isovalue: iso,
                 color: Vec3::new(s.color[0] as f32, s.color[1] as f32, s.color[2] as f32),
                 opacity: s.opacity as f32,
+                scene_surface,
             })
         })
         .collect()
@@ -301,7 +340,7 @@ mod tests {
                 "surfaces":[{"isovalue":0.4,"color":[1,0,0],"opacity":0.5}],
                 "color_map":{"name":"viridis","range":[0,2]}}"#,
         );
-        let s = apply(&Style::default(), &c, (0.0, 1.0), (0.1, 0.9)).expect("valid");
+        let s = apply(&Style::default(), &c, (0.0, 1.0), (0.1, 0.9), 0).expect("valid");
         let l = s.lighting(&Lighting::default()).expect("a style");
         let clip = l.clip_box.expect("clip");
         assert_eq!(
@@ -323,6 +362,7 @@ mod tests {
             &changes(r#"{"color_map":{"name":"grey"}}"#),
             (0.0, 1.0),
             (0.1, 0.9),
+            0,
         )
         .expect("valid");
         assert_eq!(s.color_map.map(|m| (m.lo, m.hi)), Some((0.1, 0.9)));
@@ -331,6 +371,7 @@ mod tests {
             &changes(r#"{"color_map":{"name":"none"},"surfaces":[]}"#),
             (0.0, 1.0),
             (0.1, 0.9),
+            0,
         )
         .expect("valid");
         assert_eq!(s.color_map, None);
@@ -361,8 +402,8 @@ mod tests {
                 "color_map",
             ),
         ] {
-            let e =
-                apply(&Style::default(), &changes(json), (0.0, 1.0), (0.0, 1.0)).expect_err(json);
+            let e = apply(&Style::default(), &changes(json), (0.0, 1.0), (0.0, 1.0), 0)
+                .expect_err(json);
             assert_eq!(e.field, field, "{json}: {}", e.message);
         }
         assert!(refuse_in_scene(&changes(r#"{"color_map":{"name":"grey"}}"#)).is_err());
@@ -403,15 +444,21 @@ mod tests {
         };
         let range = ((0.0, 1.0), (0.0, 1.0));
         let added = changes(r#"{"surfaces":[{"isovalue":0.7}],"color_map":{"name":"grey"}}"#);
-        let s = apply(&Style::default(), &added, range.0, range.1).expect("valid");
+        let s = apply(&Style::default(), &added, range.0, range.1, 0).expect("valid");
         let l = s.lighting(&scene).expect("a style");
         assert_eq!(
             l.isosurfaces.iter().map(|i| i.isovalue).collect::<Vec<_>>(),
             [0.7]
         );
         // Back to the scene's own surface; the colour map stays the viewer's.
-        let reset =
-            apply(&s, &changes(r#"{"scene_surfaces":true}"#), range.0, range.1).expect("valid");
+        let reset = apply(
+            &s,
+            &changes(r#"{"scene_surfaces":true}"#),
+            range.0,
+            range.1,
+            0,
+        )
+        .expect("valid");
         assert_eq!(reset.surfaces, None);
         let l = reset.lighting(&scene).expect("the map is still a style");
         assert_eq!(l.isosurfaces, scene.isosurfaces);
@@ -423,10 +470,97 @@ mod tests {
             &changes(r#"{"scene_surfaces":false}"#),
             range.0,
             range.1,
+            0,
         );
         assert_eq!(kept.expect("valid"), s);
         let both = changes(r#"{"scene_surfaces":true,"surfaces":[{"isovalue":0.3}]}"#);
-        let e = apply(&s, &both, range.0, range.1).expect_err("both");
+        let e = apply(&s, &both, range.0, range.1, 0).expect_err("both");
         assert_eq!((e.field, e.relational), ("scene_surfaces", true));
+    }
+
+    #[test]
+    fn a_surface_like_the_scenes_keeps_its_material() {
+        // Shells' translucent shell: a shiny material whose blue the balls' colours multiply.
+        let shell = Material {
+            diffuse: Vec3::new(0.4, 0.6, 1.0),
+            specular: 0.9,
+            shininess: 120.0,
+            reflectivity: 0.2,
+            opacity: 0.3,
+            ..Material::default()
+        };
+        let scene = Lighting {
+            materials: vec![Material::default(), shell],
+            isosurfaces: vec![Isosurface {
+                isovalue: 0.2,
+                material: 1,
+                color: None,
+            }],
+            ..Lighting::default()
+        };
+        let range = ((0.0, 1.0), (0.0, 1.0));
+        // The shell moved and made more opaque, and a plain surface beside it.
+        let edit = changes(
+            r#"{"surfaces":[{"isovalue":0.3,"color":[0.4,0.6,1],"opacity":0.5,"scene_surface":0},
+                            {"isovalue":0.6,"color":[1,0,0]}]}"#,
+        );
+        let s = apply(&Style::default(), &edit, range.0, range.1, 1).expect("valid");
+        let l = s.lighting(&scene).expect("a style");
+        let (like, plain) = (l.isosurfaces[0], l.isosurfaces[1]);
+        assert_eq!((like.isovalue, like.color), (0.3, None));
+        assert_eq!(
+            *l.material(like.material),
+            Material {
+                opacity: 0.5,
+                ..shell
+            }
+        );
+        assert_eq!((plain.isovalue, plain.color), (0.6, Some(Vec3::X)));
+        assert_eq!(*l.material(plain.material), Material::default());
+        // The scene's materials stay, the added ones come after them.
+        assert_eq!(l.materials[..2], scene.materials[..]);
+        // An index past the scene's surfaces is refused, naming it, and nothing changes.
+        let past = changes(r#"{"surfaces":[{"isovalue":0.3,"scene_surface":1}]}"#);
+        let e = apply(&s, &past, range.0, range.1, 1).expect_err("no second surface");
+        assert_eq!((e.field, e.relational), ("surfaces", true));
+        assert!(e.message.contains("scene_surface 1"), "{}", e.message);
+    }
+
+    #[test]
+    fn the_scenes_surfaces_sent_back_as_listed_are_drawn_as_the_scene_draws_them() {
+        // What a client does when it adopts Shells' surfaces unchanged: each row of
+        // `info.effects.surfaces` sent back with its index. Every surface must come out with
+        // the scene's isovalue, colour and material (only the materials' indices differ).
+        let scene = isoray_render::scenes::DemoScene::Shells
+            .state_at(2.0)
+            .lighting;
+        let limits = crate::effects::EffectLimits {
+            max_depth: 4,
+            max_samples: 16,
+            max_passes: 16,
+        };
+        let effects = isoray_render::Effects::OFF;
+        let listed = crate::effects::info(&scene, 24, &effects, &limits).surfaces;
+        let listed = listed.expect("Shells lists its surfaces");
+        assert_eq!(listed.len(), scene.isosurfaces.len());
+        let back: Vec<SurfaceStyleSpec> = (0u32..)
+            .zip(listed)
+            .map(|(k, s)| SurfaceStyleSpec {
+                scene_surface: Some(k),
+                ..s
+            })
+            .collect();
+        let changes = EffectChanges {
+            surfaces: Some(back),
+            ..changes("{}")
+        };
+        let (range, slider) = ((0.0, 10.0), (0.1, 5.0));
+        let own = scene.isosurfaces.len();
+        let style = apply(&Style::default(), &changes, range, slider, own).expect("valid");
+        let l = style.lighting(&scene).expect("a style");
+        for (drawn, was) in l.isosurfaces.iter().zip(&scene.isosurfaces) {
+            assert_eq!((drawn.isovalue, drawn.color), (was.isovalue, was.color));
+            assert_eq!(l.material(drawn.material), scene.material(was.material));
+        }
     }
 }

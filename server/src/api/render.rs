@@ -141,8 +141,9 @@ pub async fn render(
         }
         fx = crate::effects::apply(&fx, changes, &limits).map_err(bad)?;
         let slider = entry.demo().isovalue_slider();
-        style =
-            crate::style::apply(&style, changes, entry.isovalue_range(), slider).map_err(bad)?;
+        let own = entry.lighting().isosurfaces.len();
+        style = crate::style::apply(&style, changes, entry.isovalue_range(), slider, own)
+            .map_err(bad)?;
     }
     let view = View {
         width,

@@ -83,6 +83,7 @@ async fn run_registered(
         isovalue_range: entry.isovalue_range(),
         isovalue_slider: demo.isovalue_slider(),
         scalar_field: entry.kind().has_field(),
+        scene_surfaces: entry.lighting().isosurfaces.len(),
         effects: crate::effects::EffectLimits::from_config(config),
         codecs: offered.clone(),
         max_fps: config.max_fps,

@@ -102,6 +102,12 @@ async fn a_viewers_look_through_the_render_endpoint_and_the_scene_bounds() {
                 "effects.surfaces",
                 400,
             ),
+            // Drawn like a surface of the scene's own past those it has.
+            (
+                r#"{"surfaces":[{"isovalue":0.1,"scene_surface":9}]}"#,
+                "effects.surfaces",
+                422,
+            ),
         ] {
             let r = render(&base, effects);
             assert_eq!(r.status, status, "{effects}: {}", r.text());
