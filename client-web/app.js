@@ -310,7 +310,14 @@ function describe(s) {
   const noun = { metaballs: 'balls', tets: 'tetrahedra', surfels: 'surfels' }[s.kind] ?? 'primitives';
   const size = `${s.primitives.toLocaleString('en')} ${noun}`;
   const time = s.source === 'stored' ? `${s.steps} time step${s.steps === 1 ? '' : 's'}` : 'animated demo';
-  return `${s.kind} · ${size} · ${time}`;
+  // `5,202 surfels` already names its kind.
+  return noun === s.kind ? `${size} · ${time}` : `${s.kind} · ${size} · ${time}`;
+}
+
+/** A scene's line in the picker: its name, less a `(kind)` the description repeats, and what it is. */
+function optionLabel(s) {
+  const name = s.name.endsWith(` (${s.kind})`) ? s.name.slice(0, -` (${s.kind})`.length) : s.name;
+  return `${name} (${describe(s)})`;
 }
 
 async function loadSteps(scene) {
@@ -360,7 +367,7 @@ async function refreshScenes() {
       const list = await response.json();
       scenes = list.scenes;
       showShards(list);
-      fillSelect(sceneSelect, scenes.map((s) => [s.id, `${s.name} (${describe(s)})`]), settings.scene);
+      fillSelect(sceneSelect, scenes.map((s) => [s.id, optionLabel(s)]), settings.scene);
     })
     .catch(() => {})
     .finally(() => { listing = null; });
@@ -400,7 +407,7 @@ async function start() {
     startDelayMs = Math.min(5000, startDelayMs * 2);
     return;
   }
-  fillSelect(sceneSelect, scenes.map((s) => [s.id, `${s.name} (${describe(s)})`]), settings.scene);
+  fillSelect(sceneSelect, scenes.map((s) => [s.id, optionLabel(s)]), settings.scene);
   if (!scenes.length) {
     setStatus('The server has no scenes yet.', { busy: false });
     return;
