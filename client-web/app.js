@@ -192,12 +192,35 @@ function sendSize(force = false) {
 const quality = new Quality(settings, canvas, { resized: () => sendSize(), saved, streamChanged: () => sendStream() });
 
 const effects = new EffectsPanel(settings, {
-  changed: (changes) => send({ type: 'effects', effects: changes }),
+  changed: (changes) => { send({ type: 'effects', effects: changes }); showVolume(); },
   saved,
 });
 
+// A scene whose field is drawn as a volume while transparency is on (`info.effects.volume`)
+// has no isosurface then: the isovalue, further isosurface and colour map controls change
+// nothing, so they are greyed and taken out of the tab order, with a note saying why.
+function showVolume() {
+  const fx = info?.effects;
+  const volume = Boolean(fx?.volume) && Boolean(settings.fx.transparency ?? fx.settings.transparency);
+  $('volume-note').hidden = !volume;
+  for (const id of ['h-surfaces', 'h-colors']) {
+    for (const el of $(id).closest('section').children) {
+      if (el.tagName === 'H2' || el.id === 'volume-note') continue;
+      el.inert = volume;
+      el.classList.toggle('idle', volume);
+    }
+  }
+}
+
 // --- the viewer's look, the overlay, bookmarks, recording ------------------------------------
-const look = new Look(settings, { send: (changes) => send({ type: 'effects', effects: changes }), saved });
+const look = new Look(settings, {
+  send: (changes) => {
+    send({ type: 'effects', effects: changes });
+    if (changes.transparency !== undefined) effects.noteSwitched('transparency', changes.transparency);
+    showVolume();
+  },
+  saved,
+});
 const overlay = new Overlay(canvas, {
   getPose: () => (settings.cam ? poseFromOrbit(settings.cam, settings.up) : null),
   look,
@@ -245,6 +268,7 @@ function onInfo(message) {
   const fx = effects.restoreChanges();
   if (fx) send({ type: 'effects', effects: fx });
   look.setInfo(message);
+  showVolume();
   const style = look.restoreChanges();
   if (style) send({ type: 'effects', effects: style });
   if (!look.bounds) loadBounds(message.scene.id);

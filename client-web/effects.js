@@ -94,6 +94,15 @@ export class EffectsPanel {
     return Object.keys(changes).length ? changes : null;
   }
 
+  /** Notes an effect another panel switched (a see-through isosurface turns transparency on). */
+  noteSwitched(name, value) {
+    if (!this.info) return;
+    if (value === this.info.settings[name]) delete this.settings.fx[name];
+    else this.settings.fx[name] = value;
+    const box = document.getElementById(`fx-${name}`);
+    if (box && box.type === 'checkbox') box.checked = value;
+  }
+
   #value(name) {
     return name in this.settings.fx ? this.settings.fx[name] : this.info.settings[name];
   }

@@ -340,3 +340,43 @@ test('a scene\'s own further isosurfaces are the section\'s: listed, switched of
     assert.ok((await rows()).every((x) => x.disabled));
   });
 });
+
+test('a scene drawn as a volume greys its isosurface controls while transparency is on', async () => {
+  await withPage('volume-note', async ({ page, server }) => {
+    const infos = [];
+    page.on('websocket', (ws) => ws.on('framereceived', ({ payload }) => {
+      if (typeof payload === 'string' && payload.includes('"type":"info"')) infos.push(JSON.parse(payload));
+    }));
+    await page.goto(`${server.url}?scene=clouds&t=2&scale=0.5`);
+    await settledAfterInputs(page);
+    assert.ok(infos[0].effects.volume && infos[0].effects.settings.transparency, `Clouds starts as a volume: ${JSON.stringify(infos[0].effects)}`);
+    const idle = (sel) => page.locator(sel).evaluate((e) => e.closest('[inert]') !== null);
+    const note = page.locator('#volume-note');
+    assert.ok(await note.isVisible(), 'the note says why the controls are greyed');
+    for (const sel of ['#isovalue', '#surface-add', '#cmap']) assert.ok(await idle(sel), `${sel} takes no input as a volume`);
+
+    // Transparency off: a surface, and every control works again.
+    await page.locator('#fx-transparency').uncheck();
+    await note.waitFor({ state: 'hidden' });
+    for (const sel of ['#isovalue', '#surface-add', '#cmap']) assert.ok(!(await idle(sel)), `${sel} works on the surface`);
+
+    // A see-through further isosurface turns transparency on, and the panel shows it.
+    await page.locator('#surface-add').click();
+    await page.locator('#further-opacity-0').fill('0.5');
+    await page.locator('#further-opacity-0').dispatchEvent('change');
+    await note.waitFor({ state: 'visible' });
+    assert.ok(await page.locator('#fx-transparency').isChecked(), 'the transparency switch follows');
+    // Back to the scene's start, so the URL no longer notes it off.
+    await page.waitForURL((url) => !/-transparency/.test(url.searchParams.get('fx') ?? ''));
+  });
+});
+
+test('a scene with no volume keeps its isosurface controls with transparency on', async () => {
+  await withPage('no-volume-note', async ({ page, server }) => {
+    await page.goto(`${server.url}?scene=shells&t=2&scale=0.5`);
+    await settledAfterInputs(page);
+    assert.ok(await page.locator('#fx-transparency').isChecked(), 'Shells starts see-through');
+    assert.ok(await page.locator('#volume-note').isHidden());
+    assert.ok(await page.locator('#isovalue').evaluate((e) => e.closest('[inert]') === null));
+  });
+});

@@ -134,6 +134,11 @@ pub struct EffectsInfo {
     pub max_samples: u32,
     /// Refinement passes a still view accumulates at most.
     pub max_passes: u32,
+    /// Whether the scene's field is drawn as an absorbing volume while `transparency` is on:
+    /// there is no isosurface then, so the isovalue, further isosurfaces and a colour map show
+    /// only with `transparency` off.
+    #[serde(default)]
+    pub volume: bool,
     /// The scene's own clip box (`lighting.clip_box`), which `clip_box` switches until the
     /// viewer sets a `clip` of its own; absent when the scene has none.
     #[serde(default, skip_serializing_if = "Option::is_none")]

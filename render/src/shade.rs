@@ -282,6 +282,13 @@ impl Lighting {
         l
     }
 
+    /// Whether the field is drawn as an absorbing volume while `transparency` is on (a volume
+    /// of positive, finite density): no isosurface is drawn then.
+    pub fn has_volume(&self) -> bool {
+        self.volume
+            .is_some_and(|v| v.density > 0.0 && v.density.is_finite())
+    }
+
     /// The material of `materials[index]`.
     #[inline]
     pub fn material(&self, index: u16) -> &Material {

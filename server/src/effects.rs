@@ -141,6 +141,7 @@ pub fn info(
         max_depth: limits.max_depth,
         max_samples: limits.max_samples,
         max_passes: limits.max_passes,
+        volume: lighting.has_volume(),
         clip: lighting.clip_box.map(|c| ClipBoxSpec {
             min: c.min.to_array().map(decimal),
             max: c.max.to_array().map(decimal),
@@ -208,6 +209,28 @@ mod tests {
                 max: [1.0, 2.0, 3.25],
             })
         );
+    }
+
+    #[test]
+    fn info_says_where_the_field_is_drawn_as_a_volume() {
+        use isoray_render::shade::Volume;
+        let mut lighting = Lighting::default();
+        assert!(!info(&lighting, 1, &Effects::OFF, &LIMITS).volume);
+        for (density, drawn) in [(0.8, true), (0.0, false), (f32::INFINITY, false)] {
+            lighting.volume = Some(Volume {
+                density,
+                color: glam::Vec3::ONE,
+            });
+            assert_eq!(
+                info(&lighting, 1, &Effects::OFF, &LIMITS).volume,
+                drawn,
+                "{density}"
+            );
+        }
+        let clouds = isoray_render::scenes::DemoScene::Clouds
+            .state_at(1.0)
+            .lighting;
+        assert!(info(&clouds, 40, &Effects::OFF, &LIMITS).volume);
     }
 
     #[test]

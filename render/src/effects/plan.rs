@@ -59,11 +59,7 @@ impl EffectsPlan {
     /// drawn isosurface) uses count.
     pub fn new(lighting: &Lighting, primitive_count: usize, effects: &Effects) -> EffectsPlan {
         let isosurfaces = effects.isosurfaces && !lighting.isosurfaces.is_empty();
-        let volume = effects.transparency
-            && primitive_count > 0
-            && lighting
-                .volume
-                .is_some_and(|v| v.density > 0.0 && v.density.is_finite());
+        let volume = effects.transparency && primitive_count > 0 && lighting.has_volume();
         let mut visible = if volume {
             // The field is not a surface then: only the floor's material shows.
             lighting.floor.map(|f| vec![f.material]).unwrap_or_default()
