@@ -7,6 +7,8 @@
 use crate::camera::Camera;
 use crate::kinds::surfels::demo::{self, SurfelDemo, SurfelDemoKind};
 use crate::kinds::surfels::scene::{SurfelOptions, SurfelRuntime, SurfelScene};
+use crate::shade::{Floor, Lighting, Material};
+use glam::Vec3;
 use std::sync::{Arc, OnceLock};
 
 /// Simulated frames per demo loop (8 s at 30 fps).
@@ -56,24 +58,46 @@ pub fn state_at(kind: SurfelDemoKind, time: f64) -> SurfelScene {
         .scene(frame, SurfelOptions::default(), Arc::clone(&s.runtime))
 }
 
+/// The demo's lighting: the default light, and where the simulation has a floor the balls
+/// land on or the cubes bounce off (the ball pit's box, the cubes' ground), a checker floor
+/// there, so a viewer sees them land and (with shadows) their contact shadows. The impact
+/// scene's object floats: no floor (its streaming figure with shadows is measured so).
+pub fn lighting(kind: SurfelDemoKind) -> Lighting {
+    let height = match kind {
+        SurfelDemoKind::Balls => -1.5,
+        SurfelDemoKind::Heads => -1.0,
+        SurfelDemoKind::Impact => return Lighting::default(),
+    };
+    Lighting {
+        materials: vec![
+            Material::default(),
+            Material {
+                specular: 0.0,
+                ..Material::default()
+            },
+        ],
+        floor: Some(Floor {
+            height,
+            material: 1,
+            colors: [Vec3::splat(0.55), Vec3::splat(0.3)],
+            checker: 0.5,
+        }),
+        ..Lighting::default()
+    }
+}
+
 /// The demo's camera (no build needed).
 pub fn camera(kind: SurfelDemoKind) -> Camera {
-    let look = |eye: glam::Vec3, target: glam::Vec3| Camera {
+    let look = |eye: Vec3, target: Vec3| Camera {
         eye,
         target,
-        up: glam::Vec3::Y,
+        up: Vec3::Y,
         fov_y_deg: 45.0,
     };
     match kind {
-        SurfelDemoKind::Balls => look(
-            glam::Vec3::new(0.0, 1.2, 5.2),
-            glam::Vec3::new(0.0, -0.3, 0.0),
-        ),
-        SurfelDemoKind::Impact => look(glam::Vec3::new(0.6, 0.8, 4.2), glam::Vec3::ZERO),
-        SurfelDemoKind::Heads => look(
-            glam::Vec3::new(0.0, 0.8, 5.0),
-            glam::Vec3::new(0.0, -0.2, 0.0),
-        ),
+        SurfelDemoKind::Balls => look(Vec3::new(0.0, 1.2, 5.2), Vec3::new(0.0, -0.3, 0.0)),
+        SurfelDemoKind::Impact => look(Vec3::new(0.6, 0.8, 4.2), Vec3::ZERO),
+        SurfelDemoKind::Heads => look(Vec3::new(0.0, 0.8, 5.0), Vec3::new(0.0, -0.2, 0.0)),
     }
 }
 

@@ -332,6 +332,8 @@ impl DemoScene {
             DemoScene::Shells => demo_effects::shells_lighting(),
             DemoScene::TetGyroid => crate::kinds::tets::generate::demo_lighting(),
             DemoScene::TetBucky => crate::kinds::tets::bucky::bucky_lighting(),
+            DemoScene::SurfelBalls => demo_surfels::lighting(SurfelDemoKind::Balls),
+            DemoScene::SurfelHeads => demo_surfels::lighting(SurfelDemoKind::Heads),
             _ => Lighting::default(),
         }
     }
