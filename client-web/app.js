@@ -78,6 +78,18 @@ function send(message) {
 }
 
 // --- camera ----------------------------------------------------------------------------------
+/** Width over height of the frames asked for. */
+function viewAspect() {
+  const [width, height] = quality.size();
+  return width > 0 && height > 0 ? width / height : 1;
+}
+
+/** The camera pose of the orbit for the frames asked for (a portrait view sees wider: viewFov). */
+function currentPose() {
+  return poseFromOrbit(settings.cam, settings.up, viewAspect());
+}
+
+let sentFov = null; // the field of view of the last camera message
 let cameraQueued = false;
 function cameraChanged() {
   saved();
@@ -87,7 +99,8 @@ function cameraChanged() {
   requestAnimationFrame(() => {
     cameraQueued = false;
     if (!settings.cam) return;
-    const pose = poseFromOrbit(settings.cam, settings.up);
+    const pose = currentPose();
+    sentFov = pose.fov_y_deg;
     lastCameraInput = send({ type: 'camera', ...pose }) ?? lastCameraInput;
     overlay.update();
     // The last frame, reprojected to the new camera, in this display frame.
@@ -100,7 +113,7 @@ function cameraChanged() {
 function reprojectFrame(frame) {
   reproject.setFrame(frame);
   if (frame.header.inputId < lastCameraInput && settings.cam && reproject.ready) {
-    const warped = reproject.render(poseFromOrbit(settings.cam, settings.up), frame.header.width, frame.header.height);
+    const warped = reproject.render(currentPose(), frame.header.width, frame.header.height);
     if (warped) view.draw(warped, frame.header);
   }
 }
@@ -122,6 +135,7 @@ function resetView() {
 attachControls(canvas, {
   getOrbit: () => settings.cam,
   getUp: () => settings.up,
+  getAspect: viewAspect,
   changed: cameraChanged,
   reset: resetView,
 });
@@ -188,6 +202,8 @@ function sendSize(force = false) {
   if (key === lastSize && !force) return;
   lastSize = key;
   send({ type: 'resize', width, height });
+  // Turned between portrait and landscape: the field of view follows (viewFov).
+  if (settings.cam && sentFov !== null && currentPose().fov_y_deg !== sentFov) cameraChanged();
 }
 const quality = new Quality(settings, canvas, { resized: () => sendSize(), saved, streamChanged: () => sendStream() });
 
@@ -222,7 +238,7 @@ const look = new Look(settings, {
   saved,
 });
 const overlay = new Overlay(canvas, {
-  getPose: () => (settings.cam ? poseFromOrbit(settings.cam, settings.up) : null),
+  getPose: () => (settings.cam ? currentPose() : null),
   look,
 });
 const bookmarks = new Bookmarks(settings, {
@@ -263,7 +279,9 @@ function onInfo(message) {
   // Restore the whole view: the server starts every session from the scene's defaults.
   sendStream();
   sendSize(true);
-  send({ type: 'camera', ...poseFromOrbit(settings.cam, settings.up) });
+  const pose = currentPose();
+  sentFov = pose.fov_y_deg;
+  send({ type: 'camera', ...pose });
   for (const m of surfaces.messages()) send(m);
   const fx = effects.restoreChanges();
   if (fx) send({ type: 'effects', effects: fx });

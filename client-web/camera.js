@@ -35,12 +35,27 @@ export function orbitFromPose(pose, up) {
   return { yaw: Math.atan2(dot(off, a), dot(off, b)), pitch, distance, target: [...pose.target], fov: pose.fov_y_deg };
 }
 
-/** The camera message fields (`eye`, `target`, `up`, `fov_y_deg`) of an orbit. */
-export function poseFromOrbit(o, up) {
+/** Widest vertical field of view a portrait view is given, degrees. */
+const MAX_VIEW_FOV = 150;
+
+/**
+ * The vertical field of view, degrees, of a view `aspect` (width / height) wide for an orbit's
+ * `fov`: the orbit's own for a landscape or square view. A portrait view widens it so that its
+ * horizontal field of view is the orbit's: a phone held upright sees across what a square view
+ * sees, instead of a narrow slice of the scene.
+ */
+export function viewFov(fov, aspect) {
+  if (!(aspect > 0 && aspect < 1)) return fov;
+  const half = Math.atan(Math.tan((fov * Math.PI) / 360) / aspect);
+  return Math.min(MAX_VIEW_FOV, (half * 360) / Math.PI);
+}
+
+/** The camera message fields (`eye`, `target`, `up`, `fov_y_deg`) of an orbit seen by a view `aspect` wide. */
+export function poseFromOrbit(o, up, aspect = 1) {
   const { a, u, b } = basis(up);
   const cp = Math.cos(o.pitch);
   const dir = add(add(scale(a, cp * Math.sin(o.yaw)), scale(u, Math.sin(o.pitch))), scale(b, cp * Math.cos(o.yaw)));
-  return { eye: add(o.target, scale(dir, o.distance)), target: [...o.target], up: u, fov_y_deg: o.fov };
+  return { eye: add(o.target, scale(dir, o.distance)), target: [...o.target], up: u, fov_y_deg: viewFov(o.fov, aspect) };
 }
 
 function clampPitch(p) {
@@ -53,14 +68,14 @@ export function rotate(o, dYaw, dPitch) {
   o.pitch = clampPitch(o.pitch + dPitch);
 }
 
-/** Moves the target in the view plane by `dx`, `dy` (fractions of the view height). */
-export function pan(o, up, dx, dy) {
-  const pose = poseFromOrbit(o, up);
+/** Moves the target in the view plane by `dx`, `dy` (fractions of the height of a view `aspect` wide). */
+export function pan(o, up, dx, dy, aspect = 1) {
+  const pose = poseFromOrbit(o, up, aspect);
   const forward = normalize(pose.target.map((t, i) => t - pose.eye[i]));
   const right = normalize(cross(forward, pose.up));
   const screenUp = cross(right, forward);
   // One view height at the target's distance spans 2·d·tan(fov/2) world units.
-  const span = 2 * o.distance * Math.tan((o.fov * Math.PI) / 360);
+  const span = 2 * o.distance * Math.tan((pose.fov_y_deg * Math.PI) / 360);
   o.target = add(o.target, add(scale(right, -dx * span), scale(screenUp, dy * span)));
 }
 
@@ -74,7 +89,7 @@ export function zoom(o, factor) {
  * there is none), `getUp()` the up axis; `changed()` is called after every change and
  * `reset()` when the user asks for the default view.
  */
-export function attachControls(element, { getOrbit, getUp, changed, reset }) {
+export function attachControls(element, { getOrbit, getUp, getAspect = () => 1, changed, reset }) {
   const pointers = new Map(); // pointerId -> { x, y }
   let mode = null; // 'orbit' | 'pan' while one pointer is down
   let pinch = null; // { distance, x, y } while two are down
@@ -102,10 +117,10 @@ export function attachControls(element, { getOrbit, getUp, changed, reset }) {
     if (pointers.size >= 2 && pinch) {
       const now = twoFingers();
       if (now.distance > 0 && pinch.distance > 0) zoom(o, pinch.distance / now.distance);
-      pan(o, getUp(), (now.x - pinch.x) / h, (now.y - pinch.y) / h);
+      pan(o, getUp(), (now.x - pinch.x) / h, (now.y - pinch.y) / h, getAspect());
       pinch = now;
     } else if (mode === 'pan') {
-      pan(o, getUp(), dx / h, dy / h);
+      pan(o, getUp(), dx / h, dy / h, getAspect());
     } else {
       rotate(o, -dx * (Math.PI / h), dy * (Math.PI / h));
     }

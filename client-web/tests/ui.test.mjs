@@ -235,3 +235,48 @@ test('the scene picker says when a server of the deployment does not answer', as
     assert.equal(await page.isHidden('#shards-down'), true);
   });
 });
+
+test('a portrait view sees across what a square view sees, and turned to landscape the scene\'s own view', async () => {
+  await withPage('portrait', async ({ server, page }) => {
+    const sent = [];
+    let info = null;
+    page.on('websocket', (ws) => {
+      ws.on('framesent', ({ payload }) => { if (typeof payload === 'string') sent.push(JSON.parse(payload)); });
+      ws.on('framereceived', ({ payload }) => {
+        if (typeof payload === 'string' && payload.includes('"type":"info"')) info = JSON.parse(payload);
+      });
+    });
+    // Waits on the wire, not on a guess of how long the page takes.
+    const until = async (cond, what) => {
+      const end = Date.now() + 20000;
+      while (!cond()) {
+        assert.ok(Date.now() < end, `timed out waiting for ${what}: ${JSON.stringify(sent.slice(-4))}`);
+        await new Promise((r) => setTimeout(r, 25));
+      }
+    };
+    const last = (type) => sent.filter((m) => m.type === type).at(-1);
+    // The camera that goes with the size asked last: its vertical field of view keeps the
+    // scene's horizontal one, 2·atan(tan(fov/2) / aspect), in a portrait view.
+    const expected = () => {
+      const { width, height } = last('resize');
+      const fov = info.camera.fov_y_deg;
+      const aspect = width / height;
+      return aspect >= 1 ? fov : (360 / Math.PI) * Math.atan(Math.tan((fov * Math.PI) / 360) / aspect);
+    };
+    const matches = () => info && last('resize') && last('camera') && Math.abs(last('camera').fov_y_deg - expected()) < 1e-6;
+
+    await page.setViewportSize({ width: 390, height: 760 });
+    await page.goto(`${server.url}?scene=blobs&t=3`);
+    await waitForFrames(page, 1);
+    await until(() => matches() && last('resize').width < last('resize').height, 'a portrait camera');
+    const portrait = last('camera').fov_y_deg;
+    assert.ok(portrait > info.camera.fov_y_deg + 1, `portrait sees wider: ${portrait}° for the scene's ${info.camera.fov_y_deg}°`);
+    // The link keeps the scene's field of view, not the portrait one.
+    const cam = new URL(page.url()).searchParams.get('cam');
+    assert.ok(cam === null || Number(cam.split(',')[6]) === info.camera.fov_y_deg, `the link's camera: ${cam}`);
+
+    await page.setViewportSize({ width: 900, height: 560 });
+    await until(() => matches() && last('resize').width > last('resize').height, 'the landscape camera');
+    assert.equal(last('camera').fov_y_deg, info.camera.fov_y_deg);
+  });
+});

@@ -3,7 +3,7 @@ import { test } from 'node:test';
 import assert from 'node:assert/strict';
 
 globalThis.location = { pathname: '/', search: '' };
-const { basis, orbitFromPose, poseFromOrbit, pan, rotate, zoom } = await import('../camera.js');
+const { basis, orbitFromPose, poseFromOrbit, pan, rotate, zoom, viewFov } = await import('../camera.js');
 const { defaults, parseSettings, serializeSettings, UP_AXES } = await import('../settings.js');
 const { renderSize } = await import('../quality.js');
 
@@ -107,4 +107,19 @@ test('codec and target frame rate are kept in the URL and checked when read', ()
   assert.equal(parseSettings('?codec=<script>').codec, 'auto', 'a malformed codec name is ignored');
   assert.equal(parseSettings('?fps=0').fps, null, 'a frame rate under 1 is ignored');
   assert.equal(parseSettings('?fps=abc').fps, null);
+});
+
+test('a portrait view keeps the orbit\'s horizontal field of view; others keep its vertical one', () => {
+  const o = orbitFromPose({ eye: [0, 1, 6], target: [0, 0, 0], fov_y_deg: 45 }, '+Y');
+  for (const aspect of [1, 1.5, 3, 0, NaN]) assert.equal(poseFromOrbit(o, '+Y', aspect).fov_y_deg, 45, `aspect ${aspect}`);
+  for (const aspect of [0.9, 0.5, 0.25]) {
+    const fov = poseFromOrbit(o, '+Y', aspect).fov_y_deg;
+    // Horizontal half-angle of the portrait view: atan(aspect · tan(fov/2)) = 22.5°.
+    const across = (360 / Math.PI) * Math.atan(aspect * Math.tan((fov * Math.PI) / 360));
+    assert.ok(Math.abs(across - 45) < 1e-9, `aspect ${aspect}: ${fov}° sees ${across}° across`);
+  }
+  // A very tall view stops widening at 150°.
+  assert.equal(viewFov(45, 0.01), 150);
+  // The orbit itself is not changed: a link keeps the scene's field of view.
+  assert.equal(o.fov, 45);
 });
