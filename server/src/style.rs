@@ -62,33 +62,27 @@ impl Style {
                     let like = s
                         .scene_surface
                         .and_then(|i| scene.isosurfaces.get(usize::from(i)));
-                    match like {
-                        // The scene's surface's material, diffuse colour and opacity changed;
-                        // drawn in the kind's colours as that surface is.
+                    let (m, color) = match like {
+                        // That surface's material, drawn in the kind's colours times the
+                        // viewer's colour as the scene draws it (or in the viewer's colour
+                        // where the scene gave the surface a colour of its own).
                         Some(like) => {
                             let mut m = *scene.material(like.material);
-                            (m.diffuse, m.opacity) = match like.color {
-                                Some(_) => (m.diffuse, s.opacity),
-                                None => (s.color, s.opacity),
-                            };
-                            l.materials.push(m);
-                            Isosurface {
-                                isovalue: s.isovalue,
-                                material,
-                                color: like.color.map(|_| s.color),
+                            if like.color.is_none() {
+                                m.diffuse = s.color;
                             }
+                            (m, like.color.map(|_| s.color))
                         }
-                        None => {
-                            l.materials.push(Material {
-                                opacity: s.opacity,
-                                ..Material::default()
-                            });
-                            Isosurface {
-                                isovalue: s.isovalue,
-                                material,
-                                color: Some(s.color),
-                            }
-                        }
+                        None => (Material::default(), Some(s.color)),
+                    };
+                    l.materials.push(Material {
+                        opacity: s.opacity,
+                        ..m
+                    });
+                    Isosurface {
+                        isovalue: s.isovalue,
+                        material,
+                        color,
                     }
                 })
                 .collect();
