@@ -11,6 +11,13 @@ use std::time::Instant;
 /// Prepared states kept per demo scene: the live step plus a few pinned ones.
 pub const CACHED_STATES: usize = 4;
 
+/// Live requests this many seconds apart are a pause (nobody watched), not their spacing.
+const PAUSE_SECS: f64 = 1.0;
+
+/// A live view shows no state older than its clock by this many build periods (nor by
+/// [`PAUSE_SECS`], whichever is longer): one built before a pause is stale.
+const STALE_PERIODS: f64 = 4.0;
+
 /// The pool demo states are built on: apart from the render pool, so that a render thread
 /// waiting for a build never waits for work queued behind itself, and sized to every core,
 /// so a build (which forks on rayon) uses both cores while a frame renders.
@@ -181,9 +188,11 @@ impl DemoPipeline {
     pub fn live(&self, time: f64, seen: Option<f64>) -> PreparedState {
         let mut inner = self.lock();
         if let Some(previous) = inner.last_request {
-            // A viewer that paused does not stretch the estimate past a second.
-            let gap = (time - previous).min(1.0);
-            if gap > 0.0 {
+            // A gap over a second is a pause (no viewer for a while), not the spacing of
+            // requests: counted, it made the next states a quarter of a second apart and the
+            // first frames after it showed one state for as long.
+            let gap = time - previous;
+            if gap > 0.0 && gap <= PAUSE_SECS {
                 inner.spacing_secs = if inner.spacing_secs > 0.0 {
                     0.75 * inner.spacing_secs + 0.25 * gap
                 } else {
@@ -192,9 +201,13 @@ impl DemoPipeline {
             }
         }
         inner.last_request = Some(time);
+        // A state built before a pause is stale: a new viewer would see the animation jump
+        // back to it (by as long as the scene had no viewer), then forward.
+        let period = inner.spacing_secs.max(self.frame_interval_secs);
+        let oldest_shown = time - (STALE_PERIODS * period).max(PAUSE_SECS);
         let fresh = inner
             .newest_live()
-            .filter(|e| seen.is_none_or(|l| e.time > l))
+            .filter(|e| seen.is_none_or(|l| e.time > l) && e.time >= oldest_shown)
             .map(|e| e.time);
         let shown = match (fresh, inner.in_flight.clone()) {
             (Some(t), _) => inner.take(t, true).map(|s| (t, s)),
@@ -206,7 +219,7 @@ impl DemoPipeline {
             }
             (None, None) => {
                 let newest = inner.newest_live().map(|e| e.time);
-                match newest.filter(|&n| n >= time) {
+                match newest.filter(|&n| n >= time && n >= oldest_shown) {
                     // Nothing newer is due (another viewer took it): show it again.
                     Some(t) => inner.take(t, true).map(|s| (t, s)),
                     None => {
@@ -234,7 +247,6 @@ impl DemoPipeline {
         // too fast as there are frames per period (8.4 times with sixteen viewers of
         // `scattered-1k`). Two periods, not one, so that a lone viewer whose two requests fall
         // in one step of the clock still finds the next state built when its clock skips one.
-        let period = inner.spacing_secs.max(self.frame_interval_secs);
         if inner.in_flight.is_none() && shown_time - time < 1.99 * period {
             let next = time.max(shown_time) + period;
             let pending = self.start(next);
@@ -412,6 +424,34 @@ mod tests {
             .live(1.1, second.step_time)
             .step_time
             .is_some_and(|t| (t - 1.2).abs() < 1e-9));
+    }
+
+    #[test]
+    fn after_a_pause_a_viewer_sees_the_clocks_state_and_then_every_interval() {
+        let p = DemoPipeline::new(DemoScene::Tornado4k, Arc::new(Builder::new(2)), 0.1);
+        let mut seen = None;
+        for k in 0..4 {
+            seen = p.live(1.0 + 0.1 * f64::from(k), seen).step_time;
+            settle(&p);
+        }
+        // Nobody watches for 10 s; then a new viewer (and its frames one interval apart).
+        let mut seen = None;
+        let mut shown = Vec::new();
+        for k in 0..6 {
+            let clock = 11.3 + 0.1 * f64::from(k);
+            seen = p.live(clock, seen).step_time;
+            settle(&p);
+            shown.push(seen.map(|t| t - clock));
+        }
+        // Each frame shows a state within two intervals of its clock: none from before the
+        // pause (which the first frame showed), and no state shown for a quarter of a second
+        // (the pause counted as the requests' spacing made the next states 0.33 s apart).
+        for (k, lag) in shown.iter().enumerate() {
+            assert!(
+                lag.is_some_and(|d| d.abs() <= 0.2 + 1e-9),
+                "frame {k}: state minus clock {lag:?} (all: {shown:?})"
+            );
+        }
     }
 
     #[test]
