@@ -35,3 +35,16 @@ test('axe-core finds no violation with every panel open', async (t) => {
     assert.deepEqual(found, [], 'axe-core violations');
   });
 });
+
+test('axe-core finds no violation with a volume\'s controls greyed', async (t) => {
+  await withPage('axe-volume', async ({ server, page }) => {
+    await page.goto(`${server.url}?scene=clouds&t=2&scale=0.25`);
+    await settledPixels(page);
+    await page.locator('#volume-note').waitFor();
+    await page.addScriptTag({ path: axePath });
+    const result = await page.evaluate(() => window.axe.run(document, { resultTypes: ['violations'] }));
+    const found = result.violations.map((v) => `${v.id} (${v.impact}): ${v.help}\n  ${v.nodes.map((n) => n.target.join(' ')).join('\n  ')}`);
+    t.diagnostic(`axe-core ${result.testEngine.version}: ${result.passes.length} rules passed`);
+    assert.deepEqual(found, [], 'axe-core violations');
+  });
+});
