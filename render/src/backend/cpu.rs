@@ -334,6 +334,38 @@ mod tests {
     use crate::View;
     use std::sync::Arc;
 
+    #[test]
+    fn a_floor_is_drawn_with_every_effect_off() {
+        // A floor is scene geometry, not an effect: ray casting alone draws it too (the fast
+        // path of primary rays only has none, so a scene with a floor does not take it).
+        let backend = CpuBackend::new(2).expect("pool");
+        for demo in [DemoScene::Glass, DemoScene::SurfelBalls] {
+            let with = demo.state_at(1.0);
+            assert!(with.lighting.floor.is_some(), "{demo:?} has a floor");
+            let mut without = with.clone();
+            without.lighting.floor = None;
+            let view = View {
+                width: 64,
+                height: 48,
+                camera: demo.default_camera(),
+                isovalue: demo.default_isovalue(),
+            };
+            let render = |s: crate::scene::Scene| {
+                let (fb, _) = backend.render_effects(&Arc::new(s).prepare(), &view, &Effects::OFF);
+                fb
+            };
+            let (a, b) = (render(with), render(without));
+            // The bottom rows look down at the floor below the objects.
+            let rows = |fb: &Framebuffer| fb.depth[64 * 44..].to_vec();
+            let floor_hits = rows(&a).iter().filter(|d| d.is_finite()).count();
+            assert!(
+                floor_hits > rows(&b).iter().filter(|d| d.is_finite()).count() + 64,
+                "{demo:?}: {floor_hits} of the bottom rows' pixels hit something with the floor"
+            );
+            assert_ne!(a.rgb, b.rgb, "{demo:?}: the floor shows");
+        }
+    }
+
     /// No thread holds a run of tiles that another thread could trace: while the first tile
     /// is held up, the other worker traces every other tile. Rayon's default splitting left
     /// a quarter of the image (tiles 1 to 3 of 16 here) queued behind the first tile on its

@@ -37,6 +37,9 @@ pub struct EffectsPlan {
     pub clip_box: Option<ClipBox>,
     /// The scene's further isosurfaces are traced.
     pub isosurfaces: bool,
+    /// The lighting has a floor: scene geometry, drawn with or without effects (the ray-cast
+    /// fast path, [`EffectsPlan::is_primary_only`], has none).
+    pub floor: bool,
 }
 
 impl EffectsPlan {
@@ -52,6 +55,7 @@ impl EffectsPlan {
         volume: false,
         clip_box: None,
         isosurfaces: false,
+        floor: false,
     };
 
     /// The rays `effects` calls for on a scene lit and shaded by `lighting` whose geometry has
@@ -123,6 +127,7 @@ impl EffectsPlan {
             volume,
             clip_box,
             isosurfaces: isosurfaces && !volume && primitive_count > 0,
+            floor: lighting.floor.is_some(),
         }
     }
 
@@ -265,5 +270,17 @@ mod tests {
         assert!(plan.shadows && !plan.soft_shadows);
         assert!(!plan.is_stochastic());
         assert!(EffectsPlan::new(&lighting, 1, &Effects::OFF).is_primary_only());
+        // A floor is drawn with every effect off: not the fast path, which has none.
+        let floored = Lighting {
+            floor: Some(crate::shade::Floor {
+                height: -1.0,
+                material: 0,
+                colors: [Vec3::ONE, Vec3::ZERO],
+                checker: 1.0,
+            }),
+            ..lighting
+        };
+        let plan = EffectsPlan::new(&floored, 1, &Effects::OFF);
+        assert!(plan.floor && !plan.is_primary_only());
     }
 }
