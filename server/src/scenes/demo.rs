@@ -219,7 +219,7 @@ impl DemoPipeline {
             }
             (None, None) => {
                 let newest = inner.newest_live().map(|e| e.time);
-                match newest.filter(|&n| n >= time && n >= oldest_shown) {
+                match newest.filter(|&n| n >= time) {
                     // Nothing newer is due (another viewer took it): show it again.
                     Some(t) => inner.take(t, true).map(|s| (t, s)),
                     None => {
