@@ -212,6 +212,9 @@ const effects = new EffectsPanel(settings, {
   saved,
 });
 
+/** Headings of the panel's sections about the scalar field: the isosurfaces and the colour map. */
+const FIELD_SECTIONS = ['h-surfaces', 'h-colors'];
+
 // A scene whose field is drawn as a volume while transparency is on (`info.effects.volume`)
 // has no isosurface then: the isovalue, further isosurface and colour map controls change
 // nothing, so they are greyed and taken out of the tab order, with a note saying why.
@@ -219,7 +222,7 @@ function showVolume() {
   const fx = info?.effects;
   const volume = Boolean(fx?.volume) && Boolean(settings.fx.transparency ?? fx.settings.transparency);
   $('volume-note').hidden = !volume;
-  for (const id of ['h-surfaces', 'h-colors']) {
+  for (const id of FIELD_SECTIONS) {
     for (const el of $(id).closest('section').children) {
       if (el.tagName === 'H2' || el.id === 'volume-note') continue;
       el.inert = volume;
@@ -270,7 +273,7 @@ function onInfo(message) {
   if (!settings.cam) settings.cam = orbitFromPose(message.camera, settings.up);
   // A surfel surface is no isosurface: no isovalue, further isosurfaces or colour map.
   const field = message.scalar_field !== false;
-  for (const id of ['h-surfaces', 'h-colors']) $(id).closest('section').hidden = !field;
+  for (const id of FIELD_SECTIONS) $(id).closest('section').hidden = !field;
   if (!field) Object.assign(settings, { iso: null, surf: [], cmap: null });
   surfaces.setInfo(message);
   quality.setInfo(message);

@@ -97,8 +97,7 @@ export class EffectsPanel {
   /** Notes an effect another panel switched (a see-through isosurface turns transparency on). */
   noteSwitched(name, value) {
     if (!this.info) return;
-    if (value === this.info.settings[name]) delete this.settings.fx[name];
-    else this.settings.fx[name] = value;
+    this.#keep(name, value);
     const box = document.getElementById(`fx-${name}`);
     if (box && box.type === 'checkbox') box.checked = value;
   }
@@ -108,10 +107,14 @@ export class EffectsPanel {
   }
 
   #set(name, value) {
-    // Kept only when it differs from what the scene starts with, so URLs stay short.
-    if (value === this.info.settings[name]) delete this.settings.fx[name];
-    else this.settings.fx[name] = value;
+    this.#keep(name, value);
     this.changed({ [name]: value });
     this.saved();
+  }
+
+  /** Notes `name` in the settings only where it differs from the scene's start, so URLs stay short. */
+  #keep(name, value) {
+    if (value === this.info.settings[name]) delete this.settings.fx[name];
+    else this.settings.fx[name] = value;
   }
 }
