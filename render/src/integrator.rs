@@ -53,7 +53,9 @@ pub fn trace_primary(scene: &PreparedScene, ray: &Ray, isovalue: f32) -> (Vec3, 
     )
 }
 
-/// [`trace_primary`] once the hit is known (the backend finds a tile's hits together).
+/// [`trace_primary`] once the hit is known (the backend finds a tile's hits together). The
+/// floor, scene geometry like the field's surface, is drawn where it is nearer, as
+/// [`Tracer::primary`] draws it with every effect off.
 #[inline]
 pub fn shade_primary(
     scene: &PreparedScene,
@@ -62,6 +64,15 @@ pub fn shade_primary(
     isovalue: f32,
 ) -> (Vec3, f32) {
     let lighting = scene.lighting_in_frame();
+    if let Some(floor) = &lighting.floor {
+        // `Tracer::closest`'s test: past the ray's start, before the surface or `T_MAX`.
+        let t = (floor.height - ray.origin.y) / ray.dir.y;
+        if t > 0.0 && t < hit.map_or(T_MAX, |h| h.t) {
+            let position = ray.at(t);
+            let color = lighting.shade_floor(floor, position, ray.dir, scene.frame());
+            return (color, t);
+        }
+    }
     match hit {
         Some(hit) => match &lighting.color_map {
             None => (lighting.shade(hit, ray.dir), hit.t),

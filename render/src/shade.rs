@@ -366,11 +366,43 @@ impl Lighting {
     /// The ray-cast-only image is made of this.
     pub fn shade(&self, hit: &Hit, view_dir: Vec3) -> Vec3 {
         let material = self.material(self.material_of(hit.primitive));
-        let albedo = hit.albedo * material.diffuse;
-        let normal = facing(hit.normal, view_dir);
+        self.shade_lit(material, hit.albedo, hit.position, hit.normal, view_dir)
+    }
+
+    /// [`Lighting::shade`] of the floor at `position`, a point of `frame`.
+    pub fn shade_floor(
+        &self,
+        floor: &Floor,
+        position: Vec3,
+        view_dir: Vec3,
+        frame: &LocalFrame,
+    ) -> Vec3 {
+        let albedo = floor.color_at(position, frame);
+        self.shade_lit(
+            self.material(floor.material),
+            albedo,
+            position,
+            Vec3::Y,
+            view_dir,
+        )
+    }
+
+    /// A surface of `material` and `albedo` at `position` with outward `normal`, lit by every
+    /// light without shadows.
+    #[inline(always)]
+    fn shade_lit(
+        &self,
+        material: &Material,
+        albedo: Vec3,
+        position: Vec3,
+        normal: Vec3,
+        view_dir: Vec3,
+    ) -> Vec3 {
+        let albedo = albedo * material.diffuse;
+        let normal = facing(normal, view_dir);
         let mut color = material.emission + self.ambient * albedo;
         for light in &self.lights {
-            if let Some(l) = light.toward(hit.position) {
+            if let Some(l) = light.toward(position) {
                 color += direct(material, albedo, normal, view_dir, &l, 1.0);
             }
         }

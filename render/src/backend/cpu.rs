@@ -335,34 +335,50 @@ mod tests {
     use std::sync::Arc;
 
     #[test]
-    fn a_floor_is_drawn_with_every_effect_off() {
-        // A floor is scene geometry, not an effect: ray casting alone draws it too (the fast
-        // path of primary rays only has none, so a scene with a floor does not take it).
+    fn ray_casting_draws_the_floor_as_the_integrator_does() {
+        // A floor is scene geometry, not an effect: ray casting alone (the fast path of
+        // primary rays, which shades the floor itself) draws it, and gives the integrator's
+        // image: the same hits, depths and colours.
         let backend = CpuBackend::new(2).expect("pool");
-        for demo in [DemoScene::Glass, DemoScene::SurfelBalls] {
-            let with = demo.state_at(1.0);
-            assert!(with.lighting.floor.is_some(), "{demo:?} has a floor");
-            let mut without = with.clone();
-            without.lighting.floor = None;
+        for demo in [DemoScene::Glass, DemoScene::Clouds, DemoScene::SurfelBalls] {
+            let scene = Arc::new(demo.state_at(1.0)).prepare();
+            assert!(
+                scene.lighting_in_frame().floor.is_some(),
+                "{demo:?} has a floor"
+            );
             let view = View {
-                width: 64,
-                height: 48,
+                width: 96,
+                height: 72,
                 camera: demo.default_camera(),
                 isovalue: demo.default_isovalue(),
             };
-            let render = |s: crate::scene::Scene| {
-                let (fb, _) = backend.render_effects(&Arc::new(s).prepare(), &view, &Effects::OFF);
-                fb
-            };
-            let (a, b) = (render(with), render(without));
-            // The bottom rows look down at the floor below the objects.
-            let rows = |fb: &Framebuffer| fb.depth[64 * 44..].to_vec();
-            let floor_hits = rows(&a).iter().filter(|d| d.is_finite()).count();
+            assert!(accumulator::plan_for(&scene, &Effects::OFF).is_primary_only());
+            let fast = backend.render_effects(&scene, &view, &Effects::OFF).0;
+            let pass = backend.trace_pass(&scene, &view, &EffectsPlan::PRIMARY_ONLY, 0);
+            let mut rgb = vec![0; fast.rgb.len()];
+            backend.encode_srgb(&pass.color, &mut rgb);
+            let floor = scene.lighting_in_frame().floor.expect("floor");
+            let rays = scene.primary_rays(&view.camera, view.width, view.height);
+            let mut floor_pixels = 0;
+            for (i, (a, b)) in fast.depth.iter().zip(&pass.depth).enumerate() {
+                let (x, y) = (i as u32 % view.width, i as u32 / view.width);
+                assert_eq!(
+                    a.is_finite(),
+                    b.is_finite(),
+                    "{demo:?} pixel ({x}, {y}): hit or miss"
+                );
+                if a.is_finite() {
+                    assert_eq!(a, b, "{demo:?} ({x}, {y}): depth");
+                    let ray = rays.through_pixel(x, y);
+                    let at = ray.origin + ray.dir * (a / ray.dir.dot(rays.forward()));
+                    floor_pixels += usize::from((at.y - floor.height).abs() < 1e-3);
+                }
+            }
             assert!(
-                floor_hits > rows(&b).iter().filter(|d| d.is_finite()).count() + 64,
-                "{demo:?}: {floor_hits} of the bottom rows' pixels hit something with the floor"
+                floor_pixels > 500,
+                "{demo:?}: {floor_pixels} pixels on the floor"
             );
-            assert_ne!(a.rgb, b.rgb, "{demo:?}: the floor shows");
+            assert!(fast.rgb == rgb, "{demo:?}: the colours differ");
         }
     }
 

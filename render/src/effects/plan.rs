@@ -37,9 +37,6 @@ pub struct EffectsPlan {
     pub clip_box: Option<ClipBox>,
     /// The scene's further isosurfaces are traced.
     pub isosurfaces: bool,
-    /// The lighting has a floor: scene geometry, drawn with or without effects (the ray-cast
-    /// fast path, [`EffectsPlan::is_primary_only`], has none).
-    pub floor: bool,
 }
 
 impl EffectsPlan {
@@ -55,7 +52,6 @@ impl EffectsPlan {
         volume: false,
         clip_box: None,
         isosurfaces: false,
-        floor: false,
     };
 
     /// The rays `effects` calls for on a scene lit and shaded by `lighting` whose geometry has
@@ -127,7 +123,6 @@ impl EffectsPlan {
             volume,
             clip_box,
             isosurfaces: isosurfaces && !volume && primitive_count > 0,
-            floor: lighting.floor.is_some(),
         }
     }
 
@@ -270,7 +265,7 @@ mod tests {
         assert!(plan.shadows && !plan.soft_shadows);
         assert!(!plan.is_stochastic());
         assert!(EffectsPlan::new(&lighting, 1, &Effects::OFF).is_primary_only());
-        // A floor is drawn with every effect off: not the fast path, which has none.
+        // A floor is scene geometry, not an effect: ray casting alone draws it (the fast path).
         let floored = Lighting {
             floor: Some(crate::shade::Floor {
                 height: -1.0,
@@ -281,6 +276,6 @@ mod tests {
             ..lighting
         };
         let plan = EffectsPlan::new(&floored, 1, &Effects::OFF);
-        assert!(plan.floor && !plan.is_primary_only());
+        assert!(plan.is_primary_only());
     }
 }

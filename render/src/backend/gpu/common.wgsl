@@ -316,16 +316,25 @@ fn refract_dir(dir: vec3<f32>, normal: vec3<f32>, eta: f32) -> vec4<f32> {
 
 // shade.rs Lighting::shade: every light, no shadows (ray casting).
 fn shade_cast(h: KHit, view: vec3<f32>) -> vec3<f32> {
-    let m = material(material_of(h.primitive));
     var albedo = h.albedo;
     if (has(FLAG_COLOR_MAP)) {
         albedo = frame.mapped_albedo.xyz;
     }
-    albedo = albedo * m.diffuse.xyz;
-    let normal = facing(h.normal, view);
+    return shade_lit(material(material_of(h.primitive)), albedo, h.position, h.normal, view);
+}
+
+// Lighting::shade_floor at p.
+fn shade_floor_cast(p: vec3<f32>, view: vec3<f32>) -> vec3<f32> {
+    return shade_lit(material(frame.floor_material), floor_albedo(p), p, vec3<f32>(0.0, 1.0, 0.0), view);
+}
+
+// Lighting::shade_lit: every light without shadows.
+fn shade_lit(m: Material, surface_albedo: vec3<f32>, p: vec3<f32>, n: vec3<f32>, view: vec3<f32>) -> vec3<f32> {
+    let albedo = surface_albedo * m.diffuse.xyz;
+    let normal = facing(n, view);
     var color = m.emission.xyz + frame.ambient.xyz * albedo;
     for (var k = 0u; k < frame.light_count; k = k + 1u) {
-        let l = toward(lights[k], h.position);
+        let l = toward(lights[k], p);
         if (l.ok) {
             color = color + direct(m, albedo, normal, view, l, 1.0);
         }
@@ -758,7 +767,19 @@ fn trace(@builtin(global_invocation_id) id: vec3<u32>) {
         }
     } else {
         let h = kind_first_hit(o, d, 0.0, frame.t_max, frame.isovalue);
+        var limit = frame.t_max;
         if (h.found) {
+            limit = h.t;
+        }
+        // shade_primary: the floor where it is nearer than the surface.
+        var ft = BIG;
+        if (has(FLAG_FLOOR)) {
+            ft = floor_t(o, d);
+        }
+        if (ft > 0.0 && ft < limit) {
+            color = shade_floor_cast(o + ft * d, d);
+            t = ft * dot(d, frame.forward.xyz);
+        } else if (h.found) {
             color = shade_cast(h, d);
             t = h.t * dot(d, frame.forward.xyz);
         } else {

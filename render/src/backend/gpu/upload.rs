@@ -167,9 +167,6 @@ pub fn frame(
         if plan.soft_shadows {
             bits |= flags::SOFT_SHADOWS;
         }
-        if lighting.floor.is_some() {
-            bits |= flags::FLOOR;
-        }
         if plan.isosurfaces {
             bits |= flags::ISOSURFACES;
         }
@@ -187,6 +184,10 @@ pub fn frame(
         effects.layers = plan.layers;
         effects.ao_samples = plan.ao_samples;
         effects.light_samples = plan.light_samples;
+    }
+    // Scene geometry, drawn by ray casting too.
+    if lighting.floor.is_some() {
+        bits |= flags::FLOOR;
     }
     let mapped = match &lighting.color_map {
         Some(map) => {
