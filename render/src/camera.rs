@@ -63,6 +63,12 @@ pub struct PrimaryRays {
 }
 
 impl PrimaryRays {
+    /// The angle (radians, at the image's centre) between neighbouring pixels' rays: a
+    /// pixel's footprint at distance `t` is about `t` times this wide.
+    pub fn pixel_spread(&self) -> f32 {
+        self.right_step.length()
+    }
+
     /// The ray through the centre of pixel (`x`, `y`), with `y` counted from the top.
     pub fn through_pixel(&self, x: u32, y: u32) -> Ray {
         let dir =

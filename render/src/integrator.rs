@@ -42,14 +42,16 @@ use glam::Vec3;
 pub const T_MAX: f32 = 1.0e4;
 
 /// Shaded linear colour and hit distance (`INFINITY` on a miss) of one primary ray, by ray
-/// casting alone.
+/// casting alone; `spread`: the angle between neighbouring pixels' rays
+/// ([`crate::camera::PrimaryRays::pixel_spread`]).
 #[inline]
-pub fn trace_primary(scene: &PreparedScene, ray: &Ray, isovalue: f32) -> (Vec3, f32) {
+pub fn trace_primary(scene: &PreparedScene, ray: &Ray, isovalue: f32, spread: f32) -> (Vec3, f32) {
     shade_primary(
         scene,
         ray,
         scene.first_hit(ray, 0.0, T_MAX, isovalue).as_ref(),
         isovalue,
+        spread,
     )
 }
 
@@ -62,6 +64,7 @@ pub fn shade_primary(
     ray: &Ray,
     hit: Option<&Hit>,
     isovalue: f32,
+    spread: f32,
 ) -> (Vec3, f32) {
     let lighting = scene.lighting_in_frame();
     if let Some(floor) = &lighting.floor {
@@ -69,7 +72,8 @@ pub fn shade_primary(
         let t = (floor.height - ray.origin.y) / ray.dir.y;
         if t > 0.0 && t < hit.map_or(T_MAX, |h| h.t) {
             let position = ray.at(t);
-            let color = lighting.shade_floor(floor, position, ray.dir, scene.frame());
+            let seen = (ray.dir, t, spread);
+            let color = lighting.shade_floor(floor, position, seen, scene.frame());
             return (color, t);
         }
     }
@@ -105,6 +109,9 @@ pub struct Tracer<'a> {
     lighting: &'a Lighting,
     plan: &'a EffectsPlan,
     isovalue: f32,
+    /// The angle between neighbouring pixels' camera rays: the floor's squares are averaged
+    /// over a footprint this many radians wide per unit of a ray's length.
+    pixel_spread: f32,
     /// Rays traced so far, per kind.
     pub counts: RayCounts,
     /// Traversal and root-finder counters of every query.
@@ -128,9 +135,15 @@ pub struct Tracer<'a> {
 }
 
 impl<'a> Tracer<'a> {
-    pub fn new(scene: &'a PreparedScene, plan: &'a EffectsPlan, isovalue: f32) -> Tracer<'a> {
+    pub fn new(
+        scene: &'a PreparedScene,
+        plan: &'a EffectsPlan,
+        isovalue: f32,
+        pixel_spread: f32,
+    ) -> Tracer<'a> {
         Tracer {
             scene,
+            pixel_spread,
             lighting: scene.lighting_in_frame(),
             plan,
             isovalue,
@@ -383,7 +396,13 @@ impl<'a> Tracer<'a> {
                     t,
                     position,
                     normal: Vec3::Y,
-                    albedo: floor.color_at(position, self.scene.frame()),
+                    albedo: floor.color_seen(
+                        position,
+                        ray.dir,
+                        t,
+                        self.pixel_spread,
+                        self.scene.frame(),
+                    ),
                     material: floor.material,
                 });
             }

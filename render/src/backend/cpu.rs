@@ -175,6 +175,7 @@ fn render_tiles(scene: &PreparedScene, view: &View) -> Framebuffer {
     let (width, height) = (view.width, view.height);
     let rays = scene.primary_rays(&view.camera, width, height);
     let forward = rays.forward();
+    let spread = rays.pixel_spread();
     let mut fb = Framebuffer::new(width, height);
     let trace = |rect: Rect| {
         let (x0, y0, x1, y1) = rect;
@@ -184,7 +185,7 @@ fn render_tiles(scene: &PreparedScene, view: &View) -> Framebuffer {
         // Ray casting reports no counters (the frame's rays are its pixels).
         let mut counters = SceneCounters::default();
         for (ray, hit) in scene.primary_hits(&rays, rect, view.isovalue, T_MAX, &mut counters) {
-            let (color, t) = shade_primary(scene, &ray, hit.as_ref(), view.isovalue);
+            let (color, t) = shade_primary(scene, &ray, hit.as_ref(), view.isovalue, spread);
             rgb.extend(crate::srgb::encode8_rgb(color.to_array()));
             depth.push(t * ray.dir.dot(forward));
         }
@@ -264,6 +265,7 @@ fn trace_pass(
     let (width, height) = (view.width, view.height);
     let rays = scene.primary_rays(&view.camera, width, height);
     let forward = rays.forward();
+    let spread = rays.pixel_spread();
     let n = width as usize * height as usize;
     let mut out = Pass {
         color: vec![Vec3::ZERO; n],
@@ -274,7 +276,7 @@ fn trace_pass(
         let n = ((x1 - x0) * (y1 - y0)) as usize;
         let mut color = Vec::with_capacity(n);
         let mut depth = Vec::with_capacity(n);
-        let mut tracer = Tracer::new(scene, plan, view.isovalue);
+        let mut tracer = Tracer::new(scene, plan, view.isovalue, spread);
         if tile_hits && tracer.takes_tile_hits() {
             // The tile's camera rays' first hits together (a packet where the kind has one),
             // then each pixel's integrator from its hit: the image of `trace_pixel`.
@@ -477,7 +479,7 @@ mod tests {
             };
             for effects in [shadows, more] {
                 let plan = accumulator::plan_for(&scene, &effects);
-                let tracer = Tracer::new(&scene, &plan, view.isovalue);
+                let tracer = Tracer::new(&scene, &plan, view.isovalue, 0.0);
                 tiles_used += tracer.takes_tile_hits() as usize;
                 batched += tracer.batches_shadows() as usize;
                 let tiles = trace_pass(&scene, &view, &plan, 0, true);

@@ -324,8 +324,8 @@ fn shade_cast(h: KHit, view: vec3<f32>) -> vec3<f32> {
 }
 
 // Lighting::shade_floor at p.
-fn shade_floor_cast(p: vec3<f32>, view: vec3<f32>) -> vec3<f32> {
-    return shade_lit(material(frame.floor_material), floor_albedo(p), p, vec3<f32>(0.0, 1.0, 0.0), view);
+fn shade_floor_cast(p: vec3<f32>, view: vec3<f32>, t: f32) -> vec3<f32> {
+    return shade_lit(material(frame.floor_material), floor_albedo(p, view, t), p, vec3<f32>(0.0, 1.0, 0.0), view);
 }
 
 // Lighting::shade_lit: every light without shadows.
@@ -441,18 +441,44 @@ fn floor_t(o: vec3<f32>, d: vec3<f32>) -> f32 {
     return (frame.floor_height - o.y) / d.y;
 }
 
-// shade.rs Floor::color_at, the checker counted in world coordinates.
-fn floor_albedo(p: vec3<f32>) -> vec3<f32> {
+// shade.rs Floor::color_seen: the checker, counted in world coordinates, averaged over the
+// footprint of a pixel's ray along unit d met t from its origin.
+fn floor_albedo(p: vec3<f32>, d: vec3<f32>, t: f32) -> vec3<f32> {
     if (!(frame.floor_checker > 0.0)) {
         return frame.floor_color0.xyz;
     }
-    let w = p + frame.floor_origin.xyz;
-    let ix = i32(floor(w.x / frame.floor_checker));
-    let iz = i32(floor(w.z / frame.floor_checker));
-    if (((ix + iz) & 1) != 0) {
-        return frame.floor_color1.xyz;
+    let w = (p + frame.floor_origin.xyz) / frame.floor_checker;
+    let spread = length(frame.right_step.xyz);
+    let foot = floor_footprint(d, t * spread) / frame.floor_checker;
+    let s = square_wave_mean(w.x, foot.x) * square_wave_mean(w.z, foot.y);
+    let even = 0.5 + 0.5 * s;
+    return frame.floor_color0.xyz * even + frame.floor_color1.xyz * (1.0 - even);
+}
+
+// shade.rs footprint.
+fn floor_footprint(d: vec3<f32>, width: f32) -> vec2<f32> {
+    let flat = d.x * d.x + d.z * d.z;
+    if (!(width > 0.0) || flat < 1.0e-12) {
+        let w = max(width, 0.0);
+        return vec2<f32>(w, w);
     }
-    return frame.floor_color0.xyz;
+    let stretch = 1.0 / max(d.y * d.y, 1.0e-6);
+    let hx = d.x * d.x / flat;
+    let hz = d.z * d.z / flat;
+    return width * vec2<f32>(sqrt(hx * stretch + hz), sqrt(hz * stretch + hx));
+}
+
+// shade.rs square_wave_mean.
+fn square_wave_mean(u: f32, w: f32) -> f32 {
+    if (w < 1.0e-4) {
+        if (fract(floor(u) * 0.5) == 0.0) {
+            return 1.0;
+        }
+        return -1.0;
+    }
+    let a = 1.0 - abs(fract((u + 0.5 * w) * 0.5) * 2.0 - 1.0);
+    let b = 1.0 - abs(fract((u - 0.5 * w) * 0.5) * 2.0 - 1.0);
+    return clamp((a - b) / w, -1.0, 1.0);
 }
 
 // Tracer::closest: the nearest surface on [t0, t1], every drawn isosurface and the floor.
@@ -495,7 +521,7 @@ fn closest(o: vec3<f32>, d: vec3<f32>, t0: f32, t1: f32) -> SurfaceHit {
         let t = floor_t(o, d);
         if (t > t0 && t < limit) {
             let p = o + t * d;
-            best = SurfaceHit(true, t, p, vec3<f32>(0.0, 1.0, 0.0), floor_albedo(p), frame.floor_material);
+            best = SurfaceHit(true, t, p, vec3<f32>(0.0, 1.0, 0.0), floor_albedo(p, d, t), frame.floor_material);
         }
     }
     return best;
@@ -777,7 +803,7 @@ fn trace(@builtin(global_invocation_id) id: vec3<u32>) {
             ft = floor_t(o, d);
         }
         if (ft > 0.0 && ft < limit) {
-            color = shade_floor_cast(o + ft * d, d);
+            color = shade_floor_cast(o + ft * d, d, ft);
             t = ft * dot(d, frame.forward.xyz);
         } else if (h.found) {
             color = shade_cast(h, d);

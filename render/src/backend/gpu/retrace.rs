@@ -34,7 +34,7 @@ pub fn retrace_cut(
 ) -> usize {
     let rays = scene.primary_rays(&view.camera, view.width, view.height);
     let forward = rays.forward();
-    let mut tracer = Tracer::new(scene, plan, view.isovalue);
+    let mut tracer = Tracer::new(scene, plan, view.isovalue, rays.pixel_spread());
     let mut cut = 0;
     for (i, p) in pixels.iter_mut().enumerate() {
         if p[3] != CUT_DEPTH {

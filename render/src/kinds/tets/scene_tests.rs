@@ -492,7 +492,12 @@ fn the_server_path_traces_tiles_as_packets_with_the_same_image() {
     let rays = view.camera.rays(view.width, view.height);
     for y in 0..view.height {
         for x in 0..view.width {
-            let (c, _) = trace_primary(&scene, &rays.through_pixel(x, y), view.isovalue);
+            let (c, _) = trace_primary(
+                &scene,
+                &rays.through_pixel(x, y),
+                view.isovalue,
+                rays.pixel_spread(),
+            );
             let i = ((y * view.width + x) * 3) as usize;
             assert_eq!(
                 fb.rgb[i..i + 3],
