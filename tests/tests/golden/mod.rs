@@ -215,6 +215,7 @@ fn base(kind: Kind) -> (Lighting, RefScene) {
         floor_colors: floor_colors.map(d),
         checker: 0.75,
         floor_material: RefMaterial::default(),
+        pixel_spread: 2.0 * (camera().fov_y_deg as f64 * 0.5).to_radians().tan() / HEIGHT as f64,
         lights: Vec::new(),
         ambient: DVec3::splat(0.1),
         background: [d(lighting.background_bottom), d(lighting.background_top)],

@@ -5,9 +5,11 @@
 //! horizontal squares. Every ray–sphere and ray–plane intersection is solved
 //! in closed form; soft shadows and ambient occlusion are integrated by a deterministic
 //! stratified quadrature over the light's cap and the hemisphere; a volume's optical depth by
-//! composite Simpson over the field. Nothing here calls the engine's tracer: the only thing
-//! shared with it is the shading model it is checked against (Lambert + Blinn-Phong in linear
-//! light, mirror reflection, Fresnel, opacity, `e^{-τ}`), written again from its definition.
+//! composite Simpson over the field; the floor's checker, averaged over each ray's footprint
+//! (the engine's closed-form box filter), by a 64×64 midpoint quadrature over the same box.
+//! Nothing here calls the engine's tracer: the only thing shared with it is the shading model
+//! it is checked against (Lambert + Blinn-Phong in linear light, mirror reflection, Fresnel,
+//! opacity, `e^{-τ}`, the footprint's size), written again from its definition.
 
 use glam::DVec3;
 
@@ -76,6 +78,9 @@ pub struct RefScene {
     pub floor_colors: [DVec3; 2],
     pub checker: f64,
     pub floor_material: RefMaterial,
+    /// The angle between neighbouring pixels' camera rays (`2·tan(fov/2)/height`): a ray's
+    /// footprint on the floor is this times its length wide across it.
+    pub pixel_spread: f64,
     pub lights: Vec<RefLight>,
     pub ambient: DVec3,
     pub background: [DVec3; 2],
@@ -209,22 +214,46 @@ impl RefScene {
         let t = (self.floor_height - o.y) / d.y;
         if t > t0 + EPS && t < limit {
             let p = o + t * d;
-            let square = if self.checker > 0.0 {
-                let ix = (p.x / self.checker).floor() as i64;
-                let iz = (p.z / self.checker).floor() as i64;
-                ((ix + iz) & 1) as usize
-            } else {
-                0
-            };
             best = Some(Hit {
                 t,
                 p,
                 n: DVec3::Y,
-                albedo: self.floor_colors[square],
+                albedo: self.floor_albedo(p, d, t),
                 material: self.floor_material,
             });
         }
         best
+    }
+
+    /// The checker's mean colour over the footprint of a ray along unit `d` that meets the
+    /// floor at `p`, `t` from its origin: across the ray `pixel_spread · t` wide, along its
+    /// heading that divided by `|d.y|`; the mean over the axis-aligned box bounding that
+    /// ellipse, by the midpoint rule on 64×64 points.
+    fn floor_albedo(&self, p: DVec3, d: DVec3, t: f64) -> DVec3 {
+        let square = |x: f64, z: f64| {
+            let ix = (x / self.checker).floor() as i64;
+            let iz = (z / self.checker).floor() as i64;
+            self.floor_colors[((ix + iz) & 1) as usize]
+        };
+        if !(self.checker > 0.0) {
+            return self.floor_colors[0];
+        }
+        let across = self.pixel_spread * t;
+        let along = across / d.y.abs().max(1e-3);
+        let heading = DVec3::new(d.x, 0.0, d.z).normalize_or_zero();
+        // Half-widths of the box bounding the ellipse with these axes.
+        let half = |h: f64, o: f64| 0.5 * ((along * h).powi(2) + (across * o).powi(2)).sqrt();
+        let (hx, hz) = (half(heading.x, heading.z), half(heading.z, heading.x));
+        const N: usize = 64;
+        let mut sum = DVec3::ZERO;
+        for i in 0..N {
+            for k in 0..N {
+                let fx = (i as f64 + 0.5) / N as f64 * 2.0 - 1.0;
+                let fz = (k as f64 + 0.5) / N as f64 * 2.0 - 1.0;
+                sum += square(p.x + fx * hx, p.z + fz * hz);
+            }
+        }
+        sum / (N * N) as f64
     }
 
     /// `∫ F dt` over `(t0, t1)` outside the clip box, by composite Simpson.
