@@ -235,7 +235,7 @@ impl RefScene {
             let iz = (z / self.checker).floor() as i64;
             self.floor_colors[((ix + iz) & 1) as usize]
         };
-        if !(self.checker > 0.0) {
+        if self.checker <= 0.0 {
             return self.floor_colors[0];
         }
         let across = self.pixel_spread * t;
