@@ -24,6 +24,24 @@ impl Camera {
         }
     }
 
+    /// The camera turned so that an image `height` pixels high moves by `(dx, dy)` pixels
+    /// (right and down) at its centre: a sub-pixel offset for antialiasing passes (a turn, not
+    /// a shift of the image plane, so pixels far from the centre move by up to
+    /// `1/cos²(fov/2)` times as much, 1.17 at 45°: the samples stay within their pixels'
+    /// neighbourhood, which is all an average over them needs).
+    pub fn jittered(&self, (dx, dy): (f32, f32), height: u32) -> Camera {
+        let offset = self.target - self.eye;
+        let forward = offset.normalize();
+        let right = forward.cross(self.up).normalize();
+        let up = right.cross(forward);
+        let pixel = 2.0 * (self.fov_y_deg.to_radians() * 0.5).tan() / height.max(1) as f32;
+        let turned = forward + (right * dx - up * dy) * pixel;
+        Camera {
+            target: self.eye + turned.normalize() * offset.length(),
+            ..*self
+        }
+    }
+
     /// Precomputes what every primary ray needs for an image of `width` × `height`.
     pub fn rays(&self, width: u32, height: u32) -> PrimaryRays {
         let forward = (self.target - self.eye).normalize();

@@ -148,6 +148,12 @@ pub struct Config {
     #[arg(long, env = "ISORAY_MAX_REFINE_PASSES", default_value_t = 64)]
     pub max_refine_passes: u32,
 
+    /// Sub-pixel positions a resting view averages (antialiasing: edges and fine detail
+    /// smooth out over its first still frames); 0 or 1: pixel centres only. At most
+    /// `--max-refine-passes` of them are traced.
+    #[arg(long, env = "ISORAY_ANTIALIAS_PASSES", default_value_t = 8)]
+    pub antialias_passes: u32,
+
     /// This server's name among several behind a load balancer (a DNS label such as a
     /// Kubernetes pod name). New scene ids start with it (`NAME_<hex>`), so the balancer sends
     /// every request for a scene to the server that stores it (see deploy/). Unset: one server.
@@ -329,6 +335,9 @@ impl Config {
         }
         if !(1..=4096).contains(&self.max_refine_passes) {
             return Err("--max-refine-passes must be in 1..=4096".into());
+        }
+        if self.antialias_passes > 4096 {
+            return Err("--antialias-passes must be in 0..=4096".into());
         }
         if let Some(shard) = &self.shard {
             crate::placement::validate_shard(shard)?;

@@ -2,7 +2,8 @@
 //!
 //! While the view and the scene time stay the same, each still frame the session asks for is
 //! one more pass accumulated by the engine ([`isoray_render::Accumulator`]): soft shadows and
-//! ambient occlusion get more samples per pixel with every frame. Once the engine says the
+//! ambient occlusion get more samples per pixel with every frame, and the first
+//! `--antialias-passes` see the view from sub-pixel offsets (antialiasing). Once the engine says the
 //! accumulation converged, [`Refinement::converged`] tells the session to stop rendering until
 //! something changes; any change (a new settings version, time or size) starts over.
 //!
@@ -22,10 +23,13 @@ pub struct Refinement {
 }
 
 impl Refinement {
-    /// Refinement that stops after at most `max_passes` passes.
-    pub fn new(max_passes: u32) -> Refinement {
+    /// Refinement that stops after at most `max_passes` passes, averaging `antialias`
+    /// sub-pixel positions ([`Accumulator::antialias`]).
+    pub fn new(max_passes: u32, antialias: u32) -> Refinement {
+        let mut accumulator = Accumulator::new(max_passes);
+        accumulator.antialias = antialias;
         Refinement {
-            state: Mutex::new((None, Accumulator::new(max_passes))),
+            state: Mutex::new((None, accumulator)),
         }
     }
 

@@ -125,7 +125,8 @@ pub fn refine(
     accumulator.last_device = DeviceTimes::default();
     if !accumulator.converged {
         let plan = plan_for(scene, effects);
-        if plan.is_primary_only() {
+        let antialiased = accumulator.antialias > 1;
+        if plan.is_primary_only() && !antialiased {
             // Ray casting has nothing to refine: one frame by the fast path is final.
             let (fb, device) = backend.render_primary(scene, view);
             accumulator.last_device = device;
@@ -137,20 +138,57 @@ pub fn refine(
             return fb;
         }
         let pass_index = accumulator.passes;
-        let pass = backend.trace_pass(scene, view, &plan, pass_index);
+        // Antialiasing: every pass after the first sees the view from a sub-pixel offset.
+        let jittered = View {
+            camera: view
+                .camera
+                .jittered(subpixel_offset(pass_index), view.height),
+            ..*view
+        };
+        let traced = if antialiased && pass_index > 0 {
+            &jittered
+        } else {
+            view
+        };
+        let pass = backend.trace_pass(scene, traced, &plan, pass_index);
         accumulator.last_device = pass.rays.device;
         accumulator.add(pass, plan.is_stochastic());
     }
     accumulator.image()
 }
 
+/// The offset in pixels, each coordinate in `[-0.5, 0.5)`, from which antialiasing pass
+/// `pass` sees the view: the pixel's centre for pass 0, then the 2-D Halton sequence (bases 2
+/// and 3), which covers the pixel evenly at every count.
+pub fn subpixel_offset(pass: u32) -> (f32, f32) {
+    if pass == 0 {
+        return (0.0, 0.0);
+    }
+    let radical_inverse = |mut n: u32, base: u32| {
+        let (mut value, mut scale) = (0.0f32, 1.0f32);
+        while n > 0 {
+            scale /= base as f32;
+            value += (n % base) as f32 * scale;
+            n /= base;
+        }
+        value
+    };
+    (
+        radical_inverse(pass, 2) - 0.5,
+        radical_inverse(pass, 3) - 0.5,
+    )
+}
+
 /// Progressive refinement of one still view: the sum of every pass so far, per pixel.
 ///
 /// Each pass draws new samples for soft shadows and occlusion (the per-pixel streams are
-/// seeded by the pass number), and the image shown is the mean. The refinement converges when
-/// the mean changes by less than [`Accumulator::threshold`] per pixel and channel on average
-/// from one pass to the next, or after [`Accumulator::max_passes`]; a plan with nothing
-/// random converges after its first pass.
+/// seeded by the pass number), and, with [`Accumulator::antialias`], sees the view from a new
+/// sub-pixel offset, so that edges and fine detail average over the pixel's area; the image
+/// shown is the mean (its depths are the first pass's, at the pixels' centres). The
+/// refinement converges when the mean changes by less than [`Accumulator::threshold`] per
+/// pixel and channel on average from one pass to the next and the antialiasing positions are
+/// done, or after [`Accumulator::max_passes`]; without antialiasing a plan with nothing random
+/// converges after its first pass.
 #[derive(Clone, Debug)]
 pub struct Accumulator {
     width: u32,
@@ -169,6 +207,10 @@ pub struct Accumulator {
     /// Convergence: mean per-channel change of the linear mean below this.
     pub threshold: f32,
     pub max_passes: u32,
+    /// Sub-pixel positions ([`subpixel_offset`]) a still view averages before it may
+    /// converge (0 or 1: the pixels' centres only, and a plan with nothing random is final
+    /// after one pass).
+    pub antialias: u32,
 }
 
 impl Default for Accumulator {
@@ -196,6 +238,7 @@ impl Accumulator {
             last_device: DeviceTimes::default(),
             threshold: DEFAULT_THRESHOLD,
             max_passes: max_passes.max(1),
+            antialias: 0,
         }
     }
 
@@ -245,9 +288,9 @@ impl Accumulator {
             self.last_delta = (change / (3.0 * self.sum.len().max(1) as f64)) as f32;
         }
         self.passes += 1;
-        self.converged = !stochastic
-            || self.passes >= self.max_passes
-            || (self.passes >= 2 && self.last_delta < self.threshold);
+        let settled = !stochastic || (self.passes >= 2 && self.last_delta < self.threshold);
+        self.converged =
+            self.passes >= self.max_passes || (self.passes >= self.antialias && settled);
     }
 
     /// The mean of the passes so far, as an sRGB frame.

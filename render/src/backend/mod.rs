@@ -12,3 +12,5 @@ pub use accumulator::{
 };
 pub use cpu::{CpuBackend, PoolError};
 pub use dispatch::Backend;
+#[cfg(test)]
+mod antialias_tests;

@@ -261,7 +261,10 @@ pub async fn render_loop(
     let mut sequence = 0u64;
     let mut seen: Option<f64> = None;
     // Effects hook: a still view keeps refining (one pass per still frame) until converged.
-    let refinement = Arc::new(Refinement::new(config.max_refine_passes));
+    let refinement = Arc::new(Refinement::new(
+        config.max_refine_passes,
+        config.antialias_passes,
+    ));
     loop {
         // Flow control: one frame in the slot at most, and a window of unacknowledged ones.
         let acked = stats.last_acked_sequence.load(Ordering::SeqCst);

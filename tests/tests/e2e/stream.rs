@@ -116,10 +116,10 @@ pub async fn reqwest_like_get(addr: std::net::SocketAddr, path: &str) -> String 
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn still_view_gets_one_lossless_frame_then_silence() {
+async fn still_view_gets_its_antialiased_lossless_frames_then_silence() {
     use isoray_protocol::{Codec, FLAG_STILL};
     use isoray_render::scenes::DemoScene;
-    use isoray_render::{Camera, CpuBackend, View};
+    use isoray_render::{Accumulator, Camera, CpuBackend, Effects, View};
     use std::sync::Arc;
 
     let server = TestServer::start(&["--still-after-ms", "100"]).await;
@@ -171,11 +171,12 @@ async fn still_view_gets_one_lossless_frame_then_silence() {
         },
         isovalue: 0.6,
     };
-    let reference = CpuBackend::new(1).expect("pool").render(&scene, &view);
+    let backend = CpuBackend::new(1).expect("pool");
+    let reference = backend.render(&scene, &view);
     assert_eq!(
         frame.image.as_raw(),
         &reference.rgb,
-        "the still frame is bit-exact"
+        "the first still frame is bit-exact"
     );
 
     // The PNG itself is lossless: decoded by the `png` crate (not the one the server encodes
@@ -189,6 +190,31 @@ async fn still_view_gets_one_lossless_frame_then_silence() {
     let info = reader.next_frame(&mut decoded).expect("PNG decodes");
     assert_eq!((info.width, info.height), (120, 90));
     assert_eq!(&decoded[..info.buffer_size()], &reference.rgb[..]);
+
+    // Then one lossless frame per antialiasing position (`--antialias-passes`, default 8),
+    // the last the engine's mean of those passes, bit for bit.
+    let mut accumulator = Accumulator::new(64);
+    accumulator.antialias = 8;
+    let mut antialiased = backend.refine(&scene, &view, &Effects::OFF, &mut accumulator);
+    for pass in 2..=8 {
+        antialiased = backend.refine(&scene, &view, &Effects::OFF, &mut accumulator);
+        frame = next_frame(&mut ws).await;
+        assert!(
+            frame.header.flags & FLAG_STILL != 0,
+            "pass {pass} is a still frame"
+        );
+        assert_eq!(frame.header.codec, Codec::Png, "pass {pass} is lossless");
+    }
+    assert!(accumulator.converged());
+    assert_ne!(
+        antialiased.rgb, reference.rgb,
+        "the passes smooth the edges"
+    );
+    assert_eq!(
+        frame.image.as_raw(),
+        &antialiased.rgb,
+        "the last still frame is the mean of the eight positions"
+    );
 
     // Nothing changes, so nothing more is sent, and nothing is rendered either.
     let (_, stats) = server
