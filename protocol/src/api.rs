@@ -383,9 +383,14 @@ pub struct RenderRequest {
     #[serde(default)]
     pub quality: Option<u8>,
     /// Effect changes over the scene's own starting effects (as in the `effects` websocket
-    /// message). One pass is traced: soft effects are not refined as on a still view.
+    /// message).
     #[serde(default)]
     pub effects: Option<crate::effects::EffectChanges>,
+    /// Passes to average, 1 to the server's `--max-refine-passes` (default 1: one pass, the
+    /// pixels' centres): as on a still view, soft shadows and occlusion get that many samples
+    /// a pixel and the image is antialiased over that many sub-pixel positions.
+    #[serde(default)]
+    pub passes: Option<u32>,
 }
 
 /// Every API error: a stable code, a message for people, and where the input was wrong.

@@ -16,7 +16,7 @@ use isoray_protocol::{
     Codec, FrameHeader, InputId, StageTimings, FLAG_DEPTH, FLAG_KEYFRAME, FLAG_STILL,
     PROTOCOL_VERSION,
 };
-use isoray_render::{Backend, DeviceTimes, Effects, Framebuffer, SurfaceBuffer, View};
+use isoray_render::{Accumulator, Backend, DeviceTimes, Effects, Framebuffer, SurfaceBuffer, View};
 use std::time::Instant;
 
 /// The H.264 stream of a session, moved into each H.264 frame and back.
@@ -32,6 +32,8 @@ pub enum Pass<'a> {
     Single,
     /// The next refinement pass of a still view, accumulated for the view `key`.
     Refine(&'a Refinement, RefineKey),
+    /// The mean of this many passes, each from its own sub-pixel position (one-shot images).
+    Accumulate(u32),
 }
 
 /// What an H.264 frame needs beyond the image.
@@ -126,6 +128,19 @@ pub fn render(
         }
         Pass::Refine(refinement, key) => {
             refinement.next_pass(backend, prepared, &request.view, request.effects, key)
+        }
+        Pass::Accumulate(passes) => {
+            let mut accumulator = Accumulator::new(passes);
+            accumulator.antialias = passes;
+            // Every pass, whatever the change between them.
+            accumulator.threshold = 0.0;
+            let mut device = DeviceTimes::default();
+            let mut fb = Framebuffer::new(0, 0);
+            while !accumulator.converged() {
+                fb = backend.refine(prepared, &request.view, request.effects, &mut accumulator);
+                device.add(&accumulator.last_device());
+            }
+            (fb, device)
         }
     };
     m::traced(&device);

@@ -270,6 +270,11 @@ fn view_constraints(config: &Config) -> Vec<Constraint> {
             range(1.0, f64::from(config.max_size)),
         ),
         ("RenderRequest", "quality", range(1.0, 100.0)),
+        (
+            "RenderRequest",
+            "passes",
+            range(1.0, f64::from(config.max_refine_passes)),
+        ),
         ("RenderRequest", "time", range(0.0, 1.0e9)),
         (
             "RenderRequest",

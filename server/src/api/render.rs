@@ -4,7 +4,7 @@
 use crate::api::access::{viewable_scene, ApiShared, ClientAddr};
 use crate::api::request::read_json;
 use crate::error::AppError;
-use crate::frame::{self, FrameRequest};
+use crate::frame::{self, FrameRequest, Pass};
 use crate::kinds::convert;
 use crate::state::AppState;
 use axum::body::Body;
@@ -102,6 +102,17 @@ pub async fn render(
             AppError::bad_request("invalid_value", "quality must be in 1..=100").field("quality"),
         );
     }
+    let passes = req.passes.unwrap_or(1);
+    let max_passes = app.config().max_refine_passes;
+    if !(1..=max_passes).contains(&passes) {
+        return Err(AppError::bad_request(
+            "invalid_value",
+            format!(
+                "passes {passes} must be in 1..={max_passes} (the server's --max-refine-passes)"
+            ),
+        )
+        .field("passes"));
+    }
     let step = match (entry.stored_scene(), req.step) {
         // The scene (the URL's resource) exists; a body naming a step it does not hold is a
         // request whose fields disagree with the store: 422, like `step` on a built-in scene.
@@ -167,6 +178,10 @@ pub async fn render(
         };
         let request = FrameRequest {
             style: Some(&style),
+            pass: match passes {
+                1 => Pass::Single,
+                n => Pass::Accumulate(n),
+            },
             ..FrameRequest::image(view, &fx, codec, quality)
         };
         frame::render(job_app.backend(), &state, &request, None).map(|f| f.payload)

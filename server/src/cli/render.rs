@@ -14,7 +14,7 @@ use isoray_render::{Backend, Camera, Scene, View};
 use isoray_server::api::client::npy_header_f32;
 use isoray_server::body::BodyReader;
 use isoray_server::effects::{self, EffectLimits};
-use isoray_server::frame::{self, FrameRequest};
+use isoray_server::frame::{self, FrameRequest, Pass};
 use isoray_server::kinds::convert;
 use isoray_server::kinds::SceneSetup;
 use isoray_server::scenes::prepared::PreparedState;
@@ -78,6 +78,10 @@ pub struct RenderArgs {
     /// JPEG quality, 1–100.
     #[arg(long, default_value_t = 90)]
     pub quality: u8,
+    /// Passes to average, 1–4096: soft shadows and occlusion get that many samples a pixel
+    /// and the image is antialiased over that many sub-pixel positions.
+    #[arg(long, default_value_t = 1)]
+    pub passes: u32,
     /// Render threads (0: one per core).
     #[arg(long, default_value_t = 0)]
     pub threads: usize,
@@ -192,6 +196,9 @@ pub fn run(args: RenderArgs) -> Result<(), String> {
     if !(1..=100).contains(&args.quality) {
         return Err(format!("--quality {} must be in 1..=100", args.quality));
     }
+    if !(1..=4096).contains(&args.passes) {
+        return Err(format!("--passes {} must be in 1..=4096", args.passes));
+    }
     let backend = Backend::cpu(args.threads).map_err(|e| e.to_string())?;
     let state = PreparedState {
         prepared: Arc::new(loaded.scene).prepare(),
@@ -213,7 +220,13 @@ pub fn run(args: RenderArgs) -> Result<(), String> {
     let bytes = if let Format::Npy = format {
         frame::surface_npy(&backend, &state, &view)
     } else {
-        let request = FrameRequest::image(view, &fx, codec, args.quality);
+        let request = FrameRequest {
+            pass: match args.passes {
+                1 => Pass::Single,
+                n => Pass::Accumulate(n),
+            },
+            ..FrameRequest::image(view, &fx, codec, args.quality)
+        };
         frame::render(&backend, &state, &request, None)
             .map_err(|e| e.to_string())?
             .payload

@@ -14,6 +14,7 @@ mod look;
 mod molecules;
 mod openapi;
 mod particles;
+mod passes;
 mod peers;
 mod push_errors;
 mod python_client;
