@@ -49,19 +49,12 @@ pub async fn render(
     // client), after the view check.
     shared.renders.check(client)?;
     let req: RenderRequest = read_json(&app, &headers, body).await?;
-    let max = app.config().max_size;
-    // The default size, within this server's --max-size.
-    let width = req.width.unwrap_or(DEFAULT_RENDER_SIZE.0.min(max));
-    let height = req.height.unwrap_or(DEFAULT_RENDER_SIZE.1.min(max));
-    for (field, v) in [("width", width), ("height", height)] {
-        if v == 0 || v > max {
-            return Err(AppError::bad_request(
-                "invalid_value",
-                format!("{field} {v} must be in 1..={max}"),
-            )
-            .field(field));
-        }
-    }
+    let Output {
+        width,
+        height,
+        quality,
+        passes,
+    } = output(&req, app.config())?;
     let look = entry.demo();
     let camera = match &req.camera {
         Some(c) => convert::camera(c, "camera")?,
@@ -96,23 +89,6 @@ pub async fn render(
         }
         None => look.default_isovalue(),
     };
-    let quality = req.quality.unwrap_or(90);
-    if !(1..=100).contains(&quality) {
-        return Err(
-            AppError::bad_request("invalid_value", "quality must be in 1..=100").field("quality"),
-        );
-    }
-    let passes = req.passes.unwrap_or(1);
-    let max_passes = app.config().max_refine_passes;
-    if !(1..=max_passes).contains(&passes) {
-        return Err(AppError::bad_request(
-            "invalid_value",
-            format!(
-                "passes {passes} must be in 1..={max_passes} (the server's --max-refine-passes)"
-            ),
-        )
-        .field("passes"));
-    }
     let step = match (entry.stored_scene(), req.step) {
         // The scene (the URL's resource) exists; a body naming a step it does not hold is a
         // request whose fields disagree with the store: 422, like `step` on a built-in scene.
@@ -196,4 +172,52 @@ pub async fn render(
         ImageFormat::Npy => "application/x-npy",
     };
     Ok(([(header::CONTENT_TYPE, content_type)], image).into_response())
+}
+
+/// What a render request asks of its image, checked.
+struct Output {
+    width: u32,
+    height: u32,
+    quality: u8,
+    passes: u32,
+}
+
+/// The image's size (default 640 × 480 within `--max-size`), JPEG quality (default 90) and
+/// passes (default 1, at most `--max-refine-passes`), or a 400 naming the field.
+fn output(req: &RenderRequest, config: &crate::config::Config) -> Result<Output, AppError> {
+    let max = config.max_size;
+    let width = req.width.unwrap_or(DEFAULT_RENDER_SIZE.0.min(max));
+    let height = req.height.unwrap_or(DEFAULT_RENDER_SIZE.1.min(max));
+    for (field, v) in [("width", width), ("height", height)] {
+        if v == 0 || v > max {
+            return Err(AppError::bad_request(
+                "invalid_value",
+                format!("{field} {v} must be in 1..={max}"),
+            )
+            .field(field));
+        }
+    }
+    let quality = req.quality.unwrap_or(90);
+    if !(1..=100).contains(&quality) {
+        return Err(
+            AppError::bad_request("invalid_value", "quality must be in 1..=100").field("quality"),
+        );
+    }
+    let passes = req.passes.unwrap_or(1);
+    let max_passes = config.max_refine_passes;
+    if !(1..=max_passes).contains(&passes) {
+        return Err(AppError::bad_request(
+            "invalid_value",
+            format!(
+                "passes {passes} must be in 1..={max_passes} (the server's --max-refine-passes)"
+            ),
+        )
+        .field("passes"));
+    }
+    Ok(Output {
+        width,
+        height,
+        quality,
+        passes,
+    })
 }
