@@ -31,9 +31,7 @@ impl Camera {
     /// neighbourhood, which is all an average over them needs).
     pub fn jittered(&self, (dx, dy): (f32, f32), height: u32) -> Camera {
         let offset = self.target - self.eye;
-        let forward = offset.normalize();
-        let right = forward.cross(self.up).normalize();
-        let up = right.cross(forward);
+        let [forward, right, up] = self.basis();
         let pixel = 2.0 * (self.fov_y_deg.to_radians() * 0.5).tan() / height.max(1) as f32;
         let turned = forward + (right * dx - up * dy) * pixel;
         Camera {
@@ -42,11 +40,16 @@ impl Camera {
         }
     }
 
-    /// Precomputes what every primary ray needs for an image of `width` × `height`.
-    pub fn rays(&self, width: u32, height: u32) -> PrimaryRays {
+    /// The unit forward, right and up directions of the view.
+    fn basis(&self) -> [Vec3; 3] {
         let forward = (self.target - self.eye).normalize();
         let right = forward.cross(self.up).normalize();
-        let up = right.cross(forward);
+        [forward, right, right.cross(forward)]
+    }
+
+    /// Precomputes what every primary ray needs for an image of `width` × `height`.
+    pub fn rays(&self, width: u32, height: u32) -> PrimaryRays {
+        let [forward, right, up] = self.basis();
         let half_h = (self.fov_y_deg.to_radians() * 0.5).tan();
         let half_w = half_h * width as f32 / height.max(1) as f32;
         let right_step = right * (2.0 * half_w / width.max(1) as f32);

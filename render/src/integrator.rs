@@ -69,7 +69,7 @@ pub fn shade_primary(
     let lighting = scene.lighting_in_frame();
     if let Some(floor) = &lighting.floor {
         // `Tracer::closest`'s test: past the ray's start, before the surface or `T_MAX`.
-        let t = (floor.height - ray.origin.y) / ray.dir.y;
+        let t = floor.distance(ray);
         if t > 0.0 && t < hit.map_or(T_MAX, |h| h.t) {
             let position = ray.at(t);
             let seen = (ray.dir, t, spread);
@@ -389,7 +389,7 @@ impl<'a> Tracer<'a> {
             }
         }
         if let Some(floor) = &self.lighting.floor {
-            let t = (floor.height - ray.origin.y) / ray.dir.y;
+            let t = floor.distance(ray);
             if t > t0 && t < limit {
                 let position = ray.at(t);
                 best = Some(SurfaceHit {
@@ -585,7 +585,7 @@ impl<'a> Tracer<'a> {
     /// through a volume.
     fn transmittance(&mut self, ray: &Ray, t_max: f32) -> f32 {
         if let Some(floor) = &self.lighting.floor {
-            let t = (floor.height - ray.origin.y) / ray.dir.y;
+            let t = floor.distance(ray);
             if t > 0.0 && t < t_max && self.lighting.material(floor.material).opacity >= 1.0 {
                 return 0.0;
             }

@@ -13,7 +13,7 @@ use crate::colormap::{srgb_code_to_linear, ColorMap};
 use crate::effects::toggles::Effects;
 pub use crate::geom::clip::ClipBox;
 use crate::geom::frame::LocalFrame;
-use crate::ray::Hit;
+use crate::ray::{Hit, Ray};
 use glam::Vec3;
 
 /// A light source.
@@ -156,6 +156,13 @@ pub struct Floor {
 }
 
 impl Floor {
+    /// How far along `ray` (in units of its direction) it meets the floor's plane: negative
+    /// behind its origin, infinite or NaN when parallel.
+    #[inline]
+    pub fn distance(&self, ray: &Ray) -> f32 {
+        (self.height - ray.origin.y) / ray.dir.y
+    }
+
     /// The floor's colour seen by a ray along unit `dir` that meets it at `p_in_local`, a
     /// point of `frame`, `t` from the ray's origin, through a pixel `spread` radians wide:
     /// the checkerboard averaged over the pixel's footprint (a box the size of the footprint

@@ -130,10 +130,7 @@ pub fn render(
             refinement.next_pass(backend, prepared, &request.view, request.effects, key)
         }
         Pass::Accumulate(passes) => {
-            let mut accumulator = Accumulator::new(passes);
-            accumulator.antialias = passes;
-            // Every pass, whatever the change between them.
-            accumulator.threshold = 0.0;
+            let mut accumulator = Accumulator::fixed_passes(passes);
             let mut device = DeviceTimes::default();
             let mut fb = Framebuffer::new(0, 0);
             while !accumulator.converged() {

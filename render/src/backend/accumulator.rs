@@ -139,13 +139,12 @@ pub fn refine(
         }
         let pass_index = accumulator.passes;
         // Antialiasing: every pass after the first sees the view from a sub-pixel offset.
-        let jittered = View {
-            camera: view
-                .camera
-                .jittered(subpixel_offset(pass_index), view.height),
-            ..*view
-        };
+        let jittered;
         let traced = if antialiased && pass_index > 0 {
+            let camera = view
+                .camera
+                .jittered(subpixel_offset(pass_index), view.height);
+            jittered = View { camera, ..*view };
             &jittered
         } else {
             view
@@ -240,6 +239,15 @@ impl Accumulator {
             max_passes: max_passes.max(1),
             antialias: 0,
         }
+    }
+
+    /// Exactly `passes` passes, each from its own sub-pixel position, whatever the change
+    /// between them (a one-shot image's average).
+    pub fn fixed_passes(passes: u32) -> Accumulator {
+        let mut accumulator = Accumulator::new(passes);
+        accumulator.antialias = passes;
+        accumulator.threshold = 0.0;
+        accumulator
     }
 
     /// Forgets every pass (the view, scene or effects changed).

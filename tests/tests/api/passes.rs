@@ -41,9 +41,7 @@ async fn averaged_passes_are_the_engines_antialiased_mean() {
             isovalue: demo.default_isovalue(),
         };
         let backend = CpuBackend::new(2).expect("pool");
-        let mut accumulator = Accumulator::new(8);
-        accumulator.antialias = 8;
-        accumulator.threshold = 0.0;
+        let mut accumulator = Accumulator::fixed_passes(8);
         let mut mean = backend.refine(&scene, &view, &Effects::OFF, &mut accumulator);
         while !accumulator.converged() {
             mean = backend.refine(&scene, &view, &Effects::OFF, &mut accumulator);
