@@ -190,7 +190,7 @@ fn configs() -> Vec<(&'static str, Effects)> {
 
 /// The look of the main table: the paper scenes made reflective (and, for the transparency
 /// row, transparent) with an added sphere light; the effects demos as they are.
-fn table_look(demo: DemoScene, state: &Scene, transparent: bool) -> Scene {
+pub(crate) fn table_look(demo: DemoScene, state: &Scene, transparent: bool) -> Scene {
     if DemoScene::EFFECTS.contains(&demo) || demo == DemoScene::TetGyroid {
         return state.clone();
     }

@@ -13,6 +13,7 @@ mod load_cluster;
 mod metaball_packets;
 mod metaballs;
 mod overlap;
+mod sampling;
 mod stream;
 mod surfels;
 mod tets;
@@ -55,6 +56,9 @@ enum Command {
     /// The deforming-surfels paper (§5, Fig. 3, Fig. 5): ms per frame for rebuild, eager
     /// refit, lazy and lazy + cache; tests per ray; radius tightness per level.
     Surfels(surfels::SurfelsArgs),
+    /// What a resting view's accuracy costs in passes: soft shadows and occlusion with
+    /// stratified against independent sample points, RMS error against a many-pass reference.
+    Sampling(sampling::SamplingArgs),
     /// The GPU backend beside the CPU backend (feature `gpu`): the paper scenes, a million
     /// balls, the tet data sets and the surfel demos at 640×480 and 1920×1080, with upload,
     /// trace and readback apart.
@@ -75,6 +79,7 @@ fn main() {
         Command::Load(args) => load::run(args),
         Command::Overlap(args) => overlap::run(args),
         Command::Surfels(args) => surfels::run(args),
+        Command::Sampling(args) => sampling::run(args),
         #[cfg(feature = "gpu")]
         Command::Gpu(args) => gpu::run(args),
     };

@@ -482,8 +482,8 @@ impl<'a> Tracer<'a> {
             // (Pool with occlusion at 640×480: 10% slower): they are asked without a hint.
             self.hinting = false;
             let mut open = 0.0;
-            for _ in 0..ao {
-                let dir = cosine_hemisphere(normal, rng.next_f32(), rng.next_f32());
+            for (u1, u2) in rng.points(ao, self.plan.sampling) {
+                let dir = cosine_hemisphere(normal, u1, u2);
                 self.counts.bump(RayKind::Occlusion);
                 let ray = Ray { origin: above, dir };
                 open += self.transmittance(&ray, self.lighting.occlusion_distance);
@@ -538,8 +538,8 @@ impl<'a> Tracer<'a> {
                 let cos_max = (1.0 - (radius / distance).powi(2)).max(0.0).sqrt();
                 let n = self.plan.light_samples.max(1);
                 let mut seen = 0.0;
-                for _ in 0..n {
-                    let dir = uniform_cone(to_light, cos_max, rng.next_f32(), rng.next_f32());
+                for (u1, u2) in rng.points(n, self.plan.sampling) {
+                    let dir = uniform_cone(to_light, cos_max, u1, u2);
                     // Distance to the sphere along `dir`, nearer root.
                     let oc = origin - center;
                     let b = oc.dot(dir);

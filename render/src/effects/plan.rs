@@ -13,6 +13,7 @@
 
 use crate::effects::toggles::{EffectKind, Effects, MAX_DEPTH, MAX_SAMPLES};
 use crate::geom::clip::ClipBox;
+use crate::geom::rng::Sampling;
 use crate::shade::{Light, Lighting, Material};
 
 /// What one frame traces, derived from the scene's lighting and the session's effects.
@@ -37,6 +38,9 @@ pub struct EffectsPlan {
     pub clip_box: Option<ClipBox>,
     /// The scene's further isosurfaces are traced.
     pub isosurfaces: bool,
+    /// How soft shadows and occlusion draw their sample points (stratified across passes
+    /// unless a comparison asks for independent ones).
+    pub sampling: Sampling,
 }
 
 impl EffectsPlan {
@@ -52,6 +56,7 @@ impl EffectsPlan {
         volume: false,
         clip_box: None,
         isosurfaces: false,
+        sampling: Sampling::Stratified,
     };
 
     /// The rays `effects` calls for on a scene lit and shaded by `lighting` whose geometry has
@@ -123,6 +128,7 @@ impl EffectsPlan {
             volume,
             clip_box,
             isosurfaces: isosurfaces && !volume && primitive_count > 0,
+            sampling: Sampling::Stratified,
         }
     }
 
@@ -134,7 +140,8 @@ impl EffectsPlan {
 
     /// Whether only primary rays are traced.
     pub fn is_primary_only(&self) -> bool {
-        *self == EffectsPlan::PRIMARY_ONLY
+        let sampling = EffectsPlan::PRIMARY_ONLY.sampling;
+        EffectsPlan { sampling, ..*self } == EffectsPlan::PRIMARY_ONLY
     }
 
     /// The effects of `kind` this plan actually traces.

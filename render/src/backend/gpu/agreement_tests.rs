@@ -372,3 +372,50 @@ fn auto_takes_a_hardware_gpu_only() {
         Backend::Gpu(gpu) => assert!(!gpu.adapter().contains("Cpu"), "{}", gpu.adapter()),
     }
 }
+
+/// Mean absolute difference of two passes' linear colours, per channel.
+fn mean_difference(a: &[glam::Vec3], b: &[glam::Vec3]) -> f64 {
+    let sum: f64 = a
+        .iter()
+        .zip(b)
+        .map(|(p, q)| (*p - *q).abs().element_sum() as f64)
+        .sum();
+    sum / (3 * a.len().max(1)) as f64
+}
+
+/// Soft shadows and occlusion draw the same sample points on both sides in every pass, not
+/// only the first: stratified points carry the pass number (`PixelRng::points` in rng.rs,
+/// `points_begin`/`points_next` in common.wgsl), independent ones the pass's stream. Glass
+/// with soft shadows and occlusion, pass 5 on both backends: the GPU's pass is far nearer the
+/// CPU's pass 5 than the CPU's pass 4 is (a kernel that drew pass 0's points, or the other
+/// way's, would be as far as another pass).
+#[test]
+fn later_passes_draw_the_same_sample_points_on_both_backends() {
+    use crate::geom::rng::Sampling;
+    let (gpu, cpu) = (gpu(), CpuBackend::new(2).expect("pool"));
+    let (scene, view) = setup(DemoScene::Glass);
+    let effects = Effects {
+        shadows: true,
+        soft_shadows: true,
+        ambient_occlusion: true,
+        ..Effects::OFF
+    };
+    let plan = accumulator::plan_for(&scene, &effects);
+    assert!(plan.soft_shadows && plan.ao_samples > 0, "{plan:?}");
+    assert_eq!(plan.sampling, Sampling::Stratified, "the default");
+    for sampling in [Sampling::Stratified, Sampling::Independent] {
+        let plan = crate::EffectsPlan { sampling, ..plan };
+        let g = gpu.trace_pass(&scene, &view, &plan, 5);
+        assert_eq!(g.rays.device.passes, 1, "{sampling:?}: traced on the GPU");
+        let c = cpu.trace_pass(&scene, &view, &plan, 5);
+        let earlier = cpu.trace_pass(&scene, &view, &plan, 4);
+        let same = mean_difference(&g.color, &c.color);
+        let other = mean_difference(&earlier.color, &c.color);
+        eprintln!("{sampling:?}: GPU against CPU pass 5 {same:.2e}, CPU pass 4 {other:.2e}");
+        assert!(
+            same * 8.0 < other,
+            "{sampling:?}: the GPU's pass 5 is {same:.2e} from the CPU's, another pass {other:.2e}"
+        );
+    }
+    assert!(!gpu.has_failed());
+}

@@ -93,6 +93,7 @@ const FLAG_VOLUME: u32 = 32u;
 const FLAG_CLIP: u32 = 64u;
 const FLAG_ISOSURFACES: u32 = 128u;
 const FLAG_MARK_CUT: u32 = 256u;
+const FLAG_STRATIFIED: u32 = 512u;
 
 // integrator.rs INSIDE_EPS.
 const INSIDE_EPS: f32 = 2.0e-4;
@@ -170,9 +171,14 @@ fn mix64(z0: vec2<u32>) -> vec2<u32> {
 
 var<private> rng_state: vec2<u32>;
 
+var<private> rotation_state: vec2<u32>;
+var<private> rng_pass: u32;
+
 fn rng_seed(x: u32, y: u32, pass_index: u32) {
     let key = vec2<u32>(x, y) ^ mix64(add64(vec2<u32>(pass_index, 0u), vec2<u32>(0x1503A7E5u, 0u)));
     rng_state = mix64(mul64(key, GOLDEN));
+    rotation_state = mix64(mul64(vec2<u32>(x, y) ^ mix64(vec2<u32>(0x5EED57A7u, 0u)), GOLDEN));
+    rng_pass = pass_index;
 }
 
 // Uniform in [0, 1).
@@ -180,6 +186,32 @@ fn rng_next() -> f32 {
     rng_state = add64(rng_state, GOLDEN);
     let v = mix64(rng_state);
     return f32(v.y >> 8u) * (1.0 / 16777216.0);
+}
+
+// PixelRng::points: one estimate's `count` points. Stratified: the pixel's next rotation of
+// the R2 sequence (rng.rs R2_STEPS), from point `pass · count` on; else independent points.
+var<private> points_rotation: vec2<u32>;
+var<private> points_index: u32;
+
+fn points_begin(count: u32) {
+    if (has(FLAG_STRATIFIED)) {
+        rotation_state = add64(rotation_state, GOLDEN);
+        let v = mix64(rotation_state);
+        points_rotation = vec2<u32>(v.y, v.x);
+        points_index = rng_pass * count;
+    }
+}
+
+fn points_next() -> vec2<f32> {
+    if (has(FLAG_STRATIFIED)) {
+        let i = points_index;
+        points_index = i + 1u;
+        let p = points_rotation + vec2<u32>(i * 3242174889u, i * 2447445414u);
+        return vec2<f32>(f32(p.x >> 8u), f32(p.y >> 8u)) * (1.0 / 16777216.0);
+    }
+    let u1 = rng_next();
+    let u2 = rng_next();
+    return vec2<f32>(u1, u2);
 }
 
 // ---- sampling.rs ----
@@ -630,19 +662,23 @@ fn local(m: Material, h: SurfaceHit, normal: vec3<f32>, view: vec3<f32>, above: 
                 n = max(frame.light_samples, 1u);
             }
         }
+        // One estimate's points: all the occlusion rays' (j = 0 begins them), or a soft light's.
+        if (is_ao && j == 0u) {
+            points_begin(ao);
+        } else if (soft) {
+            points_begin(n);
+        }
         var seen = 0.0;
         for (var s = 0u; s < n; s = s + 1u) {
             var dir = l.to_light;
             var reach = 0.0;
             if (is_ao) {
-                let u1 = rng_next();
-                let u2 = rng_next();
-                dir = cosine_hemisphere(normal, u1, u2);
+                let u = points_next();
+                dir = cosine_hemisphere(normal, u.x, u.y);
                 reach = frame.occlusion_distance;
             } else if (soft) {
-                let u1 = rng_next();
-                let u2 = rng_next();
-                dir = uniform_cone(l.to_light, cos_max, u1, u2);
+                let u = points_next();
+                dir = uniform_cone(l.to_light, cos_max, u.x, u.y);
                 // Distance to the sphere along dir, nearer root.
                 let oc = above - light.position.xyz;
                 let b = dot(oc, dir);

@@ -28,6 +28,9 @@ pub mod flags {
     /// A pixel the driver cut short is written with depth `CUT` (retrace.rs `CUT_DEPTH`) for
     /// the backend to trace again on the CPU; without it such a pixel keeps what it reached.
     pub const MARK_CUT: u32 = 256;
+    /// Soft shadows and occlusion take their points from the pixel's rotated R2 sequence
+    /// (`geom::rng::Sampling::Stratified`); without it, independent points from its stream.
+    pub const STRATIFIED: u32 = 512;
 }
 
 /// Light kinds of [`GpuLight::position`]'s `w`.

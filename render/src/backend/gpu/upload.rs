@@ -8,6 +8,7 @@ use crate::backend::gpu::layout::{
 };
 use crate::backend::gpu::{metaballs, surfels, tets};
 use crate::effects::plan::EffectsPlan;
+use crate::geom::rng::Sampling;
 use crate::integrator::T_MAX;
 use crate::kinds::dispatch::PreparedGeometry;
 use crate::scene::PreparedScene;
@@ -166,6 +167,9 @@ pub fn frame(
         }
         if plan.soft_shadows {
             bits |= flags::SOFT_SHADOWS;
+        }
+        if plan.sampling == Sampling::Stratified {
+            bits |= flags::STRATIFIED;
         }
         if plan.isosurfaces {
             bits |= flags::ISOSURFACES;
