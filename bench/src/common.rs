@@ -1,6 +1,7 @@
 //! Helpers every benchmark shares: the machine line printed with each table, medians, and
 //! writing the `--json` report.
 
+use isoray_render::scenes::DemoScene;
 use serde::Serialize;
 use std::path::Path;
 
@@ -57,6 +58,22 @@ pub fn median(mut v: Vec<f64>) -> f64 {
     }
     v.sort_by(f64::total_cmp);
     v[v.len() / 2]
+}
+
+/// The demos named by `ids` (scene ids), or `default`'s when `ids` is empty; an unknown id
+/// is an error naming it.
+pub fn demos(ids: &[String], default: &[&str]) -> Result<Vec<DemoScene>, String> {
+    let find = |id: &str| {
+        DemoScene::ALL
+            .into_iter()
+            .find(|d| d.id() == id)
+            .ok_or_else(|| format!("unknown scene {id:?}"))
+    };
+    if ids.is_empty() {
+        default.iter().map(|id| find(id)).collect()
+    } else {
+        ids.iter().map(|id| find(id)).collect()
+    }
 }
 
 /// `n / d`, 0 when `d` is 0.

@@ -24,7 +24,7 @@
 //! removed. Each pair is timed interleaved (off, on, off, on, …) and must trace the same
 //! rays of every kind.
 
-use crate::common::{median, write_json, Machine};
+use crate::common::{demos, median, write_json, Machine};
 use clap::Args;
 use glam::Vec3;
 use isoray_render::effects::available_effects;
@@ -230,19 +230,7 @@ fn frame_ms(
 }
 
 pub fn run(args: EffectsArgs) -> Result<(), String> {
-    let ids: Vec<String> = if args.scenes.is_empty() {
-        DEFAULT_SCENES.iter().map(|s| s.to_string()).collect()
-    } else {
-        args.scenes.clone()
-    };
-    let mut demos = Vec::new();
-    for id in &ids {
-        let demo = DemoScene::ALL
-            .iter()
-            .find(|d| d.id() == id)
-            .ok_or_else(|| format!("unknown scene {id:?}"))?;
-        demos.push(*demo);
-    }
+    let demos = demos(&args.scenes, &DEFAULT_SCENES)?;
     let backend = CpuBackend::new(args.threads).map_err(|e| e.to_string())?;
     let machine = Machine {
         threads: backend.threads(),

@@ -16,13 +16,12 @@
 //! The golden tests check the same effects against an analytic reference that shares no code
 //! with the engine (tests/tests/golden).
 
-use crate::common::{median, write_json, Machine};
+use crate::common::{demos, median, write_json, Machine};
 use crate::effects::table_look;
 use clap::Args;
 use glam::Vec3;
 use isoray_render::backend::accumulator::{plan_for, TracePasses, DEFAULT_THRESHOLD};
 use isoray_render::geom::rng::Sampling;
-use isoray_render::scenes::DemoScene;
 use isoray_render::shade::linear_to_srgb8;
 use isoray_render::{CpuBackend, Effects, EffectsPlan, PreparedScene, View};
 use serde::Serialize;
@@ -183,17 +182,9 @@ pub fn run(args: SamplingArgs) -> Result<(), String> {
         ..Machine::here()
     };
     println!("# isoray-bench sampling: {}", machine.line());
-    let ids: Vec<String> = if args.scenes.is_empty() {
-        DEFAULT_SCENES.iter().map(|s| s.to_string()).collect()
-    } else {
-        args.scenes.clone()
-    };
     let mut rows = Vec::new();
-    for id in &ids {
-        let demo = DemoScene::ALL
-            .into_iter()
-            .find(|d| d.id() == id)
-            .ok_or_else(|| format!("unknown scene {id:?}"))?;
+    for demo in demos(&args.scenes, &DEFAULT_SCENES)? {
+        let id = demo.id();
         let state = demo.state_at(1.0);
         let scene = Arc::new(table_look(demo, &state, false)).prepare();
         let view = View {
