@@ -5,6 +5,7 @@
 //! ball pit and the clipped cubes smaller so they stay interactive on two cores.
 
 use crate::camera::Camera;
+use crate::effects::Effects;
 use crate::kinds::surfels::demo::{self, SurfelDemo, SurfelDemoKind};
 use crate::kinds::surfels::scene::{SurfelOptions, SurfelRuntime, SurfelScene};
 use crate::shade::{Floor, Lighting, Material};
@@ -82,6 +83,12 @@ pub fn lighting(kind: SurfelDemoKind) -> Lighting {
             colors: [Vec3::splat(0.55), Vec3::splat(0.3)],
             checker: 0.5,
         }),
+        // Objects on a floor without their shadows look as if they float: hard shadows on
+        // (about 1.4 times a ray-cast pass of the ball pit at 640×480).
+        effects: Effects {
+            shadows: true,
+            ..Effects::OFF
+        },
         ..Lighting::default()
     }
 }

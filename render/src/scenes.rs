@@ -593,6 +593,25 @@ fn pool(time: f64) -> MetaballScene {
 mod tests {
     use super::*;
 
+    /// A demo that stands its objects on a floor under a light shows their shadows on it from
+    /// the first frame, so that nothing seems to float (its effects' defaults cast them).
+    #[test]
+    fn demos_with_a_floor_cast_shadows_on_it_by_default() {
+        let mut floors = 0;
+        for demo in DemoScene::ALL {
+            let lighting = demo.lighting();
+            if lighting.floor.is_none() || lighting.lights.is_empty() {
+                continue;
+            }
+            floors += 1;
+            assert!(
+                lighting.effects.shadows,
+                "{demo:?} has a floor and a light, not its shadows"
+            );
+        }
+        assert!(floors >= 5, "the demos with floors: {floors}");
+    }
+
     #[test]
     fn paper_scenes_have_the_paper_counts_and_are_valid_and_deterministic() {
         for demo in DemoScene::ALL {
