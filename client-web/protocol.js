@@ -17,6 +17,8 @@ export const codecLabel = (codec) => CODEC_LABELS[codec] ?? `codec ${codec}`;
 export const FLAG_STILL = 1;
 export const FLAG_KEYFRAME = 2;
 export const FLAG_DEPTH = 4;
+// With FLAG_STILL: the last frame of the resting view's refinement.
+export const FLAG_FINAL = 8;
 export const DEPTH_HEADER_LEN = 48;
 
 /** Reads the 64-byte little-endian header at the front of a frame. */

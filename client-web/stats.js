@@ -3,11 +3,17 @@
 // and as a live plot of the last 30 seconds. Every number is measured from the frames this
 // page received; nothing is estimated.
 
-import { codecLabel } from './protocol.js';
+import { codecLabel, FLAG_STILL, FLAG_FINAL } from './protocol.js';
 
 const WINDOW_MS = 1000; // frames and bytes per second are counted over the last second
 const HISTORY_MS = 30000; // span of the plot
 const SAMPLE_MS = 250;
+// A still frame says whether the server is still refining the resting view or is done.
+function stillLabel(flags) {
+  if (!(flags & FLAG_STILL)) return '';
+  return flags & FLAG_FINAL ? ' still, final' : ' still, refining';
+}
+
 const STAGES = [['update', 'updateUs', '#c9a227'], ['build', 'buildUs', '#d9682b'], ['trace', 'traceUs', '#4f9de0'], ['encode', 'encodeUs', '#8f6fd8']];
 
 export class Stats {
@@ -65,7 +71,7 @@ export class Stats {
       `bitrate  ${s ? s.mbps.toFixed(2) : '0.00'} Mbit/s`,
     ];
     if (h) {
-      lines.push(`size     ${h.width}×${h.height} ${codecLabel(h.codec)}${h.flags & 1 ? ' still' : ''}`);
+      lines.push(`size     ${h.width}×${h.height} ${codecLabel(h.codec)}${stillLabel(h.flags)}`);
       for (const [name, key] of STAGES) lines.push(`${name.padEnd(8)} ${ms(h[key] / 1000)}`);
     }
     this.text.textContent = lines.join('\n');

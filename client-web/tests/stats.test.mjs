@@ -38,7 +38,7 @@ test('the stats overlay shows the frame rate the page really receives', async (t
       const recent = wire.times.map((t, k) => [t, wire.bytes[k]]).filter(([t]) => t > now - 1000);
       pairs.push([Number(/fps\s+(\d+)/.exec(text)[1]), recent.length]);
       rates.push([Number(/bitrate\s+([\d.]+)/.exec(text)[1]), recent.reduce((a, [, b]) => a + b, 0) * 8 / 1e6]);
-      const shown = /^size\s+\d+×\d+ (.+?)( still)?$/m.exec(text);
+      const shown = /^size\s+\d+×\d+ (.+?)( still, (?:refining|final))?$/m.exec(text);
       assert.ok(shown, `the overlay shows the frame's size and codec (${text})`);
       codecs.push([shown[1], [...new Set(wire.codecs.filter((_, k) => wire.times[k] > now - 1000))]]);
     }
@@ -69,5 +69,21 @@ test('the stats overlay shows the frame rate the page really receives', async (t
 
     await page.keyboard.press('s');
     assert.equal(await page.locator('#stats').isHidden(), true, 'the s key hides the overlay again');
+  });
+});
+
+test('the stats overlay tells a resting view still refining from a finished one', async () => {
+  await withPage('stats-final', async ({ server, page }) => {
+    // A pinned time: the view rests, its still frames refine (the antialiasing positions),
+    // and the last of them carries the final flag, which the overlay names.
+    await page.goto(server.url + '?scene=blobs&t=3&stats=1');
+    await waitForFrames(page, 1);
+    await page.waitForFunction(
+      () => /^size\s+\d+×\d+ PNG still, final$/m.test(document.getElementById('stats-text').textContent),
+      null,
+      { timeout: 60000 },
+    );
+    const text = await page.locator('#stats-text').textContent();
+    assert.match(text, /still, final/, text);
   });
 });

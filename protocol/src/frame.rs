@@ -10,7 +10,7 @@
 //! | 24 | 4 | width in pixels |
 //! | 28 | 4 | height in pixels |
 //! | 32 | 1 | codec (1 JPEG, 2 PNG, 3 H.264) |
-//! | 33 | 1 | flags (bit 0 still frame, bit 1 keyframe, bit 2 depth block follows the image) |
+//! | 33 | 1 | flags (bit 0 still frame, bit 1 keyframe, bit 2 depth block follows the image, bit 3 the last frame of a resting view) |
 //! | 34 | 1 | JPEG quality 1–100 (0 for other codecs) |
 //! | 35 | 1 | reserved, zero |
 //! | 36 | 4 | state update time, microseconds |
@@ -33,6 +33,9 @@ pub const FLAG_STILL: u8 = 1;
 pub const FLAG_KEYFRAME: u8 = 2;
 /// Flag bit: a depth block follows the image payload (see `PROTOCOL.md`, "Depth block").
 pub const FLAG_DEPTH: u8 = 4;
+/// Flag bit: the last frame of a resting view's refinement (with [`FLAG_STILL`]); nothing more
+/// is sent until something changes.
+pub const FLAG_FINAL: u8 = 8;
 
 /// How the payload is encoded.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]

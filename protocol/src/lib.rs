@@ -15,8 +15,8 @@ pub mod messages;
 pub mod version;
 
 pub use frame::{
-    Codec, FrameHeader, FrameHeaderError, StageTimings, FLAG_DEPTH, FLAG_KEYFRAME, FLAG_STILL,
-    FRAME_HEADER_LEN, FRAME_MAGIC,
+    Codec, FrameHeader, FrameHeaderError, StageTimings, FLAG_DEPTH, FLAG_FINAL, FLAG_KEYFRAME,
+    FLAG_STILL, FRAME_HEADER_LEN, FRAME_MAGIC,
 };
 
 pub use messages::*;

@@ -13,7 +13,7 @@ use crate::scenes::prepared::{micros, PreparedState};
 use crate::style::Style;
 use axum::body::Bytes;
 use isoray_protocol::{
-    Codec, FrameHeader, InputId, StageTimings, FLAG_DEPTH, FLAG_KEYFRAME, FLAG_STILL,
+    Codec, FrameHeader, InputId, StageTimings, FLAG_DEPTH, FLAG_FINAL, FLAG_KEYFRAME, FLAG_STILL,
     PROTOCOL_VERSION,
 };
 use isoray_render::{Accumulator, Backend, DeviceTimes, Effects, Framebuffer, SurfaceBuffer, View};
@@ -186,6 +186,9 @@ pub struct StreamMeta {
     pub sequence: u64,
     pub input_id: InputId,
     pub still: bool,
+    /// The last frame of a resting view's refinement: nothing follows until something
+    /// changes.
+    pub last: bool,
     pub codec: Codec,
     pub jpeg_quality: u8,
     /// The time the session asked for (a state's own time, when it has one, wins).
@@ -205,6 +208,9 @@ pub fn stream_message(
     }
     if frame.depth.is_some() {
         flags |= FLAG_DEPTH;
+    }
+    if meta.still && meta.last {
+        flags |= FLAG_FINAL;
     }
     let payload_len = u32::try_from(frame.payload.len())
         .map_err(|_| EncodeError::from_message("frame payload over 4 GiB"))?;

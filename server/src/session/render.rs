@@ -412,17 +412,15 @@ fn render_frame(
     refinement: &Refinement,
 ) -> Result<Rendered, EncodeError> {
     let state = entry.prepared_at(plan.time, settings.pinned_time.is_none(), plan.seen);
+    let key = (
+        settings.version,
+        plan.time.to_bits(),
+        plan.size.0,
+        plan.size.1,
+    );
     let pass = match plan.quality {
         Quality::Interactive => Pass::Single,
-        Quality::Still => Pass::Refine(
-            refinement,
-            (
-                settings.version,
-                plan.time.to_bits(),
-                plan.size.0,
-                plan.size.1,
-            ),
-        ),
+        Quality::Still => Pass::Refine(refinement, key),
     };
     let request = FrameRequest {
         view: View {
@@ -449,6 +447,7 @@ fn render_frame(
         sequence: plan.sequence,
         input_id: settings.last_input_id,
         still: plan.quality == Quality::Still,
+        last: plan.quality == Quality::Still && refinement.converged(key),
         codec: plan.codec,
         jpeg_quality: plan.jpeg_quality,
         time: plan.time,

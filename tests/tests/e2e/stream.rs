@@ -117,7 +117,7 @@ pub async fn reqwest_like_get(addr: std::net::SocketAddr, path: &str) -> String 
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn still_view_gets_its_antialiased_lossless_frames_then_silence() {
-    use isoray_protocol::{Codec, FLAG_STILL};
+    use isoray_protocol::{Codec, FLAG_FINAL, FLAG_STILL};
     use isoray_render::scenes::DemoScene;
     use isoray_render::{Accumulator, Camera, CpuBackend, Effects, View};
     use std::sync::Arc;
@@ -156,6 +156,7 @@ async fn still_view_gets_its_antialiased_lossless_frames_then_silence() {
         "the still frame is lossless"
     );
     assert_eq!(frame.header.input_id, 4);
+    assert_eq!(frame.header.flags & FLAG_FINAL, 0, "more passes follow");
 
     // The same view rendered directly by the engine: the still frame must match it bit for bit.
     let demo = DemoScene::Blobs;
@@ -204,6 +205,12 @@ async fn still_view_gets_its_antialiased_lossless_frames_then_silence() {
             "pass {pass} is a still frame"
         );
         assert_eq!(frame.header.codec, Codec::Png, "pass {pass} is lossless");
+        // Only the pass that ends the refinement says so.
+        assert_eq!(
+            frame.header.flags & FLAG_FINAL != 0,
+            pass == 8,
+            "pass {pass}: the final flag"
+        );
     }
     assert!(accumulator.converged());
     assert_ne!(
