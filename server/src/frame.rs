@@ -129,16 +129,12 @@ pub fn render(
         Pass::Refine(refinement, key) => {
             refinement.next_pass(backend, prepared, &request.view, request.effects, key)
         }
-        Pass::Accumulate(passes) => {
-            let mut accumulator = Accumulator::fixed_passes(passes);
-            let mut device = DeviceTimes::default();
-            let mut fb = Framebuffer::new(0, 0);
-            while !accumulator.converged() {
-                fb = backend.refine(prepared, &request.view, request.effects, &mut accumulator);
-                device.add(&accumulator.last_device());
-            }
-            (fb, device)
-        }
+        Pass::Accumulate(passes) => backend.refine_until_converged(
+            prepared,
+            &request.view,
+            request.effects,
+            &mut Accumulator::fixed_passes(passes),
+        ),
     };
     m::traced(&device);
     let t1 = Instant::now();

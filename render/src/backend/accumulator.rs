@@ -156,6 +156,25 @@ pub fn refine(
     accumulator.image()
 }
 
+/// [`refine`] until `accumulator` converges: the image of the mean of its passes, and what a
+/// device spent on them all.
+pub fn refine_until_converged(
+    backend: &impl TracePasses,
+    scene: &PreparedScene,
+    view: &View,
+    effects: &Effects,
+    accumulator: &mut Accumulator,
+) -> (Framebuffer, DeviceTimes) {
+    let mut device = DeviceTimes::default();
+    loop {
+        let fb = refine(backend, scene, view, effects, accumulator);
+        device.add(&accumulator.last_device);
+        if accumulator.converged {
+            return (fb, device);
+        }
+    }
+}
+
 /// The offset in pixels, each coordinate in `[-0.5, 0.5)`, from which antialiasing pass
 /// `pass` sees the view: the pixel's centre for pass 0, then the 2-D Halton sequence (bases 2
 /// and 3), which covers the pixel evenly at every count.

@@ -63,10 +63,7 @@ fn a_resting_view_averages_its_pixels() {
     let refined = || {
         let mut acc = Accumulator::new(64);
         acc.antialias = 16;
-        let mut fb = backend.refine(&scene, &view, &Effects::OFF, &mut acc);
-        while !acc.converged() {
-            fb = backend.refine(&scene, &view, &Effects::OFF, &mut acc);
-        }
+        let fb = backend.refine_until_converged(&scene, &view, &Effects::OFF, &mut acc);
         assert_eq!(acc.passes(), 16, "every position once, then final");
         fb
     };
@@ -146,9 +143,7 @@ fn antialiasing_sets_the_fewest_passes() {
         let mut acc = Accumulator::new(64);
         acc.antialias = antialias;
         acc.threshold = 1.0;
-        while !acc.converged() {
-            backend.refine(&scene, &view, &effects, &mut acc);
-        }
+        backend.refine_until_converged(&scene, &view, &effects, &mut acc);
         let least = if antialias > 1 { antialias } else { 1 };
         assert_eq!(acc.passes(), least, "{effects:?}, antialias {antialias}");
     }

@@ -83,6 +83,17 @@ impl CpuBackend {
     ) -> Framebuffer {
         accumulator::refine(self, scene, view, effects, accumulator)
     }
+
+    /// Refines until `accumulator` converges (see [`accumulator::refine_until_converged`]).
+    pub fn refine_until_converged(
+        &self,
+        scene: &PreparedScene,
+        view: &View,
+        effects: &Effects,
+        accumulator: &mut Accumulator,
+    ) -> Framebuffer {
+        accumulator::refine_until_converged(self, scene, view, effects, accumulator).0
+    }
 }
 
 impl TracePasses for CpuBackend {
@@ -716,10 +727,7 @@ mod effects_tests {
         let (scene, v, effects) = soft_shadow_view();
         let backend = CpuBackend::new(2).expect("pool");
         let mut acc = Accumulator::new(2000);
-        let mut image = backend.refine(&scene, &v, &effects, &mut acc);
-        while !acc.converged() {
-            image = backend.refine(&scene, &v, &effects, &mut acc);
-        }
+        let image = backend.refine_until_converged(&scene, &v, &effects, &mut acc);
         let passes = acc.passes();
         assert!(
             (2..2000).contains(&passes),

@@ -6,7 +6,7 @@
 //! `gpu`) is the variant `Gpu(GpuBackend)`, its type in `backend/gpu/` implementing
 //! [`TracePasses`].
 
-use crate::backend::accumulator::{self, Accumulator, FrameRays, TracePasses};
+use crate::backend::accumulator::{self, Accumulator, DeviceTimes, FrameRays, TracePasses};
 use crate::backend::cpu::{CpuBackend, PoolError};
 #[cfg(feature = "gpu")]
 use crate::backend::gpu::backend::GpuBackend;
@@ -146,6 +146,26 @@ impl Backend {
             #[cfg(feature = "gpu")]
             Backend::Gpu(gpu) => {
                 accumulator::refine(gpu.as_ref(), scene, view, effects, accumulator)
+            }
+        }
+    }
+
+    /// Refines until `accumulator` converges; see
+    /// [`accumulator::refine_until_converged`](crate::backend::accumulator::refine_until_converged).
+    pub fn refine_until_converged(
+        &self,
+        scene: &PreparedScene,
+        view: &View,
+        effects: &Effects,
+        accumulator: &mut Accumulator,
+    ) -> (Framebuffer, DeviceTimes) {
+        match self {
+            Backend::Cpu(cpu) => {
+                accumulator::refine_until_converged(cpu, scene, view, effects, accumulator)
+            }
+            #[cfg(feature = "gpu")]
+            Backend::Gpu(gpu) => {
+                accumulator::refine_until_converged(gpu.as_ref(), scene, view, effects, accumulator)
             }
         }
     }

@@ -42,10 +42,7 @@ async fn averaged_passes_are_the_engines_antialiased_mean() {
         };
         let backend = CpuBackend::new(2).expect("pool");
         let mut accumulator = Accumulator::fixed_passes(8);
-        let mut mean = backend.refine(&scene, &view, &Effects::OFF, &mut accumulator);
-        while !accumulator.converged() {
-            mean = backend.refine(&scene, &view, &Effects::OFF, &mut accumulator);
-        }
+        let mean = backend.refine_until_converged(&scene, &view, &Effects::OFF, &mut accumulator);
         assert_eq!(accumulator.passes(), 8);
         let served = image::load_from_memory(&eight.body).expect("PNG").to_rgb8();
         assert_eq!(

@@ -571,10 +571,7 @@ fn engine_image(backend: &CpuBackend, case: &Case) -> image::RgbImage {
     let mut acc = Accumulator::new(case.passes);
     // Force every pass: the comparison is at a fixed sample count.
     acc.threshold = 0.0;
-    let mut fb = backend.refine(&scene, &view, &case.effects, &mut acc);
-    while !acc.converged() {
-        fb = backend.refine(&scene, &view, &case.effects, &mut acc);
-    }
+    let fb = backend.refine_until_converged(&scene, &view, &case.effects, &mut acc);
     assert_eq!(acc.passes(), case.passes, "{}", case.name);
     image::RgbImage::from_raw(fb.width, fb.height, fb.rgb).expect("frame size")
 }
