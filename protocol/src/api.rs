@@ -351,7 +351,9 @@ pub enum ImageFormat {
     Jpeg,
     /// NumPy `.npy`: an `(H, W, 4)` little-endian `f32` array per pixel of the hit distance
     /// along the ray from the eye and the outward unit normal (x, y, z), `[inf, 0, 0, 0]`
-    /// where the ray misses. The primary rays' isosurface only (no effects).
+    /// where the ray misses. The primary rays' isosurface only (no floor, no further
+    /// isosurfaces, no shading), cut by the clip box where `effects` turn it on, as the image
+    /// is; one pass (`passes` above 1 is refused).
     Npy,
 }
 

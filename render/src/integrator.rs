@@ -29,6 +29,7 @@ mod batch;
 
 use crate::effects::plan::EffectsPlan;
 use crate::effects::rays::{RayCounts, RayKind};
+pub use crate::geom::optics::{reflect, refract_dir};
 use crate::geom::rng::PixelRng;
 use crate::kinds::contract::OcclusionHint;
 use crate::kinds::counters::SceneCounters;
@@ -235,6 +236,12 @@ impl<'a> Tracer<'a> {
             }
         }
         out
+    }
+
+    /// The isosurface a camera ray sees first, outside the plan's clip box (inside the solid
+    /// where the ray leaves the box there); no floor, no further isosurfaces, no volume.
+    pub fn surface_hit(&mut self, ray: &Ray) -> Option<Hit> {
+        self.crossing(ray, 0.0, T_MAX, self.isovalue)
     }
 
     /// Linear colour and hit distance (`INFINITY` on a miss) of a camera ray.
@@ -758,42 +765,5 @@ impl<'a> Tracer<'a> {
             }
         }
         color
-    }
-}
-
-/// `dir` mirrored about the unit `normal`.
-#[inline]
-pub fn reflect(dir: Vec3, normal: Vec3) -> Vec3 {
-    (dir - 2.0 * dir.dot(normal) * normal).normalize()
-}
-
-/// `dir` bent through a boundary with unit `normal` facing against it and index ratio
-/// `eta = n1 / n2`; `None` under total internal reflection.
-#[inline]
-pub fn refract_dir(dir: Vec3, normal: Vec3, eta: f32) -> Option<Vec3> {
-    let cos_i = -dir.dot(normal);
-    let k = 1.0 - eta * eta * (1.0 - cos_i * cos_i);
-    if k < 0.0 {
-        return None;
-    }
-    Some((eta * dir + (eta * cos_i - k.sqrt()) * normal).normalize())
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn snell_and_mirror() {
-        let n = Vec3::Y;
-        let d = Vec3::new(1.0, -1.0, 0.0).normalize();
-        assert!((reflect(d, n) - Vec3::new(1.0, 1.0, 0.0).normalize()).length() < 1e-6);
-        let t = refract_dir(d, n, 1.0 / 1.5).expect("entering glass never reflects totally");
-        let sin_t = t.x;
-        assert!((sin_t - (45f32.to_radians().sin() / 1.5)).abs() < 1e-6);
-        assert!(
-            refract_dir(d, n, 1.5).is_none(),
-            "45° from glass is past critical"
-        );
     }
 }

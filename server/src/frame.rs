@@ -16,7 +16,9 @@ use isoray_protocol::{
     Codec, FrameHeader, InputId, StageTimings, FLAG_DEPTH, FLAG_FINAL, FLAG_KEYFRAME, FLAG_STILL,
     PROTOCOL_VERSION,
 };
-use isoray_render::{Accumulator, Backend, DeviceTimes, Effects, Framebuffer, SurfaceBuffer, View};
+use isoray_render::{
+    Accumulator, Backend, DeviceTimes, Effects, Framebuffer, PreparedScene, SurfaceBuffer, View,
+};
 use std::time::Instant;
 
 /// The H.264 stream of a session, moved into each H.264 frame and back.
@@ -113,10 +115,7 @@ pub fn render(
 ) -> Result<Frame, EncodeError> {
     let t0 = Instant::now();
     // A viewer's style traces the same prepared state under its own lighting.
-    let styled = request
-        .style
-        .and_then(|s| s.lighting(state.prepared.lighting()))
-        .map(|l| state.prepared.with_lighting(l));
+    let styled = styled(state, request.style);
     let prepared = styled.as_ref().unwrap_or(&state.prepared);
     // Effects hook: a single pass traces one pass of the effects; a still frame adds a
     // refinement pass.
@@ -157,16 +156,34 @@ pub fn render(
     })
 }
 
+/// `state` under a viewer's `style`, where the style changes its lighting (clip box,
+/// isosurfaces, colour map): the same prepared geometry, traced with the style's lighting.
+fn styled(state: &PreparedState, style: Option<&Style>) -> Option<PreparedScene> {
+    style
+        .and_then(|s| s.lighting(state.prepared.lighting()))
+        .map(|l| state.prepared.with_lighting(l))
+}
+
 fn us32(us: u64) -> u32 {
     u32::try_from(us).unwrap_or(u32::MAX)
 }
 
 /// The primary hits of `view` as a `.npy` file: an `(H, W, 4)` `f32` array of the hit
 /// distance along the ray and the outward normal (`[∞, 0, 0, 0]` for a miss); the
-/// `format: "npy"` output of the render endpoint and `isoray render`. Geometry only: effects
-/// do not change it.
-pub fn surface_npy(backend: &Backend, state: &PreparedState, view: &View) -> Vec<u8> {
-    let surface = backend.render_surface(&state.prepared, view);
+/// `format: "npy"` output of the render endpoint and `isoray render`. The isosurface only (no
+/// floor, no further isosurfaces), cut by the clip box where `effects` (and the viewer's
+/// `style`) have one on, as the image with those effects is: the one effect that changes
+/// which surface a pixel sees.
+pub fn surface_npy(
+    backend: &Backend,
+    state: &PreparedState,
+    view: &View,
+    effects: &Effects,
+    style: Option<&Style>,
+) -> Vec<u8> {
+    let styled = styled(state, style);
+    let prepared = styled.as_ref().unwrap_or(&state.prepared);
+    let surface = backend.render_surface_effects(prepared, view, effects);
     crate::npy::write_f32(
         &[
             surface.height as usize,

@@ -10,6 +10,7 @@ use crate::camera::PrimaryRays;
 use crate::effects::plan::EffectsPlan;
 use crate::effects::toggles::Effects;
 use crate::framebuffer::{Framebuffer, SurfaceBuffer};
+use crate::geom::clip::ClipBox;
 use crate::geom::rng::PixelRng;
 use crate::integrator::{shade_primary, Tracer, T_MAX};
 use crate::kinds::counters::SceneCounters;
@@ -58,7 +59,19 @@ impl CpuBackend {
     /// The primary hits' distances and normals, blocking: the same hits
     /// [`CpuBackend::render`] shades.
     pub fn render_surface(&self, scene: &PreparedScene, view: &View) -> SurfaceBuffer {
-        self.pool.install(|| surface_tiles(scene, view))
+        self.pool.install(|| surface_tiles(scene, view, None))
+    }
+
+    /// [`CpuBackend::render_surface`] under `effects`: of them only the clip box changes
+    /// which surface a camera ray meets first (the image's, [`Tracer::surface_hit`]).
+    pub fn render_surface_effects(
+        &self,
+        scene: &PreparedScene,
+        view: &View,
+        effects: &Effects,
+    ) -> SurfaceBuffer {
+        let clip = accumulator::plan_for(scene, effects).clip_box;
+        self.pool.install(|| surface_tiles(scene, view, clip))
     }
 
     /// Renders one frame with `effects` (its first refinement pass), blocking. A plan with
@@ -207,19 +220,38 @@ fn render_tiles(scene: &PreparedScene, view: &View) -> Framebuffer {
 }
 
 /// Each tile's primary hits, as distance and normal.
-fn surface_tiles(scene: &PreparedScene, view: &View) -> SurfaceBuffer {
+fn surface_tiles(scene: &PreparedScene, view: &View, clip: Option<ClipBox>) -> SurfaceBuffer {
     let (width, height) = (view.width, view.height);
     let rays = scene.primary_rays(&view.camera, width, height);
     let n = width as usize * height as usize;
     let mut values = vec![0.0f32; n * SurfaceBuffer::CHANNELS];
     let mut distances = vec![f32::INFINITY; n];
+    let plan = EffectsPlan {
+        clip_box: clip,
+        ..EffectsPlan::PRIMARY_ONLY
+    };
     let trace = |rect: Rect| {
         let (x0, y0, x1, y1) = rect;
         let n = ((x1 - x0) * (y1 - y0)) as usize;
         let mut out = Vec::with_capacity(n * SurfaceBuffer::CHANNELS);
         let mut t_out = Vec::with_capacity(n);
-        let mut counters = SceneCounters::default();
-        for (_, hit) in scene.primary_hits(&rays, rect, view.isovalue, T_MAX, &mut counters) {
+        let hits = match clip {
+            None => {
+                let mut counters = SceneCounters::default();
+                scene.primary_hits(&rays, rect, view.isovalue, T_MAX, &mut counters)
+            }
+            Some(_) => {
+                let mut tracer = Tracer::new(scene, &plan, view.isovalue, rays.pixel_spread());
+                (y0..y1)
+                    .flat_map(|y| (x0..x1).map(move |x| (x, y)))
+                    .map(|(x, y)| {
+                        let ray = rays.through_pixel(x, y);
+                        (ray, tracer.surface_hit(&ray))
+                    })
+                    .collect()
+            }
+        };
+        for (_, hit) in hits {
             let px = match hit {
                 Some(h) => [h.t, h.normal.x, h.normal.y, h.normal.z],
                 None => [f32::INFINITY, 0.0, 0.0, 0.0],

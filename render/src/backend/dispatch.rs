@@ -117,6 +117,21 @@ impl Backend {
         }
     }
 
+    /// [`Backend::render_surface`] under `effects` (their clip box); see
+    /// [`CpuBackend::render_surface_effects`].
+    pub fn render_surface_effects(
+        &self,
+        scene: &PreparedScene,
+        view: &View,
+        effects: &Effects,
+    ) -> SurfaceBuffer {
+        match self {
+            Backend::Cpu(cpu) => cpu.render_surface_effects(scene, view, effects),
+            #[cfg(feature = "gpu")]
+            Backend::Gpu(gpu) => gpu.cpu().render_surface_effects(scene, view, effects),
+        }
+    }
+
     /// Renders one frame with `effects` (its first refinement pass), blocking; see
     /// [`accumulator::render_effects`](crate::backend::accumulator::render_effects).
     pub fn render_effects(

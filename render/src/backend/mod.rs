@@ -14,3 +14,5 @@ pub use cpu::{CpuBackend, PoolError};
 pub use dispatch::Backend;
 #[cfg(test)]
 mod antialias_tests;
+#[cfg(test)]
+mod surface_tests;

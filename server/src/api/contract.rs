@@ -273,7 +273,8 @@ fn view_constraints(config: &Config) -> Vec<Constraint> {
         (
             "RenderRequest",
             "passes",
-            range(1.0, f64::from(config.max_refine_passes)),
+            json!({"minimum": 1.0, "maximum": f64::from(config.max_refine_passes),
+                   "description": "Passes to average; 1 with `format: \"npy\"` (422 otherwise)."}),
         ),
         ("RenderRequest", "time", range(0.0, 1.0e9)),
         (

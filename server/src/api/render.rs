@@ -149,7 +149,14 @@ pub async fn render(
             ImageFormat::Png => Codec::Png,
             ImageFormat::Jpeg => Codec::Jpeg,
             ImageFormat::Npy => {
-                return Ok(frame::surface_npy(job_app.backend(), &state, &view));
+                let backend = job_app.backend();
+                return Ok(frame::surface_npy(
+                    backend,
+                    &state,
+                    &view,
+                    &fx,
+                    Some(&style),
+                ));
             }
         };
         let request = FrameRequest {
@@ -210,6 +217,18 @@ fn output(req: &RenderRequest, config: &crate::config::Config) -> Result<Output,
             "invalid_value",
             format!(
                 "passes {passes} must be in 1..={max_passes} (the server's --max-refine-passes)"
+            ),
+        )
+        .field("passes"));
+    }
+    if passes > 1 && req.format == ImageFormat::Npy {
+        // Distances and normals are not averaged: a mean of depths across an edge is a
+        // surface no pixel sees.
+        return Err(AppError::relational(
+            "invalid_value",
+            format!(
+                "passes {passes}: an npy render is one pass through the pixels' centres (leave \
+                 passes out or give 1)"
             ),
         )
         .field("passes"));

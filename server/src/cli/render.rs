@@ -199,6 +199,12 @@ pub fn run(args: RenderArgs) -> Result<(), String> {
     if !(1..=4096).contains(&args.passes) {
         return Err(format!("--passes {} must be in 1..=4096", args.passes));
     }
+    if args.passes > 1 && matches!(format, Format::Npy) {
+        return Err(format!(
+            "--passes {}: an npy render is one pass through the pixels' centres",
+            args.passes
+        ));
+    }
     let backend = Backend::cpu(args.threads).map_err(|e| e.to_string())?;
     let state = PreparedState {
         prepared: Arc::new(loaded.scene).prepare(),
@@ -218,7 +224,7 @@ pub fn run(args: RenderArgs) -> Result<(), String> {
         Format::Npy => Codec::Png,
     };
     let bytes = if let Format::Npy = format {
-        frame::surface_npy(&backend, &state, &view)
+        frame::surface_npy(&backend, &state, &view, &fx, None)
     } else {
         let request = FrameRequest {
             pass: match args.passes {

@@ -280,3 +280,96 @@ async fn depth_and_normals_round_trip_through_the_api_and_the_cli() {
     .await;
     server.stop().await;
 }
+
+/// The clip box cuts the array as it cuts the image: with the gyroid demo's own box (the
+/// octant `[0, 3]³`, `"clip_box": true`) a pixel whose ray passes clear of the box keeps its
+/// hit and normal, and the pixels whose rays cross it see something else (the surface behind,
+/// or the solid's inner side where the ray leaves the box inside it); the same array on the
+/// server and offline. A viewer's own box around the whole mesh leaves nothing to see. An
+/// averaged npy is refused, naming `passes`, by both. (That the hits are the clipped image's,
+/// and right on an analytic sphere, the render crate's `surface_tests` check.)
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_clip_box_cuts_depth_and_normals() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let server = Server::start(&dir.path().join("store"), &[]).await;
+    let base = server.base.clone();
+    let path = dir.path().join("clipped.npy");
+    call(move || {
+        let render = |extra: &str| {
+            let body = format!(
+                r#"{{"format":"npy","width":{},"height":{}{extra}}}"#,
+                SIZE.0, SIZE.1
+            );
+            super::tets::post_json(&base, "/api/v1/scenes/tets-gyroid/render", &body)
+        };
+        let whole = render("");
+        let clipped = render(r#","effects":{"clip_box":true}"#);
+        assert_eq!(clipped.status, 200, "{}", clipped.text());
+        let (_, full) = read_surface_npy(&whole.body);
+        let (_, cut) = read_surface_npy(&clipped.body);
+        // Whether the pixel's ray meets the octant grown (or shrunk) by `margin`.
+        let meets = |(x, y): (u32, u32), margin: f64| {
+            let (e, d) = pixel_dir(DemoScene::TetGyroid, (x, y));
+            let (lo, hi) = (DVec3::splat(-margin), DVec3::splat(3.0 + margin));
+            let (a, b) = ((lo - e) / d, (hi - e) / d);
+            let (near, far) = (a.min(b).max_element(), a.max(b).min_element());
+            near <= far && far > 0.0
+        };
+        let (mut clear, mut changed, mut crossing) = (0, 0, 0);
+        for (i, (f, c)) in full.chunks_exact(4).zip(cut.chunks_exact(4)).enumerate() {
+            let px = (i as u32 % SIZE.0, i as u32 / SIZE.0);
+            if !meets(px, 1e-3) {
+                assert_eq!(f, c, "{px:?} passes clear of the box");
+                clear += 1;
+            } else if meets(px, -1e-3) && f[0].is_finite() {
+                crossing += 1;
+                changed += usize::from(f != c);
+            }
+        }
+        eprintln!(
+            "tets-gyroid clipped: {clear} pixels clear of the box kept; {changed} of {crossing} \
+             hits through it changed"
+        );
+        assert!(
+            clear > 100 && changed > 50,
+            "{clear} clear, {changed} changed"
+        );
+
+        let (w, h) = (SIZE.0.to_string(), SIZE.1.to_string());
+        let cli = |extra: &[&str]| {
+            Command::new(isoray_binary())
+                .args(["render", "--demo", "tets-gyroid", "--format", "npy"])
+                .args(["--width", &w, "--height", &h, "--effects"])
+                .arg(r#"{"clip_box":true}"#)
+                .args(extra)
+                .arg("-o")
+                .arg(OsStr::new(&path))
+                .output()
+                .expect("isoray runs")
+        };
+        let out = cli(&[]);
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        assert_eq!(std::fs::read(&path).expect("written"), clipped.body);
+
+        let all = r#","effects":{"clip_box":true,"clip":{"min":[-3,-3,-3],"max":[3,3,3]}}"#;
+        let (_, none) = read_surface_npy(&render(all).body);
+        assert!(
+            none.chunks_exact(4)
+                .all(|p| p == [f32::INFINITY, 0.0, 0.0, 0.0]),
+            "a box around the whole mesh cuts all of it"
+        );
+
+        let r = render(r#","passes":4"#);
+        assert_eq!(r.status, 422, "{}", r.text());
+        assert_eq!(json(&r)["field"], "passes", "{}", r.text());
+        let out = cli(&["--passes", "4"]);
+        assert!(!out.status.success());
+        assert!(String::from_utf8_lossy(&out.stderr).contains("--passes 4"));
+    })
+    .await;
+    server.stop().await;
+}
