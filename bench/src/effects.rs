@@ -248,12 +248,7 @@ pub fn run(args: EffectsArgs) -> Result<(), String> {
     let mut unused = Vec::new();
     for &demo in &demos {
         let state = demo.state_at(1.0);
-        let view = View {
-            width: args.width,
-            height: args.height,
-            camera: demo.default_camera(),
-            isovalue: demo.default_isovalue(),
-        };
+        let view = demo.default_view(args.width, args.height);
         let opaque = Arc::new(table_look(demo, &state, false)).prepare();
         let transparent = Arc::new(table_look(demo, &state, true)).prepare();
         for (name, effects) in configs() {

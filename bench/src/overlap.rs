@@ -36,7 +36,7 @@ use crate::common::{median, serve_in_process, write_json, Machine};
 use crate::stream::{demo, parse_size};
 use futures_util::{SinkExt, StreamExt};
 use isoray_protocol::{FrameHeader, ServerMessage, FLAG_STILL};
-use isoray_render::{Backend, View};
+use isoray_render::Backend;
 use isoray_server::Config;
 use serde::Serialize;
 use std::path::PathBuf;
@@ -393,12 +393,7 @@ fn alone(
         .num_threads(threads)
         .build()
         .map_err(|e| e.to_string())?;
-    let view = View {
-        width,
-        height,
-        camera: scene.default_camera(),
-        isovalue: scene.default_isovalue(),
-    };
+    let view = scene.default_view(width, height);
     let mut effects = scene.lighting().effects;
     effects.shadows |= shadows;
     let (mut build, mut trace, mut encode) = (Vec::new(), Vec::new(), Vec::new());

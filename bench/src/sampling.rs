@@ -187,12 +187,7 @@ pub fn run(args: SamplingArgs) -> Result<(), String> {
         let id = demo.id();
         let state = demo.state_at(1.0);
         let scene = Arc::new(table_look(demo, &state, false)).prepare();
-        let view = View {
-            width: args.width,
-            height: args.height,
-            camera: demo.default_camera(),
-            isovalue: demo.default_isovalue(),
-        };
+        let view = demo.default_view(args.width, args.height);
         for (effect, effects) in effects() {
             let plan = plan_for(&scene, &effects);
             if !plan.is_stochastic() {

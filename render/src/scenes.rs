@@ -21,6 +21,7 @@ use crate::kinds::metaballs::scene::{Metaball, MetaballScene};
 use crate::kinds::surfels::demo::SurfelDemoKind;
 use crate::scene::{Geometry, Scene};
 use crate::shade::Lighting;
+use crate::view::View;
 use glam::{Quat, Vec3};
 use std::path::Path;
 use std::sync::OnceLock;
@@ -238,6 +239,17 @@ impl DemoScene {
             DemoScene::SurfelBalls => demo_surfels::camera(SurfelDemoKind::Balls),
             DemoScene::SurfelImpact => demo_surfels::camera(SurfelDemoKind::Impact),
             DemoScene::SurfelHeads => demo_surfels::camera(SurfelDemoKind::Heads),
+        }
+    }
+
+    /// A `width` × `height` view from [`DemoScene::default_camera`] at
+    /// [`DemoScene::default_isovalue`]: what a viewer first sees.
+    pub fn default_view(self, width: u32, height: u32) -> View {
+        View {
+            width,
+            height,
+            camera: self.default_camera(),
+            isovalue: self.default_isovalue(),
         }
     }
 

@@ -54,12 +54,7 @@ fn a_resting_view_averages_its_pixels() {
     let backend = CpuBackend::new(2).expect("pool");
     let demo = DemoScene::Blobs;
     let scene = Arc::new(demo.state_at(1.0)).prepare();
-    let view = View {
-        width: 64,
-        height: 48,
-        camera: demo.default_camera(),
-        isovalue: demo.default_isovalue(),
-    };
+    let view = demo.default_view(64, 48);
     let refined = || {
         let mut acc = Accumulator::new(64);
         acc.antialias = 16;
@@ -127,12 +122,7 @@ fn antialiasing_sets_the_fewest_passes() {
     let backend = CpuBackend::new(2).expect("pool");
     let demo = DemoScene::Glass;
     let scene = Arc::new(demo.state_at(1.0)).prepare();
-    let view = View {
-        width: 32,
-        height: 24,
-        camera: demo.default_camera(),
-        isovalue: demo.default_isovalue(),
-    };
+    let view = demo.default_view(32, 24);
     let soft = Effects {
         shadows: true,
         soft_shadows: true,

@@ -391,12 +391,7 @@ mod tests {
                 scene.lighting_in_frame().floor.is_some(),
                 "{demo:?} has a floor"
             );
-            let view = View {
-                width: 96,
-                height: 72,
-                camera: demo.default_camera(),
-                isovalue: demo.default_isovalue(),
-            };
+            let view = demo.default_view(96, 72);
             assert!(accumulator::plan_for(&scene, &Effects::OFF).is_primary_only());
             let fast = backend.render_effects(&scene, &view, &Effects::OFF).0;
             let pass = backend.trace_pass(&scene, &view, &EffectsPlan::PRIMARY_ONLY, 0);
@@ -514,12 +509,7 @@ mod tests {
         let (mut tiles_used, mut batched) = (0, 0);
         for demo in demos {
             let scene = Arc::new(demo.state_at(0.5)).prepare();
-            let view = View {
-                width: 40,
-                height: 28,
-                camera: demo.default_camera(),
-                isovalue: demo.default_isovalue(),
-            };
+            let view = demo.default_view(40, 28);
             for effects in [shadows, more] {
                 let plan = accumulator::plan_for(&scene, &effects);
                 let tracer = Tracer::new(&scene, &plan, view.isovalue, 0.0);
@@ -572,12 +562,7 @@ mod tests {
                 ..options
             };
             let (wide, node_by_node) = (Arc::clone(&state).prepare(), state.prepare_with(binary));
-            let view = View {
-                width: 48,
-                height: 32,
-                camera: demo.default_camera(),
-                isovalue: demo.default_isovalue(),
-            };
+            let view = demo.default_view(48, 32);
             for effects in [hard, all] {
                 let plan = accumulator::plan_for(&wide, &effects);
                 let a = trace_pass(&wide, &view, &plan, 0, true);

@@ -6,7 +6,7 @@
 use super::tets::post_json;
 use super::*;
 use isoray_render::scenes::DemoScene;
-use isoray_render::{Accumulator, CpuBackend, Effects, View};
+use isoray_render::{Accumulator, CpuBackend, Effects};
 use std::sync::Arc;
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -34,12 +34,7 @@ async fn averaged_passes_are_the_engines_antialiased_mean() {
         // The engine's own accumulation of the same view.
         let demo = DemoScene::Blobs;
         let scene = Arc::new(demo.state_at(1.0)).prepare();
-        let view = View {
-            width: 80,
-            height: 60,
-            camera: demo.default_camera(),
-            isovalue: demo.default_isovalue(),
-        };
+        let view = demo.default_view(80, 60);
         let backend = CpuBackend::new(2).expect("pool");
         let mut accumulator = Accumulator::fixed_passes(8);
         let mean = backend.refine_until_converged(&scene, &view, &Effects::OFF, &mut accumulator);

@@ -46,12 +46,7 @@ pub(super) fn gpu() -> GpuBackend {
 pub(super) fn setup(demo: DemoScene) -> (PreparedScene, View) {
     let state = Arc::new(demo.state_at(1.0));
     let scene = state.prepare();
-    let view = View {
-        width: WIDTH,
-        height: HEIGHT,
-        camera: demo.default_camera(),
-        isovalue: demo.default_isovalue(),
-    };
+    let view = demo.default_view(WIDTH, HEIGHT);
     (scene, view)
 }
 

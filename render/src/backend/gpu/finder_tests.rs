@@ -15,7 +15,6 @@ use crate::framebuffer::Framebuffer;
 use crate::kinds::metaballs::engine::PrepareOptions;
 use crate::kinds::metaballs::roots::RootFinder;
 use crate::scenes::DemoScene;
-use crate::view::View;
 use std::sync::Arc;
 
 /// Largest depth difference allowed, world units: each side stops within the states' root
@@ -56,12 +55,7 @@ fn each_gpu_finder_finds_the_cpu_finders_depths() {
     };
     for demo in [DemoScene::Blobs, DemoScene::Shells] {
         let state = Arc::new(demo.state_at(1.0));
-        let view = View {
-            width: 96,
-            height: 72,
-            camera: demo.default_camera(),
-            isovalue: demo.default_isovalue(),
-        };
+        let view = demo.default_view(96, 72);
         // Every finder at its default step, and the secant method at the paper's (centre
         // projections only: an infinite step, which the kernel gets as 0).
         let steps = RootFinder::ALL

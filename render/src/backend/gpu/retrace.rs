@@ -63,12 +63,7 @@ mod tests {
     fn marked_pixels_get_the_cpu_backends_pixels() {
         let demo = DemoScene::Glass;
         let scene = Arc::new(demo.state_at(1.0)).prepare();
-        let view = View {
-            width: 24,
-            height: 18,
-            camera: demo.default_camera(),
-            isovalue: demo.default_isovalue(),
-        };
+        let view = demo.default_view(24, 18);
         let plan = accumulator::plan_for(&scene, &scene.lighting().effects);
         let pass = 3;
         let cpu = CpuBackend::new(1)

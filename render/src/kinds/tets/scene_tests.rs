@@ -451,15 +451,10 @@ fn normals_point_down_the_gradient() {
 #[test]
 fn the_demo_renders_the_same_on_one_and_two_threads() {
     use crate::scenes::DemoScene;
-    use crate::{CpuBackend, View};
+    use crate::CpuBackend;
     let demo = DemoScene::TetGyroid;
     let scene = Arc::new(demo.state_at(0.75)).prepare();
-    let view = View {
-        width: 41,
-        height: 29,
-        camera: demo.default_camera(),
-        isovalue: demo.default_isovalue(),
-    };
+    let view = demo.default_view(41, 29);
     let one = CpuBackend::new(1).expect("pool").render(&scene, &view);
     let two = CpuBackend::new(2).expect("pool").render(&scene, &view);
     assert_eq!(one, two);
@@ -479,15 +474,10 @@ fn the_server_path_traces_tiles_as_packets_with_the_same_image() {
     use crate::integrator::trace_primary;
     use crate::scenes::DemoScene;
     use crate::shade::linear_to_srgb8;
-    use crate::{CpuBackend, View};
+    use crate::CpuBackend;
     let demo = DemoScene::TetGyroid;
     let scene = Arc::new(demo.state_at(2.5)).prepare();
-    let view = View {
-        width: 53,
-        height: 37,
-        camera: demo.default_camera(),
-        isovalue: demo.default_isovalue(),
-    };
+    let view = demo.default_view(53, 37);
     let fb = CpuBackend::new(2).expect("pool").render(&scene, &view);
     let rays = view.camera.rays(view.width, view.height);
     for y in 0..view.height {
@@ -516,15 +506,10 @@ fn the_effects_layer_covers_tets() {
     // rays traced, deterministically.
     use crate::effects::{Effects, RayKind};
     use crate::scenes::DemoScene;
-    use crate::{CpuBackend, View};
+    use crate::CpuBackend;
     let demo = DemoScene::TetGyroid;
     let scene = Arc::new(demo.state_at(1.0)).prepare();
-    let view = View {
-        width: 48,
-        height: 36,
-        camera: demo.default_camera(),
-        isovalue: demo.default_isovalue(),
-    };
+    let view = demo.default_view(48, 36);
     let one = CpuBackend::new(1).expect("pool");
     let two = CpuBackend::new(2).expect("pool");
     let (plain, plain_rays) = one.render_effects(&scene, &view, &Effects::OFF);

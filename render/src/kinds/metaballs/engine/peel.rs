@@ -371,7 +371,7 @@ mod tests {
         // and different from the opaque scene's.
         use crate::effects::Effects;
         use crate::shade::MaterialGroup;
-        use crate::{CpuBackend, View};
+        use crate::CpuBackend;
         use std::sync::Arc;
         let backend = CpuBackend::new(2).expect("pool");
         let effects = Effects {
@@ -395,12 +395,7 @@ mod tests {
             });
             assert!(counted.lighting.uniform_opacity().is_some());
             assert!(shaded.lighting.uniform_opacity().is_none());
-            let view = View {
-                width: 96,
-                height: 72,
-                camera: demo.default_camera(),
-                isovalue: demo.default_isovalue(),
-            };
+            let view = demo.default_view(96, 72);
             let render = |s: crate::scene::Scene| {
                 let (fb, _) = backend.render_effects(&Arc::new(s).prepare(), &view, &effects);
                 fb.rgb
