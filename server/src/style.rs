@@ -284,6 +284,44 @@ pub fn refuse_without_field(changes: &EffectChanges) -> Result<(), EffectError> 
     Ok(())
 }
 
+/// What a one-shot image's look starts from: the scene's lighting and its field.
+pub struct SceneLook<'a> {
+    pub lighting: &'a Lighting,
+    /// The scene has a scalar field (not a surfel scene).
+    pub has_field: bool,
+    pub isovalue_range: (f32, f32),
+    /// The isovalue slider's range (a colour map's default range).
+    pub slider: (f32, f32),
+}
+
+/// The effects and the viewer's look of a one-shot image (the render endpoint's `effects`,
+/// `isoray render --effects`): the scene's own effects within `limits` with `changes` applied,
+/// and the style their `clip`, `surfaces` and `color_map` set, as a session's `effects`
+/// message sets both; the first invalid value is the error.
+pub fn one_shot(
+    scene: &SceneLook,
+    changes: Option<&EffectChanges>,
+    limits: &crate::effects::EffectLimits,
+) -> Result<(isoray_render::Effects, Style), EffectError> {
+    let fx = crate::effects::clamp(&scene.lighting.effects, limits);
+    let Some(changes) = changes else {
+        return Ok((fx, Style::default()));
+    };
+    if !scene.has_field {
+        refuse_without_field(changes)?;
+    }
+    let fx = crate::effects::apply(&fx, changes, limits)?;
+    let own = scene.lighting.isosurfaces.len();
+    let style = apply(
+        &Style::default(),
+        changes,
+        scene.isovalue_range,
+        scene.slider,
+        own,
+    )?;
+    Ok((fx, style))
+}
+
 /// Refuses the viewer-only fields in a scene description's `lighting.effects`, naming the
 /// scene's own field for each.
 pub fn refuse_in_scene(changes: &EffectChanges) -> Result<(), EffectError> {

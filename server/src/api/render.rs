@@ -113,25 +113,20 @@ pub async fn render(
         );
     }
     let limits = crate::effects::EffectLimits::from_config(app.config());
-    let mut fx = crate::effects::clamp(&entry.lighting().effects, &limits);
-    let mut style = crate::style::Style::default();
-    if let Some(changes) = &req.effects {
-        let bad = |e: crate::effects::EffectError| {
+    let scene_look = crate::style::SceneLook {
+        lighting: entry.lighting(),
+        has_field: field,
+        isovalue_range: entry.isovalue_range(),
+        slider: entry.demo().isovalue_slider(),
+    };
+    let (fx, style) =
+        crate::style::one_shot(&scene_look, req.effects.as_ref(), &limits).map_err(|e| {
             let field = format!("effects.{}", e.field);
             match e.relational {
                 true => AppError::relational("invalid_value", e.message).field(field),
                 false => AppError::bad_request("invalid_value", e.message).field(field),
             }
-        };
-        if !field {
-            crate::style::refuse_without_field(changes).map_err(bad)?;
-        }
-        fx = crate::effects::apply(&fx, changes, &limits).map_err(bad)?;
-        let slider = entry.demo().isovalue_slider();
-        let own = entry.lighting().isosurfaces.len();
-        style = crate::style::apply(&style, changes, entry.isovalue_range(), slider, own)
-            .map_err(bad)?;
-    }
+        })?;
     let view = View {
         width,
         height,

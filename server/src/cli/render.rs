@@ -9,17 +9,19 @@ use isoray_protocol::api::{ApiCamera, CreateScene, JsonStep};
 use isoray_protocol::effects::EffectChanges;
 use isoray_protocol::Codec;
 use isoray_render::kinds::metaballs::pdb::{is_molecule, read_models, MoleculeOptions};
+use isoray_render::scene::Geometry;
 use isoray_render::scenes::DemoScene;
 use isoray_render::{Backend, Camera, Scene, View};
 use isoray_server::api::client::npy_header_f32;
 use isoray_server::body::BodyReader;
-use isoray_server::effects::{self, EffectLimits};
+use isoray_server::effects::EffectLimits;
 use isoray_server::frame::{self, FrameRequest, Pass};
 use isoray_server::kinds::convert;
 use isoray_server::kinds::SceneSetup;
 use isoray_server::scenes::prepared::PreparedState;
 use isoray_server::store::format::{verify_payload, StepHeader, HEADER_LEN};
 use isoray_server::store::ingest::{ingest_json, ingest_npy, ingest_raw, IngestLimits, Target};
+use isoray_server::style::{self, SceneLook};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
@@ -71,8 +73,8 @@ pub struct RenderArgs {
     /// Vertical field of view in degrees.
     #[arg(long)]
     pub fov: Option<f64>,
-    /// Effect changes over the scene's own, as JSON (as in the `effects` websocket message),
-    /// e.g. `{"shadows": true}`.
+    /// Effect changes over the scene's own and a viewer's look (`clip`, `surfaces`,
+    /// `color_map`), as JSON (as in the `effects` websocket message), e.g. `{"shadows": true}`.
     #[arg(long)]
     pub effects: Option<String>,
     /// JPEG quality, 1–100.
@@ -101,6 +103,8 @@ struct Loaded {
     scene: Scene,
     camera: Camera,
     isovalue: f32,
+    /// The isovalue slider's range (a colour map's default range).
+    slider: (f32, f32),
 }
 
 /// Runs the command; the error is what to print.
@@ -125,6 +129,7 @@ pub fn run(args: RenderArgs) -> Result<(), String> {
                 scene: demo.state_at(args.time),
                 camera: demo.default_camera(),
                 isovalue: demo.default_isovalue(),
+                slider: demo.isovalue_slider(),
             }
         }
         None => {
@@ -164,14 +169,18 @@ pub fn run(args: RenderArgs) -> Result<(), String> {
             return Err(format!("{name} {v} must be in 1..=16384"));
         }
     }
-    let limits = EffectLimits::ENGINE;
-    let mut fx = effects::clamp(&loaded.scene.lighting.effects, &limits);
-    if let Some(text) = &args.effects {
-        let changes: EffectChanges =
-            serde_json::from_str(text).map_err(|e| format!("--effects: {e}"))?;
-        fx = effects::apply(&fx, &changes, &limits)
-            .map_err(|e| format!("--effects: {}: {}", e.field, e.message))?;
-    }
+    let changes: Option<EffectChanges> = match &args.effects {
+        Some(text) => Some(serde_json::from_str(text).map_err(|e| format!("--effects: {e}"))?),
+        None => None,
+    };
+    let scene_look = SceneLook {
+        lighting: &loaded.scene.lighting,
+        has_field: !matches!(loaded.scene.geometry, Geometry::Surfels(_)),
+        isovalue_range: loaded.scene.isovalue_range(),
+        slider: loaded.slider,
+    };
+    let (fx, style) = style::one_shot(&scene_look, changes.as_ref(), &EffectLimits::ENGINE)
+        .map_err(|e| format!("--effects: {}: {}", e.field, e.message))?;
     let extension = args
         .output
         .extension()
@@ -224,9 +233,10 @@ pub fn run(args: RenderArgs) -> Result<(), String> {
         Format::Npy => Codec::Png,
     };
     let bytes = if let Format::Npy = format {
-        frame::surface_npy(&backend, &state, &view, &fx, None)
+        frame::surface_npy(&backend, &state, &view, &fx, Some(&style))
     } else {
         let request = FrameRequest {
+            style: Some(&style),
             pass: match args.passes {
                 1 => Pass::Single,
                 n => Pass::Accumulate(n),
@@ -349,5 +359,6 @@ fn load(spec_path: Option<&Path>, step_path: &Path, model: usize) -> Result<Load
         scene: setup.scene(Some((columns, &payload))),
         camera: setup.camera,
         isovalue: setup.isovalue,
+        slider: setup.slider,
     })
 }

@@ -285,7 +285,8 @@ async fn depth_and_normals_round_trip_through_the_api_and_the_cli() {
 /// octant `[0, 3]³`, `"clip_box": true`) a pixel whose ray passes clear of the box keeps its
 /// hit and normal, and the pixels whose rays cross it see something else (the surface behind,
 /// or the solid's inner side where the ray leaves the box inside it); the same array on the
-/// server and offline. A viewer's own box around the whole mesh leaves nothing to see. An
+/// server and offline. A viewer's own box around the whole mesh leaves nothing to see, on
+/// the server and offline. An
 /// averaged npy is refused, naming `passes`, by both. (That the hits are the clipped image's,
 /// and right on an analytic sphere, the render crate's `surface_tests` check.)
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -335,40 +336,45 @@ async fn the_clip_box_cuts_depth_and_normals() {
             "{clear} clear, {changed} changed"
         );
 
+        // `isoray render` with `effects`, then `extra`: the array it wrote, or its error.
         let (w, h) = (SIZE.0.to_string(), SIZE.1.to_string());
-        let cli = |extra: &[&str]| {
-            Command::new(isoray_binary())
+        let cli = |effects: &str, extra: &[&str]| {
+            let out = Command::new(isoray_binary())
                 .args(["render", "--demo", "tets-gyroid", "--format", "npy"])
-                .args(["--width", &w, "--height", &h, "--effects"])
-                .arg(r#"{"clip_box":true}"#)
+                .args(["--width", &w, "--height", &h, "--effects", effects])
                 .args(extra)
                 .arg("-o")
                 .arg(OsStr::new(&path))
                 .output()
-                .expect("isoray runs")
+                .expect("isoray runs");
+            match out.status.success() {
+                true => Ok(std::fs::read(&path).expect("written")),
+                false => Err(String::from_utf8_lossy(&out.stderr).into_owned()),
+            }
         };
-        let out = cli(&[]);
         assert!(
-            out.status.success(),
-            "{}",
-            String::from_utf8_lossy(&out.stderr)
+            cli(r#"{"clip_box":true}"#, &[]) == Ok(clipped.body),
+            "the CLI's clipped array is the server's"
         );
-        assert_eq!(std::fs::read(&path).expect("written"), clipped.body);
 
-        let all = r#","effects":{"clip_box":true,"clip":{"min":[-3,-3,-3],"max":[3,3,3]}}"#;
-        let (_, none) = read_surface_npy(&render(all).body);
+        let whole_box = r#"{"clip_box":true,"clip":{"min":[-3,-3,-3],"max":[3,3,3]}}"#;
+        let served = render(&format!(r#","effects":{whole_box}"#)).body;
+        let (_, none) = read_surface_npy(&served);
         assert!(
             none.chunks_exact(4)
                 .all(|p| p == [f32::INFINITY, 0.0, 0.0, 0.0]),
             "a box around the whole mesh cuts all of it"
         );
+        assert!(
+            cli(whole_box, &[]) == Ok(served),
+            "the viewer's box offline too"
+        );
 
         let r = render(r#","passes":4"#);
         assert_eq!(r.status, 422, "{}", r.text());
         assert_eq!(json(&r)["field"], "passes", "{}", r.text());
-        let out = cli(&["--passes", "4"]);
-        assert!(!out.status.success());
-        assert!(String::from_utf8_lossy(&out.stderr).contains("--passes 4"));
+        let refused = cli(r#"{"clip_box":true}"#, &["--passes", "4"]).expect_err("refused");
+        assert!(refused.contains("--passes 4"), "{refused}");
     })
     .await;
     server.stop().await;

@@ -2,7 +2,8 @@
 //! a colour map recolours a tet scene's isosurfaces, a clip box and an added isosurface change
 //! the image, a look that changes nothing leaves the bytes as they were, bad values are 400s
 //! naming the field, a surfel scene (no field) refuses them, and a scene description refuses
-//! them. The scene description endpoint reports the scene's bounds.
+//! them; `isoray render --effects` draws the same look byte for byte. The scene description
+//! endpoint reports the scene's bounds.
 
 use super::tets::post_json;
 use super::*;
@@ -34,6 +35,7 @@ async fn a_viewers_look_through_the_render_endpoint_and_the_scene_bounds() {
     let dir = tempfile::tempdir().expect("temp dir");
     let server = Server::start(dir.path(), &[]).await;
     let base = server.base.clone();
+    let offline = dir.path().join("look.png");
     call(move || {
         for id in ["tets-gyroid", "blobs"] {
             let scene = json(&get(&base, &format!("/api/v1/scenes/{id}")));
@@ -113,6 +115,24 @@ async fn a_viewers_look_through_the_render_endpoint_and_the_scene_bounds() {
             assert_eq!(r.status, status, "{effects}: {}", r.text());
             assert_eq!(json(&r)["field"], field, "{effects}: {}", r.text());
         }
+
+        // `isoray render --effects` takes the same look (the scene's effects and the viewer's
+        // colour map and clip box), byte for byte.
+        let look = r#"{"color_map":{"name":"viridis","range":[-0.05,2]},"clip_box":true,"clip":{"min":[0,-3,0],"max":[3,3,3]}}"#;
+        let served = render(&base, look);
+        assert_eq!(served.status, 200, "{}", served.text());
+        assert_ne!(served.body, render(&base, "{}").body, "the look changes the image");
+        let out = Command::new(isoray_binary())
+            .args(["render", "--demo", "tets-gyroid", "--time", "0", "--width", "80"])
+            .args(["--height", "60", "--effects", look, "-o"])
+            .arg(&offline)
+            .output()
+            .expect("isoray runs");
+        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+        assert!(
+            std::fs::read(&offline).expect("written") == served.body,
+            "isoray render --effects draws the served look"
+        );
 
         // A surfel scene has no field: an isovalue, further isosurfaces and a colour map are
         // 422s naming them; its effects and the look's resets render.
