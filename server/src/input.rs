@@ -231,19 +231,11 @@ pub fn apply(
             };
         }
         ClientMessage::Isovalue(IsovalueInput { value, .. }) => {
-            if !limits.scalar_field {
-                return fail(
-                    "isovalue: a surfel scene has no scalar field to take an isovalue of".into(),
-                );
+            let range = limits.isovalue_range;
+            match crate::kinds::convert::isovalue(*value, range, limits.scalar_field, "isovalue") {
+                Ok(v) => settings.isovalue = v,
+                Err(e) => return fail(e.message),
             }
-            let (lo, hi) = limits.isovalue_range;
-            let value = *value;
-            if !(value.is_finite() && value > lo as f64 && value < hi as f64) {
-                return fail(format!(
-                    "isovalue {value} is outside the scene's range ({lo}, {hi})"
-                ));
-            }
-            settings.isovalue = value as f32;
         }
         ClientMessage::Resize(ResizeInput { width, height, .. }) => {
             let (width, height, max) = (*width, *height, limits.max_size);

@@ -62,31 +62,7 @@ pub async fn render(
     };
     let field = entry.kind().has_field();
     let isovalue = match req.isovalue {
-        Some(_) if !field => {
-            return Err(AppError::relational(
-                "invalid_value",
-                "isovalue: a surfel scene has no scalar field to take an isovalue of",
-            )
-            .field("isovalue"))
-        }
-        Some(v) => {
-            let (lo, hi) = entry.isovalue_range();
-            if !v.is_finite() {
-                return Err(AppError::bad_request(
-                    "invalid_value",
-                    format!("isovalue {v} is not a finite number"),
-                )
-                .field("isovalue"));
-            }
-            if !(v > f64::from(lo) && v < f64::from(hi)) {
-                return Err(AppError::relational(
-                    "invalid_value",
-                    format!("isovalue {v} is outside the scene's isovalue range ({lo}, {hi})"),
-                )
-                .field("isovalue"));
-            }
-            v as f32
-        }
+        Some(v) => convert::isovalue(v, entry.isovalue_range(), field, "isovalue")?,
         None => look.default_isovalue(),
     };
     let step = match (entry.stored_scene(), req.step) {

@@ -61,8 +61,8 @@ pub struct RenderArgs {
     pub width: u32,
     #[arg(long, default_value_t = 480)]
     pub height: u32,
-    /// Isovalue (default: the scene's).
-    #[arg(long)]
+    /// Isovalue, inside the scene's range (default: the scene's).
+    #[arg(long, allow_hyphen_values = true)]
     pub isovalue: Option<f64>,
     /// Camera position `x,y,z` (default: the scene's camera).
     #[arg(long, value_parser = parse_vec3, allow_hyphen_values = true)]
@@ -159,9 +159,10 @@ pub fn run(args: RenderArgs) -> Result<(), String> {
     } else {
         loaded.camera
     };
+    let has_field = !matches!(loaded.scene.geometry, Geometry::Surfels(_));
     let isovalue = match args.isovalue {
-        Some(v) if v.is_finite() && v > 0.0 => v as f32,
-        Some(v) => return Err(format!("--isovalue {v} must be a positive number")),
+        Some(v) => convert::isovalue(v, loaded.scene.isovalue_range(), has_field, "--isovalue")
+            .map_err(|e| e.message)?,
         None => loaded.isovalue,
     };
     for (name, v) in [("--width", args.width), ("--height", args.height)] {
@@ -175,7 +176,7 @@ pub fn run(args: RenderArgs) -> Result<(), String> {
     };
     let scene_look = SceneLook {
         lighting: &loaded.scene.lighting,
-        has_field: !matches!(loaded.scene.geometry, Geometry::Surfels(_)),
+        has_field,
         isovalue_range: loaded.scene.isovalue_range(),
         slider: loaded.slider,
     };

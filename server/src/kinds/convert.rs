@@ -36,6 +36,41 @@ pub fn to_f32(v: f64) -> f32 {
     }
 }
 
+/// A viewer's isovalue `v` (the websocket's `isovalue` input, the render endpoint's and
+/// `isoray render`'s `isovalue`) for a scene whose meaningful isovalues are the open `range`:
+/// a finite number inside it (400 when not a number at all, 422 outside the range), and
+/// refused for a scene without a scalar field (a surfel scene, 422).
+pub fn isovalue(
+    v: f64,
+    range: (f32, f32),
+    scalar_field: bool,
+    field: &str,
+) -> Result<f32, KindError> {
+    if !scalar_field {
+        return Err(KindError::relational(
+            "invalid_value",
+            format!("{field}: a surfel scene has no scalar field to take an isovalue of"),
+        )
+        .field(field));
+    }
+    if !v.is_finite() {
+        return Err(KindError::invalid(
+            "invalid_value",
+            format!("{field} {v} is not a finite number"),
+        )
+        .field(field));
+    }
+    let (lo, hi) = range;
+    if !(v > f64::from(lo) && v < f64::from(hi)) {
+        return Err(KindError::relational(
+            "invalid_value",
+            format!("{field} {v} is outside the scene's range ({lo}, {hi})"),
+        )
+        .field(field));
+    }
+    Ok(v as f32)
+}
+
 pub fn vec3(v: [f64; 3], field: &str) -> Result<Vec3, KindError> {
     Ok(Vec3::new(
         finite(v[0], &format!("{field}[0]"))?,

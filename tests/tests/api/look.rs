@@ -175,3 +175,58 @@ async fn a_viewers_look_through_the_render_endpoint_and_the_scene_bounds() {
     .await;
     server.stop().await;
 }
+
+/// An isovalue is checked alike by the render endpoint and `isoray render` (and the
+/// websocket, `e2e::bad_input`): a tet scene's negative isovalue renders the same image on
+/// both, one outside the scene's range is refused by both naming the range, and a surfel
+/// scene, which has no field, refuses any.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn an_isovalue_is_checked_alike_by_the_endpoint_and_the_cli() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let server = Server::start(dir.path(), &[]).await;
+    let base = server.base.clone();
+    let offline = dir.path().join("iso.png");
+    call(move || {
+        let cli = |demo: &str, isovalue: &str| {
+            let out = Command::new(isoray_binary())
+                .args(["render", "--demo", demo, "--width", "80", "--height", "60"])
+                .args(["--isovalue", isovalue, "-o"])
+                .arg(&offline)
+                .output()
+                .expect("isoray runs");
+            match out.status.success() {
+                true => Ok(std::fs::read(&offline).expect("written")),
+                false => Err(String::from_utf8_lossy(&out.stderr).into_owned()),
+            }
+        };
+        let served = post_json(
+            &base,
+            "/api/v1/scenes/tets-gyroid/render",
+            r#"{"width":80,"height":60,"isovalue":-0.3}"#,
+        );
+        assert_eq!(served.status, 200, "{}", served.text());
+        assert!(
+            cli("tets-gyroid", "-0.3") == Ok(served.body),
+            "the same image offline"
+        );
+
+        let r = post_json(
+            &base,
+            "/api/v1/scenes/tets-gyroid/render",
+            r#"{"width":80,"height":60,"isovalue":1e6}"#,
+        );
+        assert_eq!(r.status, 422, "{}", r.text());
+        assert_eq!(json(&r)["field"], "isovalue", "{}", r.text());
+        assert!(
+            r.text().contains("outside the scene's range"),
+            "{}",
+            r.text()
+        );
+        let refused = cli("tets-gyroid", "1e6").expect_err("out of range");
+        assert!(refused.contains("outside the scene's range"), "{refused}");
+        let refused = cli("surfel-heads", "0.5").expect_err("no field");
+        assert!(refused.contains("no scalar field"), "{refused}");
+    })
+    .await;
+    server.stop().await;
+}
