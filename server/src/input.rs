@@ -254,7 +254,7 @@ pub fn apply(
         }
         ClientMessage::Time(TimeInput { time, .. }) => match *time {
             None => settings.pinned_time = None,
-            Some(t) if t.is_finite() && (0.0..=1.0e9).contains(&t) => {
+            Some(t) if t.is_finite() && (0.0..=crate::kinds::convert::MAX_TIME).contains(&t) => {
                 settings.pinned_time = Some(t)
             }
             Some(t) => {

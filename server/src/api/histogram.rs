@@ -49,15 +49,7 @@ fn parse_query(query: &str) -> Result<Query, AppError> {
         };
         match k {
             "time" => {
-                let t = number("time")?;
-                if !(0.0..=1.0e9).contains(&t) {
-                    return Err(AppError::bad_request(
-                        "invalid_value",
-                        format!("time {t} must be in [0, 1e9]"),
-                    )
-                    .field("time"));
-                }
-                q.time = Some(t);
+                q.time = Some(crate::kinds::convert::scene_time(number("time")?, "time")?);
             }
             "bins" => {
                 q.bins = v

@@ -82,12 +82,7 @@ pub async fn render(
         }
         (None, None) => None,
     };
-    let time = req.time.unwrap_or(0.0);
-    if !(time.is_finite() && (0.0..=1.0e9).contains(&time)) {
-        return Err(
-            AppError::bad_request("invalid_value", "time must be in [0, 1e9]").field("time"),
-        );
-    }
+    let time = convert::scene_time(req.time.unwrap_or(0.0), "time")?;
     let limits = crate::effects::EffectLimits::from_config(app.config());
     let scene_look = crate::style::SceneLook {
         lighting: entry.lighting(),

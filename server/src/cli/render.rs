@@ -47,7 +47,7 @@ pub struct RenderArgs {
     /// Which model of a molecule file to show (the first is 1).
     #[arg(long, default_value_t = 1, conflicts_with = "demo")]
     pub model: usize,
-    /// Time of the demo scene, seconds.
+    /// Time of the demo scene, seconds, in [0, 1e9].
     #[arg(long, default_value_t = 0.0, requires = "demo")]
     pub time: f64,
     /// Where to write the image: `.png`, `.jpg` or `.jpeg` (or `.npy`).
@@ -119,12 +119,7 @@ pub fn run(args: RenderArgs) -> Result<(), String> {
                     let ids: Vec<&str> = DemoScene::ALL.iter().map(|d| d.id()).collect();
                     format!("no demo `{id}`; the demos are {}", ids.join(", "))
                 })?;
-            if !(args.time.is_finite() && args.time >= 0.0) {
-                return Err(format!(
-                    "--time {} must be a non-negative number",
-                    args.time
-                ));
-            }
+            convert::scene_time(args.time, "--time").map_err(|e| e.message)?;
             Loaded {
                 scene: demo.state_at(args.time),
                 camera: demo.default_camera(),

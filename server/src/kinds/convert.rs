@@ -36,6 +36,23 @@ pub fn to_f32(v: f64) -> f32 {
     }
 }
 
+/// The latest time in seconds a viewer may ask a scene for (a built-in scene's generators
+/// stay finite up to it; far beyond, their `f32` phases overflow).
+pub const MAX_TIME: f64 = 1.0e9;
+
+/// A time `t` in seconds asked of a scene (the render endpoint's and histogram's `time`,
+/// `isoray render --time`): a number in `[0, MAX_TIME]` (400 otherwise).
+pub fn scene_time(t: f64, field: &str) -> Result<f64, KindError> {
+    if t.is_finite() && (0.0..=MAX_TIME).contains(&t) {
+        Ok(t)
+    } else {
+        Err(
+            KindError::invalid("invalid_value", format!("{field} {t} must be in [0, 1e9]"))
+                .field(field),
+        )
+    }
+}
+
 /// A viewer's isovalue `v` (the websocket's `isovalue` input, the render endpoint's and
 /// `isoray render`'s `isovalue`) for a scene whose meaningful isovalues are the open `range`:
 /// a finite number inside it (400 when not a number at all, 422 outside the range), and

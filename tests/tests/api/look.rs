@@ -176,21 +176,23 @@ async fn a_viewers_look_through_the_render_endpoint_and_the_scene_bounds() {
     server.stop().await;
 }
 
-/// An isovalue is checked alike by the render endpoint and `isoray render` (and the
-/// websocket, `e2e::bad_input`): a tet scene's negative isovalue renders the same image on
-/// both, one outside the scene's range is refused by both naming the range, and a surfel
-/// scene, which has no field, refuses any.
+/// An isovalue and a time are checked alike by the render endpoint and `isoray render` (and
+/// the websocket, `e2e::bad_input`): a tet scene's negative isovalue renders the same image on
+/// both, one outside the scene's range is refused by both naming the range, a surfel scene,
+/// which has no field, refuses any; a time past 1e9 s is refused by both and by the histogram
+/// (offline it used to panic in the gyroid's generator, its phase overflowing).
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn an_isovalue_is_checked_alike_by_the_endpoint_and_the_cli() {
+async fn an_isovalue_and_a_time_are_checked_alike_by_the_endpoint_and_the_cli() {
     let dir = tempfile::tempdir().expect("temp dir");
     let server = Server::start(dir.path(), &[]).await;
     let base = server.base.clone();
     let offline = dir.path().join("iso.png");
     call(move || {
-        let cli = |demo: &str, isovalue: &str| {
+        let cli = |demo: &str, args: &[&str]| {
             let out = Command::new(isoray_binary())
                 .args(["render", "--demo", demo, "--width", "80", "--height", "60"])
-                .args(["--isovalue", isovalue, "-o"])
+                .args(args)
+                .arg("-o")
                 .arg(&offline)
                 .output()
                 .expect("isoray runs");
@@ -206,7 +208,7 @@ async fn an_isovalue_is_checked_alike_by_the_endpoint_and_the_cli() {
         );
         assert_eq!(served.status, 200, "{}", served.text());
         assert!(
-            cli("tets-gyroid", "-0.3") == Ok(served.body),
+            cli("tets-gyroid", &["--isovalue", "-0.3"]) == Ok(served.body),
             "the same image offline"
         );
 
@@ -222,10 +224,30 @@ async fn an_isovalue_is_checked_alike_by_the_endpoint_and_the_cli() {
             "{}",
             r.text()
         );
-        let refused = cli("tets-gyroid", "1e6").expect_err("out of range");
+        let refused = cli("tets-gyroid", &["--isovalue", "1e6"]).expect_err("out of range");
         assert!(refused.contains("outside the scene's range"), "{refused}");
-        let refused = cli("surfel-heads", "0.5").expect_err("no field");
+        let refused = cli("surfel-heads", &["--isovalue", "0.5"]).expect_err("no field");
         assert!(refused.contains("no scalar field"), "{refused}");
+
+        let r = post_json(
+            &base,
+            "/api/v1/scenes/tets-gyroid/render",
+            r#"{"width":80,"height":60,"time":1e300}"#,
+        );
+        assert_eq!(r.status, 400, "{}", r.text());
+        assert_eq!(json(&r)["field"], "time", "{}", r.text());
+        let r = get(&base, "/api/v1/scenes/tets-gyroid/histogram?time=2e9");
+        assert_eq!(r.status, 400, "{}", r.text());
+        assert_eq!(json(&r)["field"], "time", "{}", r.text());
+        assert_eq!(
+            get(&base, "/api/v1/scenes/tets-gyroid/histogram?time=1e9").status,
+            200
+        );
+        let refused = cli("tets-gyroid", &["--time", "1e300"]).expect_err("too late");
+        assert!(
+            refused.contains("[0, 1e9]") && !refused.contains("panicked"),
+            "{refused}"
+        );
     })
     .await;
     server.stop().await;
