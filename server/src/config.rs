@@ -19,7 +19,7 @@ pub struct Config {
     #[arg(long, env = "ISORAY_LISTEN", default_value = "127.0.0.1:8080")]
     pub listen: SocketAddr,
 
-    /// Render worker threads (0: one per core).
+    /// Render worker threads (0: one per core), at most 1024.
     #[arg(long, env = "ISORAY_THREADS", default_value_t = 0)]
     pub threads: usize,
 
@@ -267,6 +267,13 @@ impl Default for Config {
 impl Config {
     /// Rejects settings the server cannot run with.
     pub fn validate(&self) -> Result<(), String> {
+        let most = isoray_render::backend::MAX_THREADS;
+        if self.threads > most {
+            return Err(format!(
+                "--threads {} must be at most {most} (0: one per core)",
+                self.threads
+            ));
+        }
         if self.max_size == 0 || self.max_size > 16384 {
             return Err(format!("--max-size {} must be in 1..=16384", self.max_size));
         }
@@ -406,6 +413,18 @@ mod tests {
             let err = with(bad).expect_err(bad);
             assert!(err.contains("--pool-share"), "{bad}: {err}");
         }
+    }
+
+    #[test]
+    fn a_thread_count_past_the_limit_is_refused() {
+        let with = |v: &str| Config::parse_from(["isoray", &format!("--threads={v}")]).validate();
+        with("0").expect("one per core");
+        with("1024").expect("the most");
+        let err = with("100000").expect_err("a mistyped count");
+        assert!(
+            err.contains("--threads 100000 must be at most 1024"),
+            "{err}"
+        );
     }
 
     #[test]

@@ -22,6 +22,10 @@ use rayon::prelude::*;
 /// Tile edge in pixels: small enough to balance two to sixty-four workers on one frame.
 const TILE: u32 = 16;
 
+/// Most render threads a pool is asked for: far beyond any machine's cores, and short of the
+/// thousands of threads a mistyped count would start.
+pub const MAX_THREADS: usize = 1024;
+
 /// A pool of render workers.
 pub struct CpuBackend {
     pool: rayon::ThreadPool,

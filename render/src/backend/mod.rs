@@ -10,7 +10,7 @@ pub mod gpu;
 pub use accumulator::{
     Accumulator, DeviceTimes, FrameRays, Pass, DEFAULT_MAX_PASSES, DEFAULT_THRESHOLD,
 };
-pub use cpu::{CpuBackend, PoolError};
+pub use cpu::{CpuBackend, PoolError, MAX_THREADS};
 pub use dispatch::Backend;
 #[cfg(test)]
 mod antialias_tests;

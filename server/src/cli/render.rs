@@ -84,7 +84,7 @@ pub struct RenderArgs {
     /// and the image is antialiased over that many sub-pixel positions.
     #[arg(long, default_value_t = 1)]
     pub passes: u32,
-    /// Render threads (0: one per core).
+    /// Render threads (0: one per core), at most 1024.
     #[arg(long, default_value_t = 0)]
     pub threads: usize,
 }
@@ -208,6 +208,13 @@ pub fn run(args: RenderArgs) -> Result<(), String> {
         return Err(format!(
             "--passes {}: an npy render is one pass through the pixels' centres",
             args.passes
+        ));
+    }
+    let most = isoray_render::backend::MAX_THREADS;
+    if args.threads > most {
+        return Err(format!(
+            "--threads {} must be at most {most} (0: one per core)",
+            args.threads
         ));
     }
     let backend = Backend::cpu(args.threads).map_err(|e| e.to_string())?;

@@ -180,7 +180,8 @@ async fn a_viewers_look_through_the_render_endpoint_and_the_scene_bounds() {
 /// the websocket, `e2e::bad_input`): a tet scene's negative isovalue renders the same image on
 /// both, one outside the scene's range is refused by both naming the range, a surfel scene,
 /// which has no field, refuses any; a time past 1e9 s is refused by both and by the histogram
-/// (offline it used to panic in the gyroid's generator, its phase overflowing).
+/// (offline it used to panic in the gyroid's generator, its phase overflowing). A thread
+/// count past `MAX_THREADS` is refused offline too.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn an_isovalue_and_a_time_are_checked_alike_by_the_endpoint_and_the_cli() {
     let dir = tempfile::tempdir().expect("temp dir");
@@ -246,6 +247,12 @@ async fn an_isovalue_and_a_time_are_checked_alike_by_the_endpoint_and_the_cli() 
         let refused = cli("tets-gyroid", &["--time", "1e300"]).expect_err("too late");
         assert!(
             refused.contains("[0, 1e9]") && !refused.contains("panicked"),
+            "{refused}"
+        );
+        // A mistyped thread count is refused before a pool of that many threads is started.
+        let refused = cli("blobs", &["--threads", "100000"]).expect_err("too many");
+        assert!(
+            refused.contains("--threads 100000 must be at most"),
             "{refused}"
         );
     })
