@@ -365,7 +365,9 @@ pub struct RenderRequest {
     /// Stored step to render (default: the newest). Stored scenes only.
     #[serde(default)]
     pub step: Option<u64>,
-    /// Time in seconds for built-in scenes (default 0).
+    /// Time in seconds, 0 to 1e9 (default 0): a built-in scene at that time; for a stored
+    /// scene, instead of `step`, its latest step at or before that time (the first if none
+    /// is), as a viewer's time input picks it.
     #[serde(default)]
     pub time: Option<f64>,
     #[serde(default)]

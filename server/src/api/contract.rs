@@ -285,7 +285,7 @@ fn view_constraints(config: &Config) -> Vec<Constraint> {
         (
             "RenderRequest",
             "step",
-            json!({"description": "Stored step to render (default: the newest). Stored scenes only (422 for a built-in demo), and one the scene holds (422 otherwise)."}),
+            json!({"description": "Stored step to render (default: the newest, or the one `time` picks). Stored scenes only (422 for a built-in demo), one the scene holds, and not with `time` (422 otherwise)."}),
         ),
         (
             "JsonStep",

@@ -65,13 +65,23 @@ pub async fn render(
         Some(v) => convert::isovalue(v, entry.isovalue_range(), field, "isovalue")?,
         None => look.default_isovalue(),
     };
+    let time = convert::scene_time(req.time.unwrap_or(0.0), "time")?;
     let step = match (entry.stored_scene(), req.step) {
+        (Some(_), Some(_)) if req.time.is_some() => {
+            return Err(AppError::relational(
+                "invalid_value",
+                "time picks a stored scene's step as step does; give one of them",
+            )
+            .field("time"))
+        }
         // The scene (the URL's resource) exists; a body naming a step it does not hold is a
         // request whose fields disagree with the store: 422, like `step` on a built-in scene.
         (Some(scene), Some(i)) => Some(scene.step(i).ok_or_else(|| {
             AppError::relational("invalid_value", format!("scene `{id}` has no step {i}"))
                 .field("step")
         })?),
+        // The step a viewer's time input shows: the latest at or before `time`.
+        (Some(scene), None) if req.time.is_some() => scene.at_time(time),
         (Some(scene), None) => scene.latest(),
         (None, Some(_)) => {
             return Err(AppError::relational(
@@ -82,7 +92,6 @@ pub async fn render(
         }
         (None, None) => None,
     };
-    let time = convert::scene_time(req.time.unwrap_or(0.0), "time")?;
     let limits = crate::effects::EffectLimits::from_config(app.config());
     let scene_look = crate::style::SceneLook {
         lighting: entry.lighting(),

@@ -23,6 +23,7 @@ mod restart;
 mod schemathesis;
 mod slow_body;
 mod slow_headers;
+mod step_time;
 mod surfel_files;
 mod surfels;
 mod tets;
