@@ -71,7 +71,7 @@ pub struct RenderArgs {
     #[arg(long, value_parser = parse_vec3, allow_hyphen_values = true)]
     pub target: Option<[f64; 3]>,
     /// Vertical field of view in degrees.
-    #[arg(long)]
+    #[arg(long, allow_hyphen_values = true)]
     pub fov: Option<f64>,
     /// Effect changes over the scene's own and a viewer's look (`clip`, `surfaces`,
     /// `color_map`), as JSON (as in the `effects` websocket message), e.g. `{"shadows": true}`.
@@ -135,12 +135,16 @@ pub fn run(args: RenderArgs) -> Result<(), String> {
             load(args.spec.as_deref(), step, args.model)?
         }
     };
+    // The camera's checks name the API's fields; a command line has flags.
     let error = |e: isoray_server::kinds::error::KindError| {
-        format!(
-            "{}{}",
-            e.field.map(|f| format!("{f}: ")).unwrap_or_default(),
-            e.message
-        )
+        [
+            ("camera.eye", "--eye"),
+            ("camera.target", "--target"),
+            ("camera.fov_y_deg", "--fov"),
+            ("camera: ", "--eye, --target: "),
+        ]
+        .iter()
+        .fold(e.message, |m, (field, flag)| m.replace(field, flag))
     };
     let camera = if args.eye.is_some() || args.target.is_some() || args.fov.is_some() {
         let c = loaded.camera;

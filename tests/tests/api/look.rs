@@ -181,7 +181,7 @@ async fn a_viewers_look_through_the_render_endpoint_and_the_scene_bounds() {
 /// both, one outside the scene's range is refused by both naming the range, a surfel scene,
 /// which has no field, refuses any; a time past 1e9 s is refused by both and by the histogram
 /// (offline it used to panic in the gyroid's generator, its phase overflowing). A thread
-/// count past `MAX_THREADS` is refused offline too.
+/// count past `MAX_THREADS` is refused offline too, and a bad camera flag is named as the flag.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn an_isovalue_and_a_time_are_checked_alike_by_the_endpoint_and_the_cli() {
     let dir = tempfile::tempdir().expect("temp dir");
@@ -249,6 +249,9 @@ async fn an_isovalue_and_a_time_are_checked_alike_by_the_endpoint_and_the_cli() 
             refused.contains("[0, 1e9]") && !refused.contains("panicked"),
             "{refused}"
         );
+        // The camera's flags are named as flags.
+        let refused = cli("blobs", &["--fov", "0"]).expect_err("no view");
+        assert!(refused.contains("--fov 0 must be in [1, 170]"), "{refused}");
         // A mistyped thread count is refused before a pool of that many threads is started.
         let refused = cli("blobs", &["--threads", "100000"]).expect_err("too many");
         assert!(
