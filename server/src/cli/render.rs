@@ -109,55 +109,8 @@ struct Loaded {
 
 /// Runs the command; the error is what to print.
 pub fn run(args: RenderArgs) -> Result<(), String> {
-    let loaded = match &args.demo {
-        Some(id) => {
-            let demo = DemoScene::ALL
-                .iter()
-                .copied()
-                .find(|d| d.id() == id)
-                .ok_or_else(|| {
-                    let ids: Vec<&str> = DemoScene::ALL.iter().map(|d| d.id()).collect();
-                    format!("no demo `{id}`; the demos are {}", ids.join(", "))
-                })?;
-            convert::scene_time(args.time, "--time").map_err(|e| e.message)?;
-            Loaded {
-                scene: demo.state_at(args.time),
-                camera: demo.default_camera(),
-                isovalue: demo.default_isovalue(),
-                slider: demo.isovalue_slider(),
-            }
-        }
-        None => {
-            let step = args
-                .step
-                .as_deref()
-                .ok_or("a step file or --demo is needed")?;
-            load(args.spec.as_deref(), step, args.model)?
-        }
-    };
-    // The camera's checks name the API's fields; a command line has flags.
-    let error = |e: isoray_server::kinds::error::KindError| {
-        [
-            ("camera.eye", "--eye"),
-            ("camera.target", "--target"),
-            ("camera.fov_y_deg", "--fov"),
-            ("camera: ", "--eye, --target: "),
-        ]
-        .iter()
-        .fold(e.message, |m, (field, flag)| m.replace(field, flag))
-    };
-    let camera = if args.eye.is_some() || args.target.is_some() || args.fov.is_some() {
-        let c = loaded.camera;
-        let api = ApiCamera {
-            eye: args.eye.unwrap_or(c.eye.to_array().map(f64::from)),
-            target: args.target.unwrap_or(c.target.to_array().map(f64::from)),
-            up: c.up.to_array().map(f64::from),
-            fov_y_deg: args.fov.unwrap_or(f64::from(c.fov_y_deg)),
-        };
-        convert::camera(&api, "camera").map_err(error)?
-    } else {
-        loaded.camera
-    };
+    let loaded = loaded(&args)?;
+    let camera = camera(&args, loaded.camera)?;
     let has_field = !matches!(loaded.scene.geometry, Geometry::Surfels(_));
     let isovalue = match args.isovalue {
         Some(v) => convert::isovalue(v, loaded.scene.isovalue_range(), has_field, "--isovalue")
@@ -181,46 +134,7 @@ pub fn run(args: RenderArgs) -> Result<(), String> {
     };
     let (fx, style) = style::one_shot(&scene_look, changes.as_ref(), &EffectLimits::ENGINE)
         .map_err(|e| format!("--effects: {}: {}", e.field, e.message))?;
-    let extension = args
-        .output
-        .extension()
-        .map(|e| e.to_string_lossy().to_ascii_lowercase());
-    let format = match args.format.as_deref().or(extension.as_deref()) {
-        Some("png") => Format::Png,
-        Some("jpg" | "jpeg") => Format::Jpeg,
-        Some("npy") => Format::Npy,
-        _ if args.format.is_some() => {
-            return Err(format!(
-                "--format {}: use png, jpeg or npy",
-                args.format.as_deref().unwrap_or_default()
-            ))
-        }
-        _ => {
-            return Err(format!(
-                "{}: write .png, .jpg, .jpeg or .npy (or give --format)",
-                args.output.display()
-            ))
-        }
-    };
-    if !(1..=100).contains(&args.quality) {
-        return Err(format!("--quality {} must be in 1..=100", args.quality));
-    }
-    if !(1..=4096).contains(&args.passes) {
-        return Err(format!("--passes {} must be in 1..=4096", args.passes));
-    }
-    if args.passes > 1 && matches!(format, Format::Npy) {
-        return Err(format!(
-            "--passes {}: an npy render is one pass through the pixels' centres",
-            args.passes
-        ));
-    }
-    let most = isoray_render::backend::MAX_THREADS;
-    if args.threads > most {
-        return Err(format!(
-            "--threads {} must be at most {most} (0: one per core)",
-            args.threads
-        ));
-    }
+    let format = format(&args)?;
     let backend = Backend::cpu(args.threads).map_err(|e| e.to_string())?;
     let state = PreparedState {
         prepared: Arc::new(loaded.scene).prepare(),
@@ -262,6 +176,111 @@ pub fn run(args: RenderArgs) -> Result<(), String> {
         args.height
     );
     Ok(())
+}
+
+/// The scene `args` name: a demo at `--time`, or a step file.
+fn loaded(args: &RenderArgs) -> Result<Loaded, String> {
+    Ok(match &args.demo {
+        Some(id) => {
+            let demo = DemoScene::ALL
+                .iter()
+                .copied()
+                .find(|d| d.id() == id)
+                .ok_or_else(|| {
+                    let ids: Vec<&str> = DemoScene::ALL.iter().map(|d| d.id()).collect();
+                    format!("no demo `{id}`; the demos are {}", ids.join(", "))
+                })?;
+            convert::scene_time(args.time, "--time").map_err(|e| e.message)?;
+            Loaded {
+                scene: demo.state_at(args.time),
+                camera: demo.default_camera(),
+                isovalue: demo.default_isovalue(),
+                slider: demo.isovalue_slider(),
+            }
+        }
+        None => {
+            let step = args
+                .step
+                .as_deref()
+                .ok_or("a step file or --demo is needed")?;
+            load(args.spec.as_deref(), step, args.model)?
+        }
+    })
+}
+
+/// The scene's `camera` moved by `--eye`, `--target` and `--fov`, checked.
+fn camera(args: &RenderArgs, camera: Camera) -> Result<Camera, String> {
+    // The camera's checks name the API's fields; a command line has flags.
+    let error = |e: isoray_server::kinds::error::KindError| {
+        [
+            ("camera.eye", "--eye"),
+            ("camera.target", "--target"),
+            ("camera.fov_y_deg", "--fov"),
+            ("camera: ", "--eye, --target: "),
+        ]
+        .iter()
+        .fold(e.message, |m, (field, flag)| m.replace(field, flag))
+    };
+    Ok(
+        if args.eye.is_some() || args.target.is_some() || args.fov.is_some() {
+            let c = camera;
+            let api = ApiCamera {
+                eye: args.eye.unwrap_or(c.eye.to_array().map(f64::from)),
+                target: args.target.unwrap_or(c.target.to_array().map(f64::from)),
+                up: c.up.to_array().map(f64::from),
+                fov_y_deg: args.fov.unwrap_or(f64::from(c.fov_y_deg)),
+            };
+            convert::camera(&api, "camera").map_err(error)?
+        } else {
+            camera
+        },
+    )
+}
+
+/// The output's format (`--format`, else the output's extension), and the options that
+/// depend on it or on nothing else checked.
+fn format(args: &RenderArgs) -> Result<Format, String> {
+    let extension = args
+        .output
+        .extension()
+        .map(|e| e.to_string_lossy().to_ascii_lowercase());
+    let format = match args.format.as_deref().or(extension.as_deref()) {
+        Some("png") => Format::Png,
+        Some("jpg" | "jpeg") => Format::Jpeg,
+        Some("npy") => Format::Npy,
+        _ if args.format.is_some() => {
+            return Err(format!(
+                "--format {}: use png, jpeg or npy",
+                args.format.as_deref().unwrap_or_default()
+            ))
+        }
+        _ => {
+            return Err(format!(
+                "{}: write .png, .jpg, .jpeg or .npy (or give --format)",
+                args.output.display()
+            ))
+        }
+    };
+    if !(1..=100).contains(&args.quality) {
+        return Err(format!("--quality {} must be in 1..=100", args.quality));
+    }
+    if !(1..=4096).contains(&args.passes) {
+        return Err(format!("--passes {} must be in 1..=4096", args.passes));
+    }
+    if args.passes > 1 && matches!(format, Format::Npy) {
+        return Err(format!(
+            "--passes {}: an npy render is one pass through the pixels' centres",
+            args.passes
+        ));
+    }
+    let most = isoray_render::backend::MAX_THREADS;
+    if args.threads > most {
+        return Err(format!(
+            "--threads {} must be at most {most} (0: one per core)",
+            args.threads
+        ));
+    }
+    Ok(format)
 }
 
 enum Format {
