@@ -1,5 +1,6 @@
 //! The stability suite: hard cases for every kind's intersector, each named for what it
-//! covers (issue 13). Every case renders a small image's depth and normals
+//! covers (issue 13), and metaball demo scenes at a viewer's size (a wrong pixel in 300,000
+//! shows on screen and in none of the 32×24 cases). Every case renders an image's depth and normals
 //! (`Backend::render_surface`, the `format: "npy"` output) and asserts:
 //! - no NaN or infinity in a hit's distance or normal, and a miss is exactly `[∞, 0, 0, 0]`;
 //! - watertight: no pixel missed where the `f64` reference (sharing no code with the tracer)
@@ -74,10 +75,15 @@ const SIZE: (u32, u32) = (32, 24);
 
 /// Checks the case's image against `reference` (given the engine's own pixel ray, in `f64`).
 pub fn check_image(case: &Case, reference: impl Fn(&Ray) -> Answer) {
+    check_image_at(case, SIZE, reference)
+}
+
+/// [`check_image`] at `size` pixels.
+pub fn check_image_at(case: &Case, size: (u32, u32), reference: impl Fn(&Ray) -> Answer) {
     let prepared = Arc::new(case.scene.clone()).prepare();
     let view = View {
-        width: SIZE.0,
-        height: SIZE.1,
+        width: size.0,
+        height: size.1,
         camera: case.camera,
         isovalue: case.isovalue,
     };
@@ -97,11 +103,11 @@ pub fn check_image(case: &Case, reference: impl Fn(&Ray) -> Answer) {
     // The engine's own pixel rays, in the scene's frame; the reference gets each moved back
     // to the world (exactly: the eye is an f32 near the scene, see `LocalFrame`).
     let frame = *prepared.frame();
-    let rays = prepared.primary_rays(&case.camera, SIZE.0, SIZE.1);
+    let rays = prepared.primary_rays(&case.camera, size.0, size.1);
     let mut failures = Vec::new();
     let (mut hits, mut worst, mut worst_deg) = (0, 0.0f64, 0.0f64);
-    for y in 0..SIZE.1 {
-        for x in 0..SIZE.0 {
+    for y in 0..size.1 {
+        for x in 0..size.0 {
             let px = one.at(x, y);
             let local = rays.through_pixel(x, y);
             let origin = frame.world_from_local(local.origin);

@@ -14,6 +14,8 @@ const FINDER_BEZIER: u32 = 2u;
 const CONTROL_POINTS: u32 = 9u;
 // bezier.rs MAX_PENDING_HALVES.
 const MAX_PENDING_HALVES: u32 = 48u;
+// f32's machine epsilon (the gap above 1).
+const F32_EPSILON: f32 = 1.1920929e-7;
 // roots.rs `secant`: the Illinois iterations one bracket may take.
 const SECANT_ITERATIONS: u32 = 200u;
 
@@ -289,12 +291,10 @@ fn bezier_first_root(b: array<f32, CONTROL_POINTS>, n: u32, tol_v: f32, iters: p
             xl = max(xl, 0.0);
             xr = min(xr, 1.0);
             let width = hi - lo;
-            if (width * (xr - xl) <= tol_v || width <= tol_v) {
-                return Root(true, lo + width * xl);
-            }
+            let converged = width * (xr - xl) <= tol_v || width <= tol_v;
             // Clipping stalls (several roots or a flat stretch): split in half, the right
             // half pending; otherwise keep [xl, xr]: cut at xr, then the left part at xl / xr.
-            let split = xr - xl > 0.8 && top < MAX_PENDING_HALVES;
+            let split = !converged && xr - xl > 0.8 && top < MAX_PENDING_HALVES;
             var cut = select(xr, 0.5, split);
             // A trip count lavapipe cannot unroll, so that de Casteljau is inlined once.
             let passes = select(2u, 1u, split);
@@ -319,7 +319,23 @@ fn bezier_first_root(b: array<f32, CONTROL_POINTS>, n: u32, tol_v: f32, iters: p
                     lo = new_lo;
                 }
             }
-            continue;
+            if (!converged) {
+                continue;
+            }
+            // A hull meeting the axis on a stretch narrower than the tolerance proves no
+            // root (bezier.rs): on so short a stretch the curve lies within rounding of its
+            // control points, so the root stands only if one of them reaches the axis up to
+            // what the subdivisions may have rounded it by.
+            var scale = 0.0;
+            for (var i = 0u; i <= n; i = i + 1u) {
+                scale = max(scale, abs(b[i]));
+            }
+            let reach = -(F32_EPSILON * 512.0 * scale);
+            for (var i = 0u; i <= n; i = i + 1u) {
+                if (c[i] >= reach) {
+                    return Root(true, lo);
+                }
+            }
         }
         if (*iters > ITERATION_CAP || top == 0u) {
             return Root(false, 0.0);

@@ -22,6 +22,8 @@ pub trait Real:
     fn abs(self) -> Self;
     fn min(self, o: Self) -> Self;
     fn max(self, o: Self) -> Self;
+    /// The type's machine epsilon (the gap above 1).
+    const EPSILON: Self;
     /// A key whose order is `(self, code)`'s: the numeric order of `self` (not NaN; `-0` and
     /// `+0` equal), then `code`. One integer comparison instead of a float comparison and a
     /// tie-break, for sorting a root search's entry/exit events.
@@ -37,6 +39,7 @@ macro_rules! real {
     ($t:ty, $bits:ty, $key:ty) => {
         impl Real for $t {
             type EventKey = $key;
+            const EPSILON: $t = <$t>::EPSILON;
             const NO_EVENT: $key = <$key>::MAX;
             #[inline(always)]
             fn event_key(self, code: u32) -> $key {
