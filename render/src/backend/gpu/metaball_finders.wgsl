@@ -323,18 +323,30 @@ fn bezier_first_root(b: array<f32, CONTROL_POINTS>, n: u32, tol_v: f32, iters: p
                 continue;
             }
             // A hull meeting the axis on a stretch narrower than the tolerance proves no
-            // root (bezier.rs): on so short a stretch the curve lies within rounding of its
-            // control points, so the root stands only if one of them reaches the axis up to
-            // what the subdivisions may have rounded it by.
+            // root (bezier.rs first_root_or_piece): an end of the clipped polygon (the curve's
+            // own value) at the axis, up to what the subdivisions may have rounded it by, puts
+            // the root within the stretch; a polygon wholly below it proves no root; an inner
+            // point alone at the axis decides nothing, and clipping goes on until the stretch
+            // is so short that the curve lies within rounding of its polygon.
             var scale = 0.0;
             for (var i = 0u; i <= n; i = i + 1u) {
                 scale = max(scale, abs(b[i]));
             }
             let reach = -(F32_EPSILON * 512.0 * scale);
+            if (max(c[0], c[n]) >= reach) {
+                return Root(true, lo);
+            }
+            var inner_reach = false;
             for (var i = 0u; i <= n; i = i + 1u) {
                 if (c[i] >= reach) {
+                    inner_reach = true;
+                }
+            }
+            if (inner_reach) {
+                if (hi - lo <= F32_EPSILON * 64.0) {
                     return Root(true, lo);
                 }
+                continue;
             }
         }
         if (*iters > ITERATION_CAP || top == 0u) {

@@ -181,14 +181,23 @@ pub(crate) fn first_root_or_piece<R: Real>(
             // proves no root: the control polygon can poke above the axis where the curve
             // stays well below it (the `blobs` demo's section polygon [-0.47, -0.42, -0.27,
             // -0.065, +7·10⁻⁷, -0.023, -0.069], whose curve peaks at -0.03, reported a surface
-            // there). On so short a stretch the curve lies within rounding of its control
-            // points, so the root stands only if one of them reaches the axis up to what the
-            // subdivisions may have rounded it by: a few hundred units in the last place of
-            // the section's largest control point.
+            // there). The ends of the clipped polygon are the curve's own values: one at the
+            // axis (up to what the subdivisions may have rounded it by, a few hundred units
+            // in the last place of the section's largest control point) puts the first root
+            // within the stretch, so within the tolerance; a polygon wholly below the axis
+            // proves the curve below it; an inner point at the axis alone decides nothing,
+            // and clipping goes on until the stretch is so short that the curve lies within
+            // rounding of its polygon.
             let scale = b[..=n].iter().fold(zero, |m, &x| m.max(x.abs()));
             let floor = -(R::EPSILON * R::of(512.0) * scale);
-            if c[..=n].iter().any(|&x| x >= floor) {
+            if c[0].max(c[n]) >= floor {
                 return Some(*lo);
+            }
+            if c[..=n].iter().any(|&x| x >= floor) {
+                if *hi - *lo <= R::EPSILON * R::of(64.0) {
+                    return Some(*lo);
+                }
+                continue;
             }
         }
         if *iters > ITERATION_CAP {
@@ -459,20 +468,49 @@ mod tests {
         Ok(Some(hi))
     }
 
+    /// Polygons with inner control points above the axis, ends below it.
+    fn raised_polygons() -> impl Strategy<Value = (usize, Vec<f64>)> {
+        (2usize..=MAX_DEGREE).prop_flat_map(|n| {
+            prop::collection::vec(-1.0f64..0.5, n + 1).prop_map(move |mut c| {
+                c[0] = -c[0].abs() - 0.01;
+                c[n] = -c[n].abs() - 0.01;
+                (n, c)
+            })
+        })
+    }
+
+    /// Whether Bézier clipping, in `f64` and in `f32`, finds no root of `c` at `tol_v`.
+    fn no_root_found(c: &[f64], n: usize, tol_v: f64) -> Result<(), TestCaseError> {
+        let mut points = [0.0f64; MAX_DEGREE + 1];
+        points[..=n].copy_from_slice(c);
+        let singles = points.map(|x| x as f32);
+        let mut iters = 0;
+        let v = bezier_first_root(&points, n, tol_v, &mut iters, &mut Vec::new());
+        prop_assert_eq!(v, None, "f64 at {} over {:?}", tol_v, c);
+        let v = bezier_first_root(&singles, n, tol_v as f32, &mut iters, &mut Vec::new());
+        prop_assert_eq!(v, None, "f32 at {} over {:?}", tol_v, singles);
+        Ok(())
+    }
+
     proptest! {
         #[test]
         fn a_control_point_poking_above_the_axis_is_no_root_where_the_curve_stays_below(
             (n, c) in poked_polygons()
         ) {
             prop_assume!(sampled_max(&c, n) < -1e-3);
-            let mut points = [0.0f64; MAX_DEGREE + 1];
-            points[..=n].copy_from_slice(&c);
-            let mut iters = 0;
-            let v = bezier_first_root(&points, n, 1e-4, &mut iters, &mut Vec::new());
-            prop_assert_eq!(v, None, "f64 over {:?}", c);
-            let singles = points.map(|x| x as f32);
-            let v = bezier_first_root(&singles, n, 1e-4, &mut iters, &mut Vec::new());
-            prop_assert_eq!(v, None, "f32 over {:?}", singles);
+            no_root_found(&c, n, 1e-4)?;
+        }
+
+        /// At a loose tolerance the hull's crossing is narrower than the tolerance from the
+        /// first clip on, however far above the axis the polygon reaches.
+        #[test]
+        fn a_polygon_above_the_axis_is_no_root_at_a_loose_tolerance(
+            (n, c) in raised_polygons()
+        ) {
+            prop_assume!(c.iter().any(|&x| x > 0.0) && sampled_max(&c, n) < -1e-3);
+            for tol_v in [0.05, 0.2, 0.5, 1.0] {
+                no_root_found(&c, n, tol_v)?;
+            }
         }
 
         #[test]
@@ -486,14 +524,17 @@ mod tests {
             let singles = points.map(|x| x as f32);
             let truth = clear_first_root(&singles.map(f64::from), n);
             prop_assume!(truth.is_ok());
-            let mut iters = 0;
-            let v = bezier_first_root(&singles, n, 1e-4, &mut iters, &mut Vec::new());
-            match truth {
-                Ok(Some(r)) => {
-                    let v = v.map(f64::from);
-                    prop_assert!(v.is_some_and(|v| (v - r).abs() <= 2e-4), "{:?} against {} over {:?}", v, r, singles);
+            for tol_v in [1e-4f32, 0.05] {
+                let mut iters = 0;
+                let v = bezier_first_root(&singles, n, tol_v, &mut iters, &mut Vec::new());
+                match truth {
+                    Ok(Some(r)) => {
+                        let v = v.map(f64::from);
+                        let near = |v: f64| (v - r).abs() <= tol_v as f64 + 1e-4;
+                        prop_assert!(v.is_some_and(near), "{:?} against {} at {} over {:?}", v, r, tol_v, singles);
+                    }
+                    _ => prop_assert_eq!(v, None, "no root at {} over {:?}", tol_v, singles),
                 }
-                _ => prop_assert_eq!(v, None, "no root over {:?}", singles),
             }
         }
     }
