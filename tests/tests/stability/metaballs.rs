@@ -54,11 +54,17 @@ fn answer(case: &Case, ray: &Ray) -> Answer {
     let high = r.first_at_least(t + eps, 0.0);
     let robust = high.is_some_and(|h| r.first_below(t + eps, h + 1e-9) - h > case.bound);
     let at = r.first_at_least(t, 0.0);
+    let low = r.first_at_least(t - eps, 0.0);
+    // A ray that grazes the surface within the rounding budget before it crosses it may hit
+    // the graze (the field there within 10⁻⁶ of `T` on `scattered-1k` and `tornado-4k`), whose
+    // normal is not the crossing's: the normal is compared only where the field comes within
+    // the budget of `T` no earlier than the case's bound before the crossing.
+    let no_graze = |at: &f64| low.is_some_and(|low| at - low <= case.bound);
     Answer {
-        low: r.first_at_least(t - eps, 0.0),
+        low,
         high,
         robust,
-        normal: at.and_then(|t| r.normal(t)),
+        normal: at.filter(no_graze).and_then(|t| r.normal(t)),
     }
 }
 
@@ -339,13 +345,19 @@ fn the_blobs_demo_at_a_viewers_size() {
 
 #[test]
 fn the_small_demo_scenes_at_a_viewers_size() {
-    for scene in [
-        DemoScene::Glass,
-        DemoScene::Clouds,
-        DemoScene::Shells,
-        DemoScene::Scattered1k,
-        DemoScene::Tornado4k,
+    // Tornado 4k at 7 s had one pixel of the Bézier clipping's false hits at 480×360; at
+    // 640×480 Scattered 1k at 0 s and Tornado 4k at 4.4 s each have a ray that grazes the
+    // surface within 10⁻⁶ of the isovalue before it crosses it (a hit at the graze is right;
+    // its normal is not the crossing's).
+    let (small, vga) = ((480, 360), (640, 480));
+    for (scene, time, size) in [
+        (DemoScene::Glass, 7.0, small),
+        (DemoScene::Clouds, 7.0, small),
+        (DemoScene::Shells, 7.0, small),
+        (DemoScene::Scattered1k, 0.0, vga),
+        (DemoScene::Tornado4k, 4.4, vga),
+        (DemoScene::Tornado4k, 7.0, small),
     ] {
-        demo(scene, 7.0, (480, 360));
+        demo(scene, time, size);
     }
 }

@@ -7,7 +7,9 @@
 //!   finds the surface robustly, and no hit where it finds none;
 //! - the hit distance within the case's stated bound of the reference, and a robust hit's
 //!   normal within the case's stated angle of the reference's (where the reference's normal
-//!   has the engine's definition: not for tets, whose engine normals are smooth);
+//!   has the engine's definition: not for tets, whose engine normals are smooth; and not
+//!   where the ray grazes the surface within the rounding budget before it crosses it, where
+//!   a hit at the graze is right and its normal another);
 //! - the same bytes on a repeat and on one and two threads.
 //!
 //! Some cases add explicit rays (along the axes, through box faces, edges and corners).
