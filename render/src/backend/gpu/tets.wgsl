@@ -40,6 +40,8 @@ struct TetNode {
 // Traversal stack; the upload refuses deeper trees (tets_layout.rs MAX_DEPTH + 1).
 const TET_STACK_SIZE: u32 = 64u;
 const TET_NONE: u32 = 0xffffffffu;
+// march.rs EDGE_NOISE: (16 ε)² for f32's ε.
+const TET_EDGE_NOISE: f32 = 3.6379788e-12;
 
 var<private> tet_stack_node: array<u32, TET_STACK_SIZE>;
 var<private> tet_stack_t: array<f32, TET_STACK_SIZE>;
@@ -152,14 +154,25 @@ fn tet_intersect(count: u32, d: vec3<f32>, t_min: f32, t_max: f32) -> f32 {
     if (numerator < 0.0) {
         sign = -1.0;
     }
+    var dropped = 0u;
     for (var i = 0u; i < count; i = i + 1u) {
         var j = i + 1u;
         if (j == count) {
             j = 0u;
         }
-        if (dot(cross(tet_rel[i], tet_rel[j]) * sign, d) < 0.0) {
+        // march.rs edge_normal: an edge whose plane normal rounding sets is not tested, and
+        // a polygon left with fewer than three tested edges is never hit (march.rs closed).
+        let a = tet_rel[i];
+        let b = tet_rel[j];
+        let m = cross(a, b);
+        if (dot(m, m) <= TET_EDGE_NOISE * (dot(a, a) * dot(b, b))) {
+            dropped = dropped + 1u;
+        } else if (dot(m * sign, d) < 0.0) {
             return -1.0;
         }
+    }
+    if (count < dropped + 3u) {
+        return -1.0;
     }
     return t;
 }
