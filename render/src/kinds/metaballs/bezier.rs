@@ -347,22 +347,7 @@ mod tests {
     /// non-negative, by `f64` bisection on the sum of its terms `c_k C(n, k) v^k (1 - v)^(n-k)`
     /// (binomials by their product formula; no Horner's rule, no secant).
     fn reference_root(c: &[f64], n: usize) -> f64 {
-        let choose = |k: usize| (0..k).fold(1.0, |acc, i| acc * (n - i) as f64 / (i + 1) as f64);
-        let g = |v: f64| {
-            (0..=n)
-                .map(|k| c[k] * choose(k) * v.powi(k as i32) * (1.0 - v).powi((n - k) as i32))
-                .sum::<f64>()
-        };
-        let (mut lo, mut hi) = (0.0f64, 1.0f64);
-        for _ in 0..200 {
-            let mid = 0.5 * (lo + hi);
-            if g(mid) < 0.0 {
-                lo = mid;
-            } else {
-                hi = mid;
-            }
-        }
-        hi
+        bisect(|v| bernstein(c, n, v), 0.0, 1.0, 200)
     }
 
     /// Control points negative before index `k0`, non-negative from it, the last positive.
@@ -406,11 +391,27 @@ mod tests {
         }
     }
 
-    /// The Bernstein polynomial of `c` at `v`, term by term in `f64`.
+    /// The Bernstein polynomial of `c` at `v`, term by term in `f64`, its binomials by their
+    /// product formula (not the finder's table).
     fn bernstein(c: &[f64], n: usize, v: f64) -> f64 {
+        let choose = |k: usize| (0..k).fold(1.0, |acc, i| acc * (n - i) as f64 / (i + 1) as f64);
         (0..=n)
-            .map(|k| c[k] * BINOMIAL[n][k] * v.powi(k as i32) * (1.0 - v).powi((n - k) as i32))
+            .map(|k| c[k] * choose(k) * v.powi(k as i32) * (1.0 - v).powi((n - k) as i32))
             .sum()
+    }
+
+    /// Where `g` turns from negative to non-negative in `[lo, hi]` (`g(lo) < 0 ≤ g(hi)`),
+    /// by `steps` bisections.
+    fn bisect(g: impl Fn(f64) -> f64, mut lo: f64, mut hi: f64, steps: usize) -> f64 {
+        for _ in 0..steps {
+            let mid = 0.5 * (lo + hi);
+            if g(mid) < 0.0 {
+                lo = mid;
+            } else {
+                hi = mid;
+            }
+        }
+        hi
     }
 
     /// The largest of `c`'s curve over 4,097 even samples of `[0, 1]`.
@@ -452,15 +453,7 @@ mod tests {
         if i == 0 || g(x(end)) < 0.0 {
             return Err(());
         }
-        let (mut lo, mut hi) = (x(i - 1), x(end));
-        for _ in 0..100 {
-            let mid = 0.5 * (lo + hi);
-            if g(mid) < 0.0 {
-                lo = mid;
-            } else {
-                hi = mid;
-            }
-        }
+        let hi = bisect(g, x(i - 1), x(end), 100);
         let slope = (g((hi + 1e-6).min(1.0)) - g(hi - 1e-6)) / 2e-6;
         if slope < 0.01 {
             return Err(());
