@@ -55,7 +55,8 @@ var<private> tet_cases: array<u32, 16> = array<u32, 16>(
 const TET_EDGE_A: u32 = 0x211000u;
 const TET_EDGE_B: u32 = 0x332321u;
 
-// The isopolygon being tested, relative to the ray origin, and its corners.
+// The isopolygon being tested, its points and relative to the ray origin, and its corners.
+var<private> tet_pts: array<vec3<f32>, 4>;
 var<private> tet_rel: array<vec3<f32>, 4>;
 var<private> tet_corner: array<vec4<f32>, 4>;
 
@@ -99,8 +100,9 @@ fn tet_slab(n: u32, o: vec3<f32>, inv: vec3<f32>, t_min: f32, t_max: f32) -> f32
     return -1.0;
 }
 
-// march.rs extract for the tet at leaf position k: fills `tet_corner` and, relative to `o`,
-// `tet_rel`; returns the polygon's vertex count (0: the isovalue misses the tet).
+// march.rs extract for the tet at leaf position k: fills `tet_corner`, `tet_pts` and,
+// relative to `o`, `tet_rel`; returns the polygon's vertex count (0: the isovalue misses
+// the tet).
 fn tet_extract(k: u32, o: vec3<f32>, iso: f32) -> u32 {
     let ids = tet_leaf_tets[k];
     var which = 0u;
@@ -127,6 +129,7 @@ fn tet_extract(k: u32, o: vec3<f32>, iso: f32) -> u32 {
         let pb = tet_corner[b];
         let s = (iso - pa.w) / (pb.w - pa.w);
         let p = pa.xyz + (pb.xyz - pa.xyz) * s;
+        tet_pts[i] = p;
         tet_rel[i] = p - o;
     }
     return count;
@@ -135,11 +138,12 @@ fn tet_extract(k: u32, o: vec3<f32>, iso: f32) -> u32 {
 // march.rs intersect_one on the polygon in `tet_rel`: the distance in [t_min, t_max] if the
 // ray passes inside, else -1.
 fn tet_intersect(count: u32, d: vec3<f32>, t_min: f32, t_max: f32) -> f32 {
+    // march.rs plane_normal: from the points' own differences.
     var normal: vec3<f32>;
     if (count == 3u) {
-        normal = cross(tet_rel[1] - tet_rel[0], tet_rel[2] - tet_rel[0]);
+        normal = cross(tet_pts[1] - tet_pts[0], tet_pts[2] - tet_pts[0]);
     } else {
-        normal = cross(tet_rel[2] - tet_rel[0], tet_rel[3] - tet_rel[1]);
+        normal = cross(tet_pts[2] - tet_pts[0], tet_pts[3] - tet_pts[1]);
     }
     let numerator = dot(normal, tet_rel[0]);
     let denominator = dot(normal, d);
@@ -160,12 +164,13 @@ fn tet_intersect(count: u32, d: vec3<f32>, t_min: f32, t_max: f32) -> f32 {
         if (j == count) {
             j = 0u;
         }
-        // march.rs edge_normal: an edge whose plane normal rounding sets is not tested, and
-        // a polygon left with fewer than three tested edges is never hit (march.rs closed).
-        let a = tet_rel[i];
-        let b = tet_rel[j];
-        let m = cross(a, b);
-        if (dot(m, m) <= TET_EDGE_NOISE * (dot(a, a) * dot(b, b))) {
+        // march.rs edge_normal: the plane formed about the edge's midpoint, with the edge as
+        // the points give it; an edge whose plane normal rounding sets is not tested, and a
+        // polygon left with fewer than three tested edges is never hit (march.rs closed).
+        let c = (tet_rel[i] + tet_rel[j]) * 0.5;
+        let m = cross(c, tet_pts[j] - tet_pts[i]);
+        let cc = dot(c, c);
+        if (dot(m, m) <= TET_EDGE_NOISE * (cc * cc)) {
             dropped = dropped + 1u;
         } else if (dot(m * sign, d) < 0.0) {
             return -1.0;
