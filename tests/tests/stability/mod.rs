@@ -107,7 +107,7 @@ pub fn check_image_at(case: &Case, size: (u32, u32), reference: impl Fn(&Ray) ->
     let frame = *prepared.frame();
     let rays = prepared.primary_rays(&case.camera, size.0, size.1);
     let mut failures = Vec::new();
-    let (mut hits, mut worst, mut worst_deg) = (0, 0.0f64, 0.0f64);
+    let (mut hits, mut worst, mut outside, mut worst_deg) = (0, 0.0f64, 0.0f64, 0.0f64);
     for y in 0..size.1 {
         for x in 0..size.0 {
             let px = one.at(x, y);
@@ -133,6 +133,8 @@ pub fn check_image_at(case: &Case, size: (u32, u32), reference: impl Fn(&Ray) ->
             }
             if let (Some(t), Some(r), true) = (got, answer.low, answer.robust) {
                 worst = worst.max((t - r).abs());
+                let high = answer.high.map_or(0.0, |h| t - h);
+                outside = outside.max(r - t).max(high);
                 if let Some(n) = answer.normal {
                     worst_deg = worst_deg.max(angle_deg(px, n));
                 }
@@ -140,7 +142,7 @@ pub fn check_image_at(case: &Case, size: (u32, u32), reference: impl Fn(&Ray) ->
         }
     }
     eprintln!(
-        "{}: {hits} hits, on robust pixels worst |t - t_low| {worst:.2e} and normal {worst_deg:.2e}°, {} failures",
+        "{}: {hits} hits, on robust pixels worst |t - t_low| {worst:.2e} ({outside:.2e} outside [t_low, t_high]) and normal {worst_deg:.2e}°, {} failures",
         case.name,
         failures.len()
     );
