@@ -1,5 +1,5 @@
 //! The stability suite: hard cases for every kind's intersector, each named for what it
-//! covers (issue 13), and metaball and tet demo scenes at a viewer's size (a wrong pixel in
+//! covers (issue 13), and demo scenes of every kind at a viewer's size (a wrong pixel in
 //! 300,000 shows on screen and in none of the 32×24 cases). Every case renders an image's depth
 //! and normals (`Backend::render_surface`, the `format: "npy"` output) and asserts:
 //! - no NaN or infinity in a hit's distance or normal, and a miss is exactly `[∞, 0, 0, 0]`;

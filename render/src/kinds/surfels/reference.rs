@@ -67,9 +67,36 @@ pub fn first_hit(
     t_min: f64,
     t_max: f64,
 ) -> Option<MlsHit> {
+    trace(surfels, o, d, t_min, t_max, 0.0).hit
+}
+
+/// [`first_hit`], and how near the ray came to the surface before it.
+#[derive(Clone, Copy, Debug)]
+pub struct MlsTrace {
+    pub hit: Option<MlsHit>,
+    /// The first sample before the hit (or on the whole ray, for a miss) where the ray ran
+    /// within `near` of the surface (`|f| < near`) on a surfel's disc: where a definition of
+    /// the surface that differs by `near` may already be hit (a graze, or the crossing's
+    /// approach).
+    pub near_from: Option<f64>,
+}
+
+/// [`first_hit`] with [`MlsTrace::near_from`] for the distance `near`.
+pub fn trace(
+    surfels: &[MlsSurfel],
+    o: DVec3,
+    d: DVec3,
+    t_min: f64,
+    t_max: f64,
+    near: f64,
+) -> MlsTrace {
+    let mut out = MlsTrace {
+        hit: None,
+        near_from: None,
+    };
     let dd = d.length_squared();
     if !(dd > 0.0) {
-        return None;
+        return out;
     }
     // The surfels whose support the ray crosses, and the stretches they cover.
     let mut crossed: Vec<&MlsSurfel> = Vec::new();
@@ -89,7 +116,7 @@ pub fn first_hit(
         }
     }
     if crossed.is_empty() {
-        return None;
+        return out;
     }
     let step = crossed
         .iter()
@@ -112,6 +139,11 @@ pub fn first_hit(
             continue;
         }
         let here = implicit(&crossed, o + t * d).map(|(f, _)| f);
+        if let Some(f) = here {
+            if out.near_from.is_none() && f.abs() < near && on_disc(o + t * d) {
+                out.near_from = Some(t);
+            }
+        }
         if let (Some((tp, fp)), Some(f)) = (prev, here) {
             if fp > 0.0 && f <= 0.0 {
                 let (mut lo, mut hi) = (tp, t);
@@ -128,7 +160,8 @@ pub fn first_hit(
                 let x = o + hi * d;
                 if on_disc(x) {
                     if let Some((_, n)) = implicit(&crossed, x) {
-                        return Some(MlsHit { t: hi, normal: n });
+                        out.hit = Some(MlsHit { t: hi, normal: n });
+                        return out;
                     }
                 }
             }
@@ -136,7 +169,7 @@ pub fn first_hit(
         prev = here.map(|f| (t, f));
         t += step;
     }
-    None
+    out
 }
 
 #[cfg(test)]
