@@ -608,8 +608,10 @@ fn the_surfel_demos_at_a_viewers_size() {
     // (steps 18–42), where the surfaces tear or press together beyond what either definition
     // of the surface shares.
     // Per demo: the steps, `near` (see `demo_answer`), the bound beyond the reference's band
-    // and the normals' angle (measured: 1.1e-4 and 0.5° on the impact, 9.0e-3 and 6.4° on the
-    // ball pit, where balls touch their neighbours' supports).
+    // and the normals' angle. Measured in these frames: 1.1e-4 and 0.5° on the impact, 9.0e-3
+    // and 6.4° on the ball pit, where balls touch their neighbours' supports; in a sweep of 18
+    // frames each at 640×480 outside the left-out steps, at most 1.7e-4 and 0.5°, 8.2e-3 and
+    // 15.2° (the ball pit at step 48, just after the landing).
     for (kind, detail, steps, near, bound, normal_deg) in [
         (
             SurfelDemoKind::Impact,
@@ -625,7 +627,7 @@ fn the_surfel_demos_at_a_viewers_size() {
             [0, 60, 120, 234],
             5e-3,
             2e-2,
-            10.0,
+            20.0,
         ),
     ] {
         let demo = demo::build(kind, detail, steps[3] + 1).expect("a demo");
