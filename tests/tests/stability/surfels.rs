@@ -497,8 +497,8 @@ fn surfels_and_camera_1e5_from_the_origin() {
     }
 }
 
-/// The reference's answer on a demo ray (`near`: how far its surface may lie from the
-/// engine's, fixed against moved neighbourhoods). A hit is robust where the ray is not
+/// The reference's answer on a demo ray (`near`: how far the engine's surface, blended from
+/// fixed neighbourhoods, may lie from the reference's, blended from every surfel). A hit is robust where the ray is not
 /// grazing and the normals there agree (as [`mls_answer`]); the engine may hit from the first
 /// point where the ray ran within `near` of the surface on a disc (a graze before the
 /// crossing, or the crossing's approach), and its normal is compared only where that point is
@@ -656,9 +656,15 @@ fn the_surfel_demos_at_a_viewers_size() {
                 let answer = demo_answer(&groups, ray, near);
                 if rays.get() % 1009 == 0 {
                     let (o, d) = (ray.origin.as_dvec3(), ray.dir.as_dvec3());
-                    let all = first_hit(&groups.surfels, o, d, 0.0, 1e4).map(|h| h.t);
-                    let grouped = first_hit(&groups.crossing(o, d), o, d, 0.0, 1e4).map(|h| h.t);
-                    assert_eq!(grouped, all, "{ray:?}: grouped against every surfel");
+                    let answer = |set: &[MlsSurfel]| {
+                        let found = trace(set, o, d, 0.0, 1e4, near);
+                        (found.hit.map(|h| (h.t, h.normal)), found.near_from)
+                    };
+                    assert_eq!(
+                        answer(&groups.crossing(o, d)),
+                        answer(&groups.surfels),
+                        "{ray:?}: grouped against every surfel"
+                    );
                 }
                 rays.set(rays.get() + 1);
                 robust.set(robust.get() + answer.robust as usize);
