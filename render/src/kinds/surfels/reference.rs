@@ -9,8 +9,9 @@
 //! sign change from outside (`f > 0`, normals point out) to inside is bisected to `1e-13`
 //! relative, and kept if the point lies on a surfel's disc (within its reach of its centre,
 //! the paper's surfels being ellipses); otherwise the march goes on. No tree, no iteration
-//! from an ellipse, no convergence threshold, no clipping (§4.3): compare it on objects that
-//! clip nothing.
+//! from an ellipse, no convergence threshold, no clipping (§4.3) of its own: on objects that
+//! clip, a caller passes its own cut ([`trace_kept`]), for example the side of each clipping
+//! surface's MLS surface ([`field`]), not the engine's nearest-surfel tangent planes.
 
 use glam::DVec3;
 
@@ -58,6 +59,13 @@ fn implicit(set: &[&MlsSurfel], x: DVec3) -> Option<(f64, DVec3)> {
     Some((n.dot(x - sp / sw), n))
 }
 
+/// `f(x) = n(x)ᵀ(x − a(x))` over `surfels` (positive outside), or `None` where no support
+/// covers `x` or the normals cancel.
+pub fn field(surfels: &[MlsSurfel], x: DVec3) -> Option<f64> {
+    let set: Vec<&MlsSurfel> = surfels.iter().collect();
+    implicit(&set, x).map(|(f, _)| f)
+}
+
 /// The first point of `o + t d`, `t ∈ [t_min, t_max]`, where the MLS surface of `surfels` is
 /// crossed from outside.
 pub fn first_hit(
@@ -89,6 +97,39 @@ pub fn trace(
     t_min: f64,
     t_max: f64,
     near: f64,
+) -> MlsTrace {
+    trace_kept(surfels, o, d, (t_min, t_max), near, Keep::ALL)
+}
+
+/// Which points on a surfel's disc [`trace_kept`] counts: the caller's own cut of the
+/// surface (a test's clipping by the surfaces that clip this one, §4.3, written with its own
+/// definition of the other surfaces).
+#[derive(Clone, Copy)]
+pub struct Keep<'a> {
+    /// Where a crossing may be the hit (a crossing elsewhere is passed over).
+    pub hit: &'a dyn Fn(DVec3) -> bool,
+    /// Where running within `near` of the surface counts for [`MlsTrace::near_from`].
+    pub near: &'a dyn Fn(DVec3) -> bool,
+}
+
+impl Keep<'_> {
+    /// Every point.
+    pub const ALL: Keep<'static> = Keep {
+        hit: &|_| true,
+        near: &|_| true,
+    };
+}
+
+/// [`trace`] over `span = [t_min, t_max]`, counting only the points `keep` keeps: the first
+/// crossing from outside on a disc that `keep.hit` keeps is the hit (the march goes on past
+/// the others).
+pub fn trace_kept(
+    surfels: &[MlsSurfel],
+    o: DVec3,
+    d: DVec3,
+    (t_min, t_max): (f64, f64),
+    near: f64,
+    keep: Keep,
 ) -> MlsTrace {
     let mut out = MlsTrace {
         hit: None,
@@ -140,7 +181,8 @@ pub fn trace(
         }
         let here = implicit(&crossed, o + t * d).map(|(f, _)| f);
         if let Some(f) = here {
-            if out.near_from.is_none() && f.abs() < near && on_disc(o + t * d) {
+            let x = o + t * d;
+            if out.near_from.is_none() && f.abs() < near && on_disc(x) && (keep.near)(x) {
                 out.near_from = Some(t);
             }
         }
@@ -158,7 +200,7 @@ pub fn trace(
                     }
                 }
                 let x = o + hi * d;
-                if on_disc(x) {
+                if on_disc(x) && (keep.hit)(x) {
                     if let Some((_, n)) = implicit(&crossed, x) {
                         out.hit = Some(MlsHit { t: hi, normal: n });
                         return out;
