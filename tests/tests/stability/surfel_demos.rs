@@ -1,14 +1,14 @@
-//! The surfel demos as a viewer sees them (the impact and the ball pit at 320×240, the
-//! clipped cubes at 320×240), each step's surfels deformed again here in `f64` (eq. 1 from
-//! the model's embedding weights) and traced by `surfels::reference` over every surfel of a
-//! surface, not the engine's fixed neighbourhoods, tree or iteration.
+//! The three surfel demos as a viewer sees them (320×240), each step's surfels deformed
+//! again here in `f64` (eq. 1 from the model's embedding weights) and traced by
+//! `surfels::reference` over every surfel of a surface (a body, or a clipped face), not the
+//! engine's fixed neighbourhoods, tree or iteration.
 
 use super::surfels::{coherence, mls_surfel, FREE};
 use super::{check_image_at, Answer, Case};
 use glam::{DMat3, DVec3, Mat3, Vec3};
 use isoray_render::kinds::surfels::demo::{self, SurfelDemo, SurfelDemoKind};
 use isoray_render::kinds::surfels::model::SurfelModel;
-use isoray_render::kinds::surfels::reference::{field, trace, trace_kept, Keep, MlsSurfel};
+use isoray_render::kinds::surfels::reference::{field, trace_kept, Keep, MlsSurfel};
 use isoray_render::kinds::surfels::scene::{SurfelOptions, SurfelRuntime};
 use isoray_render::scene::Geometry;
 use isoray_render::shade::Lighting;
@@ -17,29 +17,154 @@ use std::cell::Cell;
 use std::collections::BTreeMap;
 use std::sync::Arc;
 
-/// The reference's answer on a demo ray (`near`: how far the engine's surface, blended from
-/// fixed neighbourhoods, may lie from the reference's, blended from every surfel). A hit is robust where the ray is not
-/// grazing and the normals there agree (as [`mls_answer`]); the engine may hit from the first
-/// point where the ray ran within `near` of the surface on a disc (a graze before the
-/// crossing, or the crossing's approach), and its normal is compared only where that point is
-/// the crossing's approach. A ray that never runs within `near` of the surface on a disc must
+/// The surfaces of a demo as the reference traces them: which surface each surfel belongs
+/// to, and which surfaces clip which (§4.3).
+struct Surfaces {
+    of: Vec<u16>,
+    clips: BTreeMap<u16, Vec<u16>>,
+}
+
+impl Surfaces {
+    /// One surface per simulated body (the blob and the cannonball, each ball of the pit):
+    /// the engine's neighbourhoods are fixed at rest, where the bodies lie apart, so they
+    /// never blend two bodies, and neither does the reference then.
+    fn bodies(model: &SurfelModel) -> Surfaces {
+        let of = (0..model.len())
+            .map(|k| {
+                model
+                    .embed
+                    .row(k)
+                    .first()
+                    .map_or(0, |&(j, _)| model.node_body[j as usize])
+            })
+            .collect();
+        Surfaces {
+            of,
+            clips: BTreeMap::new(),
+        }
+    }
+
+    /// One surface per surfel group, clipped as the model's clipping rows say (which groups
+    /// their stored surfels belong to: data, not the engine's rule).
+    fn groups(model: &SurfelModel) -> Surfaces {
+        let of: Vec<u16> = model.surfels.iter().map(|s| s.group).collect();
+        let mut clips: BTreeMap<u16, Vec<u16>> = BTreeMap::new();
+        for (k, &g) in of.iter().enumerate() {
+            for pair in model.clip.row(k) {
+                let by = clips.entry(g).or_default();
+                if !by.contains(&of[pair[0] as usize]) {
+                    by.push(of[pair[0] as usize]);
+                }
+            }
+        }
+        Surfaces { of, clips }
+    }
+}
+
+/// A reference hit: distance in units of `|d|`, normal, surface.
+type SurfaceHit = (f64, DVec3, u16);
+
+/// What the reference finds on a ray over the surfels `ids` (in the model's order): the
+/// nearest kept crossing over the surfaces (distance in units of `|d|`, normal, surface), the
+/// first point where the ray ran within `near` of a surface (see `MlsTrace::near_from`), and
+/// the surfels of each surface. Each surface is traced over its own surfels alone, a
+/// crossing cut away where it lies outside a surface that clips it: there that surface's own
+/// MLS field over its surfels is positive (`surfels::reference::field`), not the engine's
+/// rule (the side of the nearer of two stored surfels' tangent planes), so the two may part
+/// along an edge. Running within `near` counts only less than `margin` outside.
+fn surface_trace(
+    surfels: &[MlsSurfel],
+    ids: &[u32],
+    surfaces: &Surfaces,
+    ray: (DVec3, DVec3),
+    (near, margin): (f64, f64),
+) -> (
+    Option<SurfaceHit>,
+    Option<f64>,
+    BTreeMap<u16, Vec<MlsSurfel>>,
+) {
+    let (o, d) = ray;
+    let mut own: BTreeMap<u16, Vec<MlsSurfel>> = BTreeMap::new();
+    for &k in ids {
+        own.entry(surfaces.of[k as usize])
+            .or_default()
+            .push(surfels[k as usize]);
+    }
+    let (mut best, mut near_from): (Option<SurfaceHit>, Option<f64>) = (None, None);
+    for (&surface, set) in &own {
+        let hit = |x: DVec3| outside(surfaces, &own, surface, x) <= 0.0;
+        let close = |x: DVec3| outside(surfaces, &own, surface, x) < margin;
+        let keep = Keep {
+            hit: &hit,
+            near: &close,
+        };
+        let found = trace_kept(set, o, d, (0.0, 1e4), near, keep);
+        if let Some(h) = found.hit.filter(|h| best.is_none_or(|b| h.t < b.0)) {
+            best = Some((h.t, h.normal, surface));
+        }
+        if let Some(n) = found.near_from {
+            near_from = Some(near_from.map_or(n, |m: f64| m.min(n)));
+        }
+    }
+    (best, near_from, own)
+}
+
+/// How far outside the surfaces that clip `surface` the point lies (the largest of their
+/// fields; −∞ where none clips it or none reaches).
+fn outside(
+    surfaces: &Surfaces,
+    own: &BTreeMap<u16, Vec<MlsSurfel>>,
+    surface: u16,
+    x: DVec3,
+) -> f64 {
+    (surfaces
+        .clips
+        .get(&surface)
+        .map_or(&[][..], |v| &v[..])
+        .iter())
+    .filter_map(|h| own.get(h).and_then(|set| field(set, x)))
+    .fold(f64::NEG_INFINITY, f64::max)
+}
+
+/// The reference's answer on a demo ray ([`surface_trace`]; `near`: how far the engine's
+/// surface, blended from fixed neighbourhoods, may lie from the reference's, blended from
+/// every surfel of the surface). A hit is robust where the ray is not grazing, the normals
+/// there agree (coherence ≥ 0.9) and it lies `margin` inside every surface clipping its own;
+/// the engine may hit from the first point where the ray ran within `near` of a surface on a
+/// disc (a graze before the crossing, or the crossing's approach), and its normal is
+/// compared only where that point is the crossing's approach. A ray that never runs within
+/// `near` of a surface on a disc (less than `margin` outside its clipping surfaces) must
 /// miss; elsewhere any answer goes.
-fn demo_answer(groups: &MlsGroups, ray: &Ray, near: f64) -> Answer {
+fn demo_answer(
+    groups: &MlsGroups,
+    surfaces: &Surfaces,
+    ray: &Ray,
+    (near, margin): (f64, f64),
+) -> Answer {
     let (o, d) = (ray.origin.as_dvec3(), ray.dir.as_dvec3());
-    let crossing = groups.crossing(o, d);
-    let found = trace(&crossing, o, d, 0.0, 1e4, near);
-    match found.hit {
-        Some(h) if h.normal.dot(d) < -0.3 && coherence(&crossing, o + h.t * d) >= 0.9 => {
-            let t = h.t * d.length();
-            let low = found.near_from.map_or(t, |n| (n * d.length()).min(t));
+    let ids = groups.crossing_ids(o, d);
+    let (best, near_from, own) =
+        surface_trace(&groups.surfels, &ids, surfaces, (o, d), (near, margin));
+    // Where two surfaces meet (balls pressed together), either may be hit at the crease:
+    // the normals of every surfel near the point must agree, not only its own surface's.
+    let near_by: Vec<MlsSurfel> = ids.iter().map(|&k| groups.surfels[k as usize]).collect();
+    match best {
+        Some((t, normal, surface))
+            if normal.dot(d) < -0.3
+                && outside(surfaces, &own, surface, o + t * d) < -margin
+                && coherence(&own[&surface], o + t * d) >= 0.9
+                && coherence(&near_by, o + t * d) >= 0.9 =>
+        {
+            let t = t * d.length();
+            let low = near_from.map_or(t, |n| (n * d.length()).min(t));
             Answer {
                 low: Some(low),
                 high: Some(t),
                 robust: true,
-                normal: (low >= t - 4.0 * near).then_some(h.normal),
+                normal: (low >= t - 4.0 * near).then_some(normal),
             }
         }
-        None if found.near_from.is_none() => Answer {
+        None if near_from.is_none() => Answer {
             low: None,
             high: None,
             robust: false,
@@ -47,6 +172,31 @@ fn demo_answer(groups: &MlsGroups, ray: &Ray, near: f64) -> Answer {
         },
         Some(_) | None => FREE,
     }
+}
+
+/// On every 1009th ray (`count` the rays so far): the grouped surfels give the reference's
+/// answer over every surfel, bit for bit.
+fn check_grouping(
+    groups: &MlsGroups,
+    surfaces: &Surfaces,
+    ray: &Ray,
+    count: usize,
+    near: (f64, f64),
+) {
+    if count % 1009 != 0 {
+        return;
+    }
+    let (o, d) = (ray.origin.as_dvec3(), ray.dir.as_dvec3());
+    let answer = |ids: &[u32]| {
+        let (best, near_from, _) = surface_trace(&groups.surfels, ids, surfaces, (o, d), near);
+        (best, near_from)
+    };
+    let all: Vec<u32> = (0..groups.surfels.len() as u32).collect();
+    assert_eq!(
+        answer(&groups.crossing_ids(o, d)),
+        answer(&all),
+        "{ray:?}: grouped against every surfel"
+    );
 }
 
 /// The demo step's surfels in `f64` for the reference: eq. 1 from the model's embedding
@@ -104,13 +254,6 @@ impl MlsGroups {
     }
 
     /// The members of every group whose sphere the line `o + t d` meets, in the model's order.
-    fn crossing(&self, o: DVec3, d: DVec3) -> Vec<MlsSurfel> {
-        (self.crossing_ids(o, d).iter())
-            .map(|&k| self.surfels[k as usize])
-            .collect()
-    }
-
-    /// [`MlsGroups::crossing`]'s surfels by index.
     fn crossing_ids(&self, o: DVec3, d: DVec3) -> Vec<u32> {
         let dd = d.length_squared();
         let mut ids: Vec<u32> = Vec::new();
@@ -153,17 +296,17 @@ fn demo_case(
 #[test]
 fn the_surfel_demos_at_a_viewers_size() {
     // The impact demo as served (153,000 surfels) and the ball pit (24,000) at 320×240,
-    // against the MLS reference over every surfel. Before the blob's radii followed its
-    // stretch, steps 60, 114 and 210 of the impact showed pinholes (the back of the blob
-    // through the front: 1–5 pixels each). Left out, and measured in docs/accuracy.md: the
-    // frames of the cannonball's strike (impact steps 6–18) and of the forty balls' landing
-    // (steps 18–42), where the surfaces tear or press together beyond what either definition
-    // of the surface shares.
+    // against the MLS reference over every surfel of a body (the engine's neighbourhoods never
+    // blend two bodies). Before the blob's radii followed its stretch, steps 60, 114 and 210
+    // of the impact showed pinholes (the back of the blob through the front: 1–5 pixels
+    // each). Left out, and measured in docs/accuracy.md: the frames of the cannonball's
+    // strike (impact steps 6–18) and of the forty balls' landing (steps 18–42), where the
+    // surfaces tear or press together beyond what the two definitions of the surface share.
     // Per demo: the steps, `near` (see `demo_answer`), the bound beyond the reference's band
-    // and the normals' angle. Measured in these frames: 1.1e-4 and 0.5° on the impact, 9.0e-3
-    // and 6.4° on the ball pit, where balls touch their neighbours' supports; in a sweep of 18
-    // frames each at 640×480 outside the left-out steps, at most 1.7e-4 and 0.5°, 8.2e-3 and
-    // 15.2° (the ball pit at step 48, just after the landing).
+    // and the normals' angle. Measured in these frames: 1.1e-4 and 0.5° on the impact, 1.1e-3
+    // and 6.1° on the ball pit; in sweeps at 640×480 outside the left-out steps (18 frames of
+    // the impact, 32 of the ball pit), at most 1.7e-4 and 0.5°, 2.5e-3 and 17.2° (the ball
+    // pit at step 48, just after the landing).
     for (kind, detail, steps, near, bound, normal_deg) in [
         (
             SurfelDemoKind::Impact,
@@ -178,11 +321,12 @@ fn the_surfel_demos_at_a_viewers_size() {
             0.1,
             [0, 60, 120, 234],
             5e-3,
-            2e-2,
+            5e-3,
             20.0,
         ),
     ] {
         let demo = demo::build(kind, detail, steps[3] + 1).expect("a demo");
+        let surfaces = Surfaces::bodies(&demo.model);
         for step in steps {
             let (u, g) = &demo.steps[step];
             let groups = MlsGroups::new(demo_surfels(&demo.model, u, g));
@@ -190,94 +334,14 @@ fn the_surfel_demos_at_a_viewers_size() {
             let (rays, robust) = (Cell::new(0usize), Cell::new(0usize));
             eprintln!("{} step {step}:", kind.name());
             check_image_at(&case, (320, 240), |ray| {
-                let answer = demo_answer(&groups, ray, near);
-                if rays.get() % 1009 == 0 {
-                    let (o, d) = (ray.origin.as_dvec3(), ray.dir.as_dvec3());
-                    let answer = |set: &[MlsSurfel]| {
-                        let found = trace(set, o, d, 0.0, 1e4, near);
-                        (found.hit.map(|h| (h.t, h.normal)), found.near_from)
-                    };
-                    assert_eq!(
-                        answer(&groups.crossing(o, d)),
-                        answer(&groups.surfels),
-                        "{ray:?}: grouped against every surfel"
-                    );
-                }
+                let answer = demo_answer(&groups, &surfaces, ray, (near, 0.0));
+                check_grouping(&groups, &surfaces, ray, rays.get(), (near, 0.0));
                 rays.set(rays.get() + 1);
                 robust.set(robust.get() + answer.robust as usize);
                 answer
             });
             assert!(robust.get() > 8000, "{} robust pixels", robust.get());
         }
-    }
-}
-
-/// The clipped cubes' reference on a ray: each face (a surfel group) traced over its own
-/// surfels alone (the engine's neighbourhoods stay within a face too), a crossing cut away
-/// where it lies outside a face that clips it (§4.3). Outside is written here as that face's
-/// own MLS field over its surfels being positive (`surfels::reference::field`), not the
-/// engine's rule (the side of the nearer of two stored surfels' tangent planes), so along an
-/// edge the two may differ: a hit is robust only where every clipping face's field is below
-/// `-margin` (or none reaches), and a ray must miss only where it never runs within `near` of
-/// a face at a point less than `margin` outside every face that clips it. The nearest kept
-/// crossing over the faces is the hit.
-fn clipped_answer(
-    groups: &MlsGroups,
-    (group_of, clips): (&[u16], &BTreeMap<u16, Vec<u16>>),
-    ray: &Ray,
-    (near, margin): (f64, f64),
-) -> Answer {
-    let (o, d) = (ray.origin.as_dvec3(), ray.dir.as_dvec3());
-    let mut faces: BTreeMap<u16, Vec<MlsSurfel>> = BTreeMap::new();
-    for k in groups.crossing_ids(o, d) {
-        let face = faces.entry(group_of[k as usize]).or_default();
-        face.push(groups.surfels[k as usize]);
-    }
-    let none = Vec::new();
-    // How far outside the faces that clip `face` the point lies (the largest field).
-    let outside = |face: u16, x: DVec3| {
-        (clips.get(&face).map_or(&[][..], |v| &v[..]).iter())
-            .filter_map(|h| field(faces.get(h).unwrap_or(&none), x))
-            .fold(f64::NEG_INFINITY, f64::max)
-    };
-    let (mut best, mut near_from): (Option<(f64, DVec3, u16)>, Option<f64>) = (None, None);
-    for (&face, own) in &faces {
-        let hit = |x: DVec3| outside(face, x) <= 0.0;
-        let close = |x: DVec3| outside(face, x) < margin;
-        let keep = Keep {
-            hit: &hit,
-            near: &close,
-        };
-        let found = trace_kept(own, o, d, (0.0, 1e4), near, keep);
-        if let Some(h) = found.hit.filter(|h| best.is_none_or(|b| h.t < b.0)) {
-            best = Some((h.t, h.normal, face));
-        }
-        if let Some(n) = found.near_from {
-            near_from = Some(near_from.map_or(n, |m: f64| m.min(n)));
-        }
-    }
-    match best {
-        Some((t, normal, face))
-            if normal.dot(d) < -0.3
-                && outside(face, o + t * d) < -margin
-                && coherence(&faces[&face], o + t * d) >= 0.9 =>
-        {
-            let t = t * d.length();
-            let low = near_from.map_or(t, |n| (n * d.length()).min(t));
-            Answer {
-                low: Some(low),
-                high: Some(t),
-                robust: true,
-                normal: (low >= t - 4.0 * near).then_some(normal),
-            }
-        }
-        None if near_from.is_none() => Answer {
-            low: None,
-            high: None,
-            robust: false,
-            normal: None,
-        },
-        Some(_) | None => FREE,
     }
 }
 
@@ -289,16 +353,8 @@ fn the_clipped_cubes_demo_at_a_viewers_size() {
     let steps = [0usize, 60, 90, 150];
     let demo = demo::build(kind, 0.05, steps[steps.len() - 1] + 1).expect("a demo");
     let model = &demo.model;
-    let group_of: Vec<u16> = model.surfels.iter().map(|s| s.group).collect();
-    let mut clips: BTreeMap<u16, Vec<u16>> = BTreeMap::new();
-    for (k, &g) in group_of.iter().enumerate() {
-        for pair in model.clip.row(k) {
-            let by = clips.entry(g).or_default();
-            if !by.contains(&group_of[pair[0] as usize]) {
-                by.push(group_of[pair[0] as usize]);
-            }
-        }
-    }
+    let surfaces = Surfaces::groups(model);
+    let clips = &surfaces.clips;
     assert_eq!(clips.len(), 18, "every face is clipped: {clips:?}");
     assert!(clips.values().all(|by| by.len() == 4), "{clips:?}");
     let mut supports = model.support.clone();
@@ -308,10 +364,12 @@ fn the_clipped_cubes_demo_at_a_viewers_size() {
         let (u, g) = &demo.steps[step];
         let groups = MlsGroups::new(demo_surfels(model, u, g));
         let case = demo_case(kind, &demo, step, (1e-3, 2.0));
-        let robust = Cell::new(0usize);
+        let (rays, robust) = (Cell::new(0usize), Cell::new(0usize));
         eprintln!("{} step {step} (edge margin {margin:.4}):", kind.name());
         check_image_at(&case, (320, 240), |ray| {
-            let answer = clipped_answer(&groups, (&group_of, &clips), ray, (2e-3, margin));
+            let answer = demo_answer(&groups, &surfaces, ray, (2e-3, margin));
+            check_grouping(&groups, &surfaces, ray, rays.get(), (2e-3, margin));
+            rays.set(rays.get() + 1);
             robust.set(robust.get() + answer.robust as usize);
             answer
         });
