@@ -261,6 +261,51 @@ mod tests {
     }
 
     #[test]
+    fn a_cut_plane_is_hit_only_where_kept() {
+        // Two planes of surfels, z = 0 and z = -0.5; the upper one cut away where x > 0.
+        let mut lower = plane(10, 0.1);
+        for s in &mut lower {
+            s.centre.z = -0.5;
+        }
+        let upper = plane(10, 0.1);
+        let cut = |x: DVec3| x.x <= 0.0;
+        let keep = Keep {
+            hit: &cut,
+            near: &cut,
+        };
+        let down = DVec3::new(0.0, 0.0, -1.0);
+        for (x, expect) in [(-0.3, Some(0.4)), (0.3, None), (-0.01, Some(0.4))] {
+            let o = DVec3::new(x, 0.02, 0.4);
+            let got = trace_kept(&upper, o, down, (0.0, 10.0), 2e-2, keep);
+            assert_eq!(
+                got.hit.map(|h| (h.t * 1e9).round() / 1e9),
+                expect,
+                "x = {x}"
+            );
+            assert_eq!(got.near_from.is_some(), expect.is_some(), "x = {x}");
+        }
+        // Past the cut the march goes on to the next surface (which the cut spares).
+        let upper_only = |x: DVec3| x.x <= 0.0 || x.z < -0.25;
+        let keep = Keep {
+            hit: &upper_only,
+            near: &upper_only,
+        };
+        let both: Vec<MlsSurfel> = upper.iter().chain(&lower).copied().collect();
+        let beyond = trace_kept(
+            &both,
+            DVec3::new(0.3, 0.02, 0.4),
+            down,
+            (0.0, 10.0),
+            0.0,
+            keep,
+        );
+        let t = beyond.hit.map(|h| h.t).expect("the lower plane");
+        assert!((t - 0.9).abs() < 1e-9, "{t}");
+        assert!(field(&upper, DVec3::new(0.0, 0.0, 0.1)).is_some_and(|f| (f - 0.1).abs() < 1e-12));
+        assert!(field(&upper, DVec3::new(9.0, 0.0, 0.0)).is_none());
+    }
+
+    #[test]
     fn a_sampled_sphere_is_hit_within_the_mls_offset() {
         // Fibonacci points on the unit sphere; the MLS surface of a sphere lies inside it by
         // about h²/(8R) (the weighted chord), so |t − t_exact| must stay below h²/R.
