@@ -1,8 +1,10 @@
 //! Surfel hard cases (deforming-point-sampled-surfaces.txt), against `surfels::reference`
 //! (brute-force `f64` MLS over every surfel: no tree, no fixed neighbourhoods, no iteration
 //! from the leaf's ellipse) where its definition is the engine's (at rest, sheets that
-//! resolve), or an analytic answer in `f64` written here: the clipped cube is a box (the
-//! reference has no clipping), a deformed ball an ellipsoid shell (under a strong stretch the
+//! resolve), or an analytic answer in `f64` written here: the clipped cube is a box (exact
+//! at the faces' planes, where a reference cut by the faces' MLS fields, as `surfel_demos`
+//! cuts the clipped cubes demo, would blend along the edges), a deformed ball an ellipsoid
+//! shell (under a strong stretch the
 //! reference's isotropic support reaches across the squashed body and blends its two sides,
 //! a difference of definitions docs/accuracy.md measures).
 //!
