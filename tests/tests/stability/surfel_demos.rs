@@ -147,13 +147,16 @@ fn demo_answer(
         surface_trace(&groups.surfels, &ids, surfaces, (o, d), (near, margin));
     // Where two surfaces meet (balls pressed together), either may be hit at the crease:
     // the normals of every surfel near the point must agree, not only its own surface's.
-    let near_by: Vec<MlsSurfel> = ids.iter().map(|&k| groups.surfels[k as usize]).collect();
+    let all_agree = |x: DVec3| {
+        let near_by: Vec<MlsSurfel> = ids.iter().map(|&k| groups.surfels[k as usize]).collect();
+        coherence(&near_by, x) >= 0.9
+    };
     match best {
         Some((t, normal, surface))
             if normal.dot(d) < -0.3
                 && outside(surfaces, &own, surface, o + t * d) < -margin
                 && coherence(&own[&surface], o + t * d) >= 0.9
-                && coherence(&near_by, o + t * d) >= 0.9 =>
+                && all_agree(o + t * d) =>
         {
             let t = t * d.length();
             let low = near_from.map_or(t, |n| (n * d.length()).min(t));
@@ -293,6 +296,30 @@ fn demo_case(
     }
 }
 
+/// Checks `case` (step `step` of `demo`) at 320×240 against [`demo_answer`] with `(near,
+/// margin)`, and [`check_grouping`] on a sample of its rays; returns the robust pixels.
+fn check_demo_step(
+    case: &Case,
+    demo: &SurfelDemo,
+    step: usize,
+    surfaces: &Surfaces,
+    near: (f64, f64),
+) -> usize {
+    let (u, g) = &demo.steps[step];
+    let groups = MlsGroups::new(demo_surfels(&demo.model, u, g));
+    let (rays, robust) = (Cell::new(0usize), Cell::new(0usize));
+    eprintln!("{} step {step}:", case.name);
+    check_image_at(case, (320, 240), |ray| {
+        let answer = demo_answer(&groups, surfaces, ray, near);
+        check_grouping(&groups, surfaces, ray, rays.get(), near);
+        rays.set(rays.get() + 1);
+        robust.set(robust.get() + answer.robust as usize);
+        answer
+    });
+    eprintln!("  {} robust pixels", robust.get());
+    robust.get()
+}
+
 #[test]
 fn the_surfel_demos_at_a_viewers_size() {
     // The impact demo as served (153,000 surfels) and the ball pit (24,000) at 320×240,
@@ -328,19 +355,9 @@ fn the_surfel_demos_at_a_viewers_size() {
         let demo = demo::build(kind, detail, steps[3] + 1).expect("a demo");
         let surfaces = Surfaces::bodies(&demo.model);
         for step in steps {
-            let (u, g) = &demo.steps[step];
-            let groups = MlsGroups::new(demo_surfels(&demo.model, u, g));
             let case = demo_case(kind, &demo, step, (bound, normal_deg));
-            let (rays, robust) = (Cell::new(0usize), Cell::new(0usize));
-            eprintln!("{} step {step}:", kind.name());
-            check_image_at(&case, (320, 240), |ray| {
-                let answer = demo_answer(&groups, &surfaces, ray, (near, 0.0));
-                check_grouping(&groups, &surfaces, ray, rays.get(), (near, 0.0));
-                rays.set(rays.get() + 1);
-                robust.set(robust.get() + answer.robust as usize);
-                answer
-            });
-            assert!(robust.get() > 8000, "{} robust pixels", robust.get());
+            let robust = check_demo_step(&case, &demo, step, &surfaces, (near, 0.0));
+            assert!(robust > 8000, "{robust} robust pixels");
         }
     }
 }
@@ -360,20 +377,10 @@ fn the_clipped_cubes_demo_at_a_viewers_size() {
     let mut supports = model.support.clone();
     supports.sort_by(f32::total_cmp);
     let margin = 0.5 * supports[supports.len() / 2] as f64;
+    eprintln!("edge margin {margin:.4}");
     for step in steps {
-        let (u, g) = &demo.steps[step];
-        let groups = MlsGroups::new(demo_surfels(model, u, g));
         let case = demo_case(kind, &demo, step, (1e-3, 2.0));
-        let (rays, robust) = (Cell::new(0usize), Cell::new(0usize));
-        eprintln!("{} step {step} (edge margin {margin:.4}):", kind.name());
-        check_image_at(&case, (320, 240), |ray| {
-            let answer = demo_answer(&groups, &surfaces, ray, (2e-3, margin));
-            check_grouping(&groups, &surfaces, ray, rays.get(), (2e-3, margin));
-            rays.set(rays.get() + 1);
-            robust.set(robust.get() + answer.robust as usize);
-            answer
-        });
-        assert!(robust.get() > 1000, "{} robust pixels", robust.get());
-        eprintln!("  {} robust pixels", robust.get());
+        let robust = check_demo_step(&case, &demo, step, &surfaces, (2e-3, margin));
+        assert!(robust > 1000, "{robust} robust pixels");
     }
 }

@@ -44,7 +44,7 @@ fn w(r: f64) -> f64 {
 }
 
 /// `f(x)` and `n(x)` over `set`, or `None` where no support covers `x` or the normals cancel.
-fn implicit(set: &[&MlsSurfel], x: DVec3) -> Option<(f64, DVec3)> {
+fn implicit<'a>(set: impl IntoIterator<Item = &'a MlsSurfel>, x: DVec3) -> Option<(f64, DVec3)> {
     let (mut sw, mut sp, mut sn) = (0.0, DVec3::ZERO, DVec3::ZERO);
     for s in set {
         let k = w(x.distance(s.centre) / s.support);
@@ -62,8 +62,7 @@ fn implicit(set: &[&MlsSurfel], x: DVec3) -> Option<(f64, DVec3)> {
 /// `f(x) = n(x)ᵀ(x − a(x))` over `surfels` (positive outside), or `None` where no support
 /// covers `x` or the normals cancel.
 pub fn field(surfels: &[MlsSurfel], x: DVec3) -> Option<f64> {
-    let set: Vec<&MlsSurfel> = surfels.iter().collect();
-    implicit(&set, x).map(|(f, _)| f)
+    implicit(surfels, x).map(|(f, _)| f)
 }
 
 /// The first point of `o + t d`, `t ∈ [t_min, t_max]`, where the MLS surface of `surfels` is
@@ -179,7 +178,7 @@ pub fn trace_kept(
             }
             continue;
         }
-        let here = implicit(&crossed, o + t * d).map(|(f, _)| f);
+        let here = implicit(crossed.iter().copied(), o + t * d).map(|(f, _)| f);
         if let Some(f) = here {
             let x = o + t * d;
             if out.near_from.is_none() && f.abs() < near && on_disc(x) && (keep.near)(x) {
@@ -194,14 +193,14 @@ pub fn trace_kept(
                     if hi - lo <= 1e-13 * hi.abs().max(1.0) || !(lo < mid && mid < hi) {
                         break;
                     }
-                    match implicit(&crossed, o + mid * d) {
+                    match implicit(crossed.iter().copied(), o + mid * d) {
                         Some((fm, _)) if fm > 0.0 => lo = mid,
                         _ => hi = mid,
                     }
                 }
                 let x = o + hi * d;
                 if on_disc(x) && (keep.hit)(x) {
-                    if let Some((_, n)) = implicit(&crossed, x) {
+                    if let Some((_, n)) = implicit(crossed.iter().copied(), x) {
                         out.hit = Some(MlsHit { t: hi, normal: n });
                         return out;
                     }
