@@ -47,8 +47,8 @@ pub struct Config {
 
     /// Share of the render pool that the interactive frames of all viewers together are
     /// sized to use, in (0, 1). Higher gives many viewers larger frames at the cost of their
-    /// tail latency (README, "Load"); a lone viewer's frame takes at most 0.6 of its interval
-    /// whatever this is.
+    /// tail latency (docs/performance.md, "Load"); a lone viewer's frame takes at most 0.6 of
+    /// its interval whatever this is.
     #[arg(long, env = "ISORAY_POOL_SHARE", default_value_t = 0.6)]
     pub pool_share: f64,
 
