@@ -3,6 +3,7 @@
 
 mod api;
 mod deploy;
+mod docs;
 mod e2e;
 mod golden;
 mod scene_json;
