@@ -218,15 +218,54 @@ fn downgrade_version_5(bytes: &[u8]) -> Result<impl std::io::Read + '_, String> 
         .chain(&bytes[cur.pos..]))
 }
 
+/// Refuses a file whose sections declare more values than its bytes could hold, before vtkio
+/// reads it: vtkio reserves a section's declared count up front, so a 4 KiB file declaring
+/// `CELL_TYPES 3251968700` made it ask for gigabytes and abort (found by the `vtk_file`
+/// fuzz target). Every value takes at least one byte, binary or text, so in a real file
+/// `POINTS n` has `3n`, `CELLS n size` has `size`, a `FIELD` array `name c t type` has `c·t`
+/// and every other count at most the file's length. Counts are read from the lines that
+/// start with a keyword (or, inside a `FIELD`, a name) followed by integers; a line of
+/// binary data that happens to look like one is checked too, which can only refuse a file
+/// whose numbers there exceed its length.
+fn check_counts(bytes: &[u8]) -> Result<(), String> {
+    let len = bytes.len() as u128;
+    for (i, line) in bytes.split(|&b| b == b'\n').enumerate().skip(2) {
+        let Ok(line) = std::str::from_utf8(line) else {
+            continue;
+        };
+        let words: Vec<&str> = line.split_whitespace().collect();
+        let Some(first) = words.first() else { continue };
+        if !first.starts_with(|c: char| c.is_ascii_alphabetic()) {
+            continue;
+        }
+        let ints: Vec<u128> = words.iter().filter_map(|w| w.parse().ok()).collect();
+        let values = match *first {
+            "CELLS" => ints.iter().copied().max().unwrap_or(0),
+            "POINTS" => ints.first().map_or(0, |n| n.saturating_mul(3)),
+            _ => ints.iter().fold(1u128, |p, &n| p.saturating_mul(n)),
+        };
+        if !ints.is_empty() && (values > len || ints.iter().any(|&n| n > len)) {
+            return Err(format!(
+                "line {}: `{}` declares {values} values, more than the file's {len} bytes could hold",
+                i + 1,
+                line.trim()
+            ));
+        }
+    }
+    Ok(())
+}
+
 /// Reads a legacy `.vtk` unstructured grid with the scalar array `wanted` (or the first
 /// one-component point array, else cell array).
 pub fn read(path: &Path, wanted: Option<&str>) -> Result<Grid, String> {
-    let vtk = if is_version_5(path)? {
-        let bytes = std::fs::read(path).map_err(|e| e.to_string())?;
+    let version_5 = is_version_5(path)?;
+    let bytes = std::fs::read(path).map_err(|e| e.to_string())?;
+    check_counts(&bytes)?;
+    let vtk = if version_5 {
         let older = downgrade_version_5(&bytes).map_err(|e| format!("legacy VTK 5.1: {e}"))?;
         Vtk::parse_legacy_be(older)
     } else {
-        Vtk::import(path)
+        Vtk::parse_legacy_be(&bytes[..])
     }
     .map_err(|e| e.to_string())?;
     let DataSet::UnstructuredGrid { pieces, .. } = vtk.data else {
@@ -271,4 +310,53 @@ pub fn read(path: &Path, wanted: Option<&str>) -> Result<Grid, String> {
         grid.append(&coords, &connectivity, &offsets, &types, picked, scalars)?;
     }
     Ok(grid)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A one-tet legacy 5.1 file as meshio writes it, with `cell_types` as its CELL_TYPES
+    /// line's count.
+    fn file(cell_types: &str) -> String {
+        format!(
+            "# vtk DataFile Version 5.1\nwritten by meshio v5.3.5\nASCII\n\
+             DATASET UNSTRUCTURED_GRID\nPOINTS 4 double\n0 0 0 1 0 0 0 1 0 0 0 1\n\
+             CELLS 2 4\nOFFSETS vtktypeint64\n0 4\nCONNECTIVITY vtktypeint64\n0 1 2 3\n\
+             CELL_TYPES {cell_types}\n10\n\nPOINT_DATA 4\nFIELD FieldData 1\n\
+             u 1 4 double\n0 0.5 1 1.5\n"
+        )
+    }
+
+    #[test]
+    fn a_count_the_file_cannot_hold_is_refused_before_vtkio_reserves_it() {
+        let dir = tempfile::tempdir().expect("temp dir");
+        let path = dir.path().join("tet.vtk");
+        std::fs::write(&path, file("1")).expect("written");
+        let grid = read(&path, None).expect("the honest file reads");
+        assert_eq!(grid.into_tets().expect("one tet").cells, vec![[0, 1, 2, 3]]);
+
+        // The fuzz target's input (a 4 KiB meshio file) declared 3,251,968,700 cell types:
+        // vtkio asked for gigabytes and the process aborted.
+        std::fs::write(&path, file("3251968700")).expect("written");
+        let e = read(&path, None).expect_err("more cell types than bytes");
+        assert!(
+            e.contains("line 12") && e.contains("CELL_TYPES 3251968700"),
+            "{e}"
+        );
+
+        // Points count three values each; a field array its components times its tuples.
+        let lying = file("1").replace("POINTS 4 double", "POINTS 100 double");
+        assert!(check_counts(lying.as_bytes())
+            .expect_err("3 × 100")
+            .contains("300 values"));
+        let lying = file("1").replace("u 1 4 double", "u 1000 400 double");
+        assert!(
+            check_counts(lying.as_bytes()).is_err(),
+            "400,000 field values"
+        );
+        // Every count within the file's length, whatever the cells' two sizes multiply to.
+        let fine = file("1").replace("CELLS 2 4", "CELLS 40 100");
+        assert!(check_counts(fine.as_bytes()).is_ok());
+    }
 }
