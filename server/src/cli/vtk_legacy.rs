@@ -335,6 +335,10 @@ mod tests {
         std::fs::write(&path, file("1")).expect("written");
         let grid = read(&path, None).expect("the honest file reads");
         assert_eq!(grid.into_tets().expect("one tet").cells, vec![[0, 1, 2, 3]]);
+        // The extension's case does not matter (vtkio's own import wanted `.vtk`).
+        let upper = dir.path().join("TET.VTK");
+        std::fs::write(&upper, file("1")).expect("written");
+        assert!(read(&upper, None).is_ok());
 
         // The fuzz target's input (a 4 KiB meshio file) declared 3,251,968,700 cell types:
         // vtkio asked for gigabytes and the process aborted.
