@@ -524,12 +524,19 @@ fn data_array(e: &BytesStart<'_>, section: Section) -> Result<ArrayDesc, String>
     })
 }
 
-/// Inflates one block to exactly `size` bytes.
+/// Inflates one block to exactly `size` bytes. `size` comes from the file's block header,
+/// so nothing is reserved up front beyond what the input could give (a 2 KiB `.vtu`
+/// declaring one zlib block of 12 GB had the reader ask for 12 GB at once): zlib and xz
+/// output grows with what the stream actually yields and stops one byte past `size`, and an
+/// LZ4 block, which cannot expand more than 255 times (a match's length grows by at most
+/// 255 a byte), is refused when it declares more than that before its buffer is made.
 fn inflate(compressor: Compressor, input: &[u8], size: usize) -> Result<Vec<u8>, String> {
     use std::io::Read;
+    /// What the first reservation may be: the rest comes as the data does.
+    const RESERVE: usize = 1 << 20;
     let out = match compressor {
         Compressor::Zlib => {
-            let mut out = Vec::with_capacity(size);
+            let mut out = Vec::with_capacity(size.min(RESERVE));
             flate2::read::ZlibDecoder::new(input)
                 .take(size as u64 + 1)
                 .read_to_end(&mut out)
@@ -537,6 +544,13 @@ fn inflate(compressor: Compressor, input: &[u8], size: usize) -> Result<Vec<u8>,
             out
         }
         Compressor::Lz4 => {
+            let most = input.len().saturating_mul(255).saturating_add(16);
+            if size > most {
+                return Err(format!(
+                    "the header says {size} bytes, more than LZ4's {} compressed bytes can hold",
+                    input.len()
+                ));
+            }
             let mut out = vec![0u8; size];
             let n = lz4_flex::block::decompress_into(input, &mut out)
                 .map_err(|e| format!("lz4: {e}"))?;
@@ -544,10 +558,13 @@ fn inflate(compressor: Compressor, input: &[u8], size: usize) -> Result<Vec<u8>,
             out
         }
         Compressor::Lzma => {
-            let mut out = Vec::with_capacity(size);
+            let mut out = Capped {
+                bytes: Vec::with_capacity(size.min(RESERVE)),
+                cap: size.saturating_add(1),
+            };
             lzma_rs::xz_decompress(&mut std::io::BufReader::new(input), &mut out)
                 .map_err(|e| format!("xz: {e}"))?;
-            out
+            out.bytes
         }
     };
     if out.len() != size {
@@ -557,6 +574,31 @@ fn inflate(compressor: Compressor, input: &[u8], size: usize) -> Result<Vec<u8>,
         ));
     }
     Ok(out)
+}
+
+/// A writer that takes at most `cap` bytes, then fails: an xz block inflates no further than
+/// one byte past what its header declares.
+struct Capped {
+    bytes: Vec<u8>,
+    cap: usize,
+}
+
+impl std::io::Write for Capped {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        let room = self.cap - self.bytes.len();
+        if room == 0 && !buf.is_empty() {
+            return Err(std::io::Error::other(
+                "more bytes than the block's header declares",
+            ));
+        }
+        let n = buf.len().min(room);
+        self.bytes.extend_from_slice(&buf[..n]);
+        Ok(n)
+    }
+
+    fn flush(&mut self) -> std::io::Result<()> {
+        Ok(())
+    }
 }
 
 /// Decodes base64 text made of one or more padded segments (VTK and meshio encode a binary
@@ -703,5 +745,40 @@ mod tests {
             vec![4, 0, 0, 0, 1, 2, 3, 4]
         );
         assert!(base64_segments(b"@@@@").is_err());
+    }
+
+    #[test]
+    fn a_block_inflates_to_its_declared_size_or_is_refused_without_reserving_it() {
+        use std::io::Write;
+        let raw: Vec<u8> = (0..40_000u32).map(|i| (i % 7) as u8).collect();
+        let mut z = flate2::write::ZlibEncoder::new(Vec::new(), flate2::Compression::default());
+        z.write_all(&raw).expect("zlib writes");
+        let zlib = z.finish().expect("zlib finishes");
+        let lz4 = lz4_flex::block::compress(&raw);
+        let mut xz = Vec::new();
+        lzma_rs::xz_compress(&mut &raw[..], &mut xz).expect("xz writes");
+        for (compressor, input) in [
+            (Compressor::Zlib, &zlib),
+            (Compressor::Lz4, &lz4),
+            (Compressor::Lzma, &xz),
+        ] {
+            let name = format!("{compressor:?}");
+            assert_eq!(
+                inflate(compressor, input, raw.len()).as_ref(),
+                Ok(&raw),
+                "{name}"
+            );
+            // Declared one byte short or long: refused, naming both sizes.
+            let e = inflate(compressor, input, raw.len() - 1).expect_err("one byte short");
+            assert!(e.contains("39999") || e.contains("xz:"), "{name}: {e}");
+            let e = inflate(compressor, input, raw.len() + 1).expect_err("one byte long");
+            assert!(e.contains("40001"), "{name}: {e}");
+            // A header declaring 12 GB for the same bytes (the fuzzed `.vtu` that made the
+            // reader ask for it at once) is refused too.
+            let e = inflate(compressor, input, 12_000_000_000).expect_err("12 GB");
+            assert!(e.contains("12000000000"), "{name}: {e}");
+        }
+        let e = inflate(Compressor::Lz4, &lz4, lz4.len() * 255 + 17).expect_err("past 255×");
+        assert!(e.contains("more than LZ4's"), "{e}");
     }
 }
