@@ -10,7 +10,7 @@ cd "$(dirname "$0")"
 seconds=${1:-600}
 shift || true
 targets=("$@")
-[ ${#targets[@]} -gt 0 ] || targets=(ws_message npy_step raw_step tet_mesh vtk_file surfel_file surfel_scene surfel_step scene_spec)
+[ ${#targets[@]} -gt 0 ] || targets=(ws_message npy_step raw_step tet_mesh vtk_file points_file surfel_file surfel_scene surfel_step scene_spec)
 "${ISORAY_PYTHON:-python3}" seeds.py corpus
 for t in "${targets[@]}"; do
   echo "== $t for ${seconds}s"

@@ -112,6 +112,24 @@ with tempfile.TemporaryDirectory() as tmp:
     np.savetxt(p, np.hstack([verts, verts]))
     put("surfel_file", "cloud.xyz", bytes([4]) + open(p, "rb").read())
 
+# Particle files of `isoray push` for metaball scenes, as NumPy writes them: a CSV with a
+# header (first byte 0), XYZ frames (1) and NPZ archives, stored and deflated (2).
+parts = rng.random((40, 3))
+with tempfile.TemporaryDirectory() as tmp:
+    p = os.path.join(tmp, "p.csv")
+    np.savetxt(p, np.hstack([parts, rng.random((40, 2))]), delimiter=",",
+               header="x,y,z,radius,strength", comments="")
+    put("points_file", "particles.csv", bytes([0]) + open(p, "rb").read())
+    frames = "".join(f"{len(parts)}\nframe {k}\n" +
+                     "".join(f"C {x:.6f} {y:.6f} {z:.6f}\n" for x, y, z in parts + k)
+                     for k in range(3))
+    put("points_file", "frames.xyz", bytes([1]) + frames.encode())
+    for name, save in (("stored.npz", np.savez), ("deflated.npz", np.savez_compressed)):
+        p = os.path.join(tmp, name)
+        save(p, positions=np.stack([parts, parts + 1]), radius=rng.random((2, 40)),
+             strength=rng.random(40), color=rng.random((40, 3)).astype(np.float32))
+        put("points_file", name, bytes([2]) + open(p, "rb").read())
+
 # The same objects as a client posts them (`surfels` of a scene), and explicit surfels with
 # clipping between two groups.
 nodes = (verts * 1.1)[::3].tolist()

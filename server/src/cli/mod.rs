@@ -1,6 +1,7 @@
 //! The `isoray` binary's commands besides serving: `isoray push` (steps from files to a
 //! server) and `isoray render` (one image of a scene, offline).
 
+pub mod points_files;
 pub mod push;
 pub mod push_args;
 pub mod push_molecule;

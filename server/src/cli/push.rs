@@ -32,7 +32,7 @@ pub fn run(args: PushArgs) -> Result<(), String> {
     let points = args
         .files
         .iter()
-        .filter(|f| super::push_points::is_points(f))
+        .filter(|f| super::points_files::is_points(f))
         .count();
     if points == args.files.len() {
         return super::push_points::run(&args);
