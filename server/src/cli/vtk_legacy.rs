@@ -38,19 +38,14 @@ fn values(arrays: &[Attribute], name: &str) -> Option<Vec<f64>> {
     None
 }
 
-/// Whether the file is legacy version 5 (its first line says so); reads only that line.
-fn is_version_5(path: &Path) -> Result<bool, String> {
-    use std::io::{BufRead, Read};
-    let file = std::fs::File::open(path).map_err(|e| e.to_string())?;
-    let mut first = Vec::new();
-    std::io::BufReader::new(file)
-        .take(256)
-        .read_until(b'\n', &mut first)
-        .map_err(|e| e.to_string())?;
-    Ok(String::from_utf8_lossy(&first)
+/// Whether the file is legacy version 5: its first line (within 256 bytes) says so.
+fn is_version_5(bytes: &[u8]) -> bool {
+    let head = &bytes[..bytes.len().min(256)];
+    let first = head.split(|&b| b == b'\n').next().unwrap_or_default();
+    String::from_utf8_lossy(first)
         .trim()
         .strip_prefix("# vtk DataFile Version ")
-        .is_some_and(|v| v.trim_start().starts_with('5')))
+        .is_some_and(|v| v.trim_start().starts_with('5'))
 }
 
 /// A cursor over a legacy file's bytes: keyword lines, and numbers in ASCII or binary
@@ -258,10 +253,9 @@ fn check_counts(bytes: &[u8]) -> Result<(), String> {
 /// Reads a legacy `.vtk` unstructured grid with the scalar array `wanted` (or the first
 /// one-component point array, else cell array).
 pub fn read(path: &Path, wanted: Option<&str>) -> Result<Grid, String> {
-    let version_5 = is_version_5(path)?;
     let bytes = std::fs::read(path).map_err(|e| e.to_string())?;
     check_counts(&bytes)?;
-    let vtk = if version_5 {
+    let vtk = if is_version_5(&bytes) {
         let older = downgrade_version_5(&bytes).map_err(|e| format!("legacy VTK 5.1: {e}"))?;
         Vtk::parse_legacy_be(older)
     } else {

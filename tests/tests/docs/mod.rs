@@ -8,7 +8,7 @@
 //! Links are the inline form `[text](target)` and `![alt](target)` outside fenced code
 //! blocks; a target with a scheme (`https:`, `mailto:`) is not checked.
 
-use std::collections::HashSet;
+use std::collections::{HashMap, HashSet};
 use std::path::{Path, PathBuf};
 
 /// Directories that hold no document of the project's own.
@@ -103,6 +103,9 @@ fn link_targets(text: &str) -> Vec<String> {
 fn broken_links(doc: &Path, text: &str, root: &Path) -> Vec<String> {
     let shown = doc.strip_prefix(root).unwrap_or(doc).display().to_string();
     let mut broken = Vec::new();
+    // Each linked document's headings, read once however many links name it.
+    let mut own: Option<HashSet<String>> = None;
+    let mut linked: HashMap<PathBuf, HashSet<String>> = HashMap::new();
     for target in link_targets(text) {
         let is_url = target.split_once(':').is_some_and(|(scheme, _)| {
             !scheme.is_empty() && scheme.chars().all(|c| c.is_ascii_alphabetic())
@@ -125,12 +128,14 @@ fn broken_links(doc: &Path, text: &str, root: &Path) -> Vec<String> {
         }
         let Some(fragment) = fragment else { continue };
         if file.extension().is_some_and(|e| e == "md") {
-            let linked = if path.is_empty() {
-                text.to_string()
+            let headings = if path.is_empty() {
+                own.get_or_insert_with(|| anchors(text))
             } else {
-                std::fs::read_to_string(&file).unwrap_or_default()
+                linked
+                    .entry(file.clone())
+                    .or_insert_with(|| anchors(&std::fs::read_to_string(&file).unwrap_or_default()))
             };
-            if !anchors(&linked).contains(fragment) {
+            if !headings.contains(fragment) {
                 broken.push(format!("{shown}: {target} (no heading #{fragment})"));
             }
         }
