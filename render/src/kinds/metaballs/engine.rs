@@ -276,23 +276,8 @@ impl PreparedMetaballs {
         if !(isovalue > 0.0) || !isovalue.is_finite() || !(t_min < t_max) {
             return None;
         }
-        let accel = match (&self.options.accel, &self.accel) {
-            (AccelKind::Tree(opts), Accel::Tree(_))
-                if opts.depends_on_isovalue() && isovalue < opts.isovalue =>
-            {
-                self.fallback
-                    .get_or_init(|| build_fallback(&self.scene, opts))
-            }
-            (_, accel) => accel,
-        };
-        let params = FindParams {
-            kernel: KernelPoly::new(self.scene.kernel),
-            isovalue,
-            tolerance: self.options.tolerance,
-            owners_only: false,
-            step: self.options.step,
-            bounded: false,
-        };
+        let accel = self.accel_for(isovalue);
+        let params = self.params(isovalue);
         SCRATCH.with(|cell| {
             let mut guard = cell.borrow_mut();
             let (gathered, scratch, stack) = &mut *guard;
