@@ -118,11 +118,16 @@ pub fn parse_off(text: &str) -> Result<SurfelInput, String> {
         None => return Err("does not start with OFF".into()),
     };
     let c = numbers(&counts, 3)?;
+    let count = |x: f64| (x >= 0.0 && x.fract() == 0.0).then_some(x as usize);
     let (nv, nf) = match c[..] {
-        [v, f, ..] if v >= 0.0 && f >= 0.0 => (v as usize, f as usize),
+        [v, f, ..] => count(v).zip(count(f)).ok_or(format!(
+            "the counts line `{counts}` needs whole numbers of vertices and faces"
+        ))?,
         _ => return Err("the counts line needs vertices and faces".into()),
     };
-    let mut vertices = Vec::with_capacity(nv.min(1 << 24));
+    // Each vertex line takes at least six bytes ("0 0 0\n"), so a count the text cannot hold
+    // reserves no more than the text could give.
+    let mut vertices = Vec::with_capacity(nv.min(text.len() / 6));
     for i in 0..nv {
         let v = numbers(lines.next().ok_or(format!("vertex {i} missing"))?, 3)?;
         if v.len() < 3 {
@@ -271,5 +276,12 @@ mod tests {
         assert!(parse_off("OFF\n3 1 0\n0 0 0\n")
             .expect_err("short")
             .contains("vertex 1"));
+        // A count far beyond the file is a missing vertex, not a reservation of its size.
+        assert!(parse_off("OFF\n4000000000000 1 0\n0 0 0\n")
+            .expect_err("bomb")
+            .contains("vertex 1 missing"));
+        assert!(parse_off("OFF\n2.5 1 0\n0 0 0\n")
+            .expect_err("fraction")
+            .contains("whole numbers"));
     }
 }
