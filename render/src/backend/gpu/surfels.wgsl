@@ -168,6 +168,10 @@ fn surfel_intersect(o: vec3<f32>, d: vec3<f32>, s: u32, lo: f32, hi: f32) -> KHi
     let first = leaf.neighbours_first;
     let end = first + leaf.neighbours_count;
     var x = o + t0 * d;
+    // The last step's start and how far its plane moved it (the CPU's `next_step`): when two
+    // steps point opposite ways the next point is the secant's root between them.
+    var t_last = 0.0;
+    var moved_last = 0.0;
     for (var it = 0u; it < surfel_params.mls_iterations; it++) {
         var sw = 0.0;
         var sp = vec3<f32>(0.0);
@@ -205,7 +209,15 @@ fn surfel_intersect(o: vec3<f32>, d: vec3<f32>, s: u32, lo: f32, hi: f32) -> KHi
         if (abs(dn) < 1e-7) {
             return miss;
         }
-        x = o + (dot(n, avg - o) / dn) * d;
+        let t = dot(x - o, d);
+        let moved = dot(n, avg - o) / dn - t;
+        var step = moved;
+        if (moved * moved_last < 0.0) {
+            step = moved * (t - t_last) / (moved_last - moved);
+        }
+        t_last = t;
+        moved_last = moved;
+        x = o + (t + step) * d;
         let e = x - leaf.centre;
         if (dot(e, e) > leaf.leaf_radius * leaf.leaf_radius) {
             return miss;
