@@ -6,9 +6,10 @@
 //! and normal `n(x)` of the surfel's fixed neighbourhood (eq. 12, weights of eq. 2 about the
 //! current point) define a plane; the ray meets the plane at the next point, until
 //! `|n(x)ᵀ(x − a(x))| < ε` (where two steps point opposite ways, the next point is the
-//! secant's root between them: [`next_step`]). A point leaving the leaf's sphere rejects the intersection. The
-//! converged point is then clipped (§4.3): for each surface that clips this surfel's surface,
-//! the nearer of its two stored surfels decides, by the side of its tangent plane.
+//! secant's root between them: `next_step`). A point leaving the leaf's sphere rejects the
+//! intersection. The converged point is then clipped (§4.3): for each surface that clips
+//! this surfel's surface, the nearer of its two stored surfels decides, by the side of its
+//! tangent plane.
 //! Everything depends on the leaf and the ray only, so every traversal finds the same hits.
 
 use crate::kinds::surfels::counters::SurfelCounters;
@@ -186,9 +187,9 @@ impl<'a> Leaf<'a> {
 /// Where the ray meets the surface at a grazing angle the plain step overshoots: the plane
 /// tilts as the point moves, and successive points fall on alternate sides of the fixed
 /// point, each error about −0.7 to −0.95 times the last (measured on `surfel-impact`'s
-/// strike, where the dent's wall faces away from the camera: after the 12 iterations the
-/// point was still `4·10⁻⁴ h` off, so the front surface was missed and the blob's back showed
-/// through). When the two steps point opposite ways, `g(t) − t` changes sign between the two
+/// strike, where the dent's wall meets the camera's rays at 15–30°: after the 12 iterations
+/// the point was still `4·10⁻⁴ h` off, so the front surface was missed and the blob's back
+/// showed through). When the two steps point opposite ways, `g(t) − t` changes sign between the two
 /// starts, so its root lies between them: the step goes to the secant's root there (a
 /// bracketed step, never outside the last two points). The fixed point, and the test that
 /// accepts it, are the plain iteration's.
@@ -352,9 +353,9 @@ mod tests {
     /// most rays at a grazing angle, where the plain iteration of §4.2.1 overshoots (successive
     /// points on alternate sides of the fixed point, each error −0.7 to −0.95 times the last)
     /// and 108 searches ran out of their 12 iterations, missing the front and showing the
-    /// blob's back through it. With the secant step between two such points
-    /// (`next_step`) 18 do (step 6: 141 → 32; step 12: 9 → 5); the rest leave
-    /// their leaf's sphere or start outside every disc (docs/accuracy.md).
+    /// blob's back through it. With the secant step between two such points (`next_step`)
+    /// 18 do (step 6: 141 → 32; step 12: 9 → 5); the rest leave their leaf's sphere or start
+    /// outside every disc (docs/accuracy.md).
     #[test]
     fn the_strikes_grazing_searches_converge() {
         let step = 9;
