@@ -1,5 +1,5 @@
 //! What the GPU tests read of a kernel through naga (no device needed): the parsed module of
-//! a kind's kernel, its `u32` constants, and a struct's size and member offsets against the
+//! a kind's kernel, its constants, and a struct's size and member offsets against the
 //! Rust twin's.
 
 use crate::backend::gpu::kind::GpuKind;
@@ -12,16 +12,32 @@ pub fn module_of(kind: GpuKind) -> naga::Module {
         .unwrap_or_else(|e| panic!("{}: {}", kind.name(), e.emit_to_string(&source)))
 }
 
-/// The value of the shader's `u32` constant `name`.
-pub fn constant(module: &naga::Module, name: &str) -> u32 {
+/// The literal the shader's constant `name` is initialised with.
+fn literal(module: &naga::Module, name: &str) -> naga::Literal {
     let (_, c) = module
         .constants
         .iter()
         .find(|(_, c)| c.name.as_deref() == Some(name))
         .unwrap_or_else(|| panic!("constant {name} in the shader"));
     match module.global_expressions[c.init] {
-        naga::Expression::Literal(naga::Literal::U32(v)) => v,
+        naga::Expression::Literal(l) => l,
         ref other => panic!("{name} = {other:?}"),
+    }
+}
+
+/// The value of the shader's `u32` constant `name`.
+pub fn constant(module: &naga::Module, name: &str) -> u32 {
+    match literal(module, name) {
+        naga::Literal::U32(v) => v,
+        other => panic!("{name} = {other:?}, not a u32"),
+    }
+}
+
+/// The value of the shader's `f32` constant `name`.
+pub fn constant_f32(module: &naga::Module, name: &str) -> f32 {
+    match literal(module, name) {
+        naga::Literal::F32(v) => v,
+        other => panic!("{name} = {other:?}, not an f32"),
     }
 }
 

@@ -198,9 +198,10 @@ mod tests {
     fn the_seam_binds_as_many_arrays_as_the_upload_makes() {
         assert_eq!(GpuKind::Surfels.arrays(), ARRAYS);
     }
-    use crate::backend::gpu::naga_checks::{assert_layout, constant, module_of};
+    use crate::backend::gpu::naga_checks::{assert_layout, constant, constant_f32, module_of};
     use crate::kinds::surfels::deform::deform_surfel;
     use crate::kinds::surfels::demo::{self, SurfelDemoKind};
+    use crate::kinds::surfels::intersect::{DEFER, WIDE};
     use crate::kinds::surfels::prepared::Accel;
     use crate::kinds::surfels::scene::{SurfelOptions, SurfelRuntime, UpdateMode};
     use crate::kinds::surfels::tree::LEAF;
@@ -218,6 +219,8 @@ mod tests {
         assert_layout!(&m, "SurfelData", GpuSurfel; centre, leaf_radius, t1, radius, t2, support, normal, neighbours_first, colour, clips_first, neighbours_count, clips_count, inv_support2, _pad);
         assert_eq!(constant(&m, "SURFEL_STACK") as usize, STACK);
         assert_eq!(constant(&m, "SURFEL_LEAF"), LEAF);
+        assert_eq!(constant_f32(&m, "SURFEL_WIDE"), WIDE);
+        assert_eq!(constant_f32(&m, "SURFEL_DEFER"), DEFER);
         assert_eq!(GpuKind::Surfels.arrays(), ARRAYS);
         for binding in 0..=ARRAYS as u32 {
             let bound = m

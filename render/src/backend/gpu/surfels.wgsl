@@ -50,6 +50,11 @@ struct SurfelData {
 
 // `kids.x` of a leaf.
 const SURFEL_LEAF: u32 = 0xffffffffu;
+// The two-tier start gate (intersect.rs's `WIDE` and `DEFER`): an iteration may start from
+// a plane point out to SURFEL_WIDE radii when the nearest hit is sought, and a hit so
+// started ranks SURFEL_DEFER support radii farther than its distance.
+const SURFEL_WIDE: f32 = 1.5;
+const SURFEL_DEFER: f32 = 2.0;
 // Traversal stack entries; a median-split tree of n surfels needs ceil(log2 n) + 1.
 const SURFEL_STACK: u32 = 64u;
 
@@ -135,8 +140,14 @@ fn surfel_colour_at(s: u32, x: vec3<f32>, inv_h2: f32) -> vec3<f32> {
 // The ray's MLS intersection with leaf surfel s within [lo, hi] (§4.2.1): start on the
 // deformed ellipse, then project onto the plane of the neighbourhood's weighted average
 // position and normal until |n·(x − a)| < ε h; leaving the leaf's sphere rejects.
-fn surfel_intersect(o: vec3<f32>, d: vec3<f32>, s: u32, lo: f32, hi: f32) -> KHit {
-    let miss = no_hit();
+// A leaf's hit and the distance it ranks by (intersect.rs's `LeafHit::rank`).
+struct SurfelHit {
+    hit: KHit,
+    rank: f32,
+}
+
+fn surfel_intersect(o: vec3<f32>, d: vec3<f32>, s: u32, lo: f32, hi: f32, wide: bool) -> SurfelHit {
+    let miss = SurfelHit(no_hit(), 0.0);
     let leaf = surfel_data[s];
     let denom = dot(leaf.normal, d);
     if (abs(denom) < 1e-7) {
@@ -160,7 +171,9 @@ fn surfel_intersect(o: vec3<f32>, d: vec3<f32>, s: u32, lo: f32, hi: f32) -> KHi
     let r2 = dot(leaf.t2, q);
     let a = (g22 * r1 - g12 * r2) / det;
     let b = (g11 * r2 - g12 * r1) / det;
-    if (a * a + b * b > leaf.radius * leaf.radius) {
+    let rr = leaf.radius * leaf.radius;
+    let outside = a * a + b * b > rr;
+    if (outside && !(wide && a * a + b * b <= SURFEL_WIDE * SURFEL_WIDE * rr)) {
         return miss;
     }
     let h = leaf.support;
@@ -203,7 +216,11 @@ fn surfel_intersect(o: vec3<f32>, d: vec3<f32>, s: u32, lo: f32, hi: f32) -> KHi
             if (!(t >= lo && t <= hi) || surfel_clipped(s, x)) {
                 return miss;
             }
-            return KHit(true, t, x, n, surfel_colour_at(s, x, inv_h2), s);
+            var rank = t;
+            if (outside) {
+                rank = t + SURFEL_DEFER * h;
+            }
+            return SurfelHit(KHit(true, t, x, n, surfel_colour_at(s, x, inv_h2), s), rank);
         }
         let dn = dot(n, d);
         if (abs(dn) < 1e-7) {
@@ -230,6 +247,7 @@ fn surfel_intersect(o: vec3<f32>, d: vec3<f32>, s: u32, lo: f32, hi: f32) -> KHi
 // the best hit so far; ties to the lower surfel.
 fn surfel_nearest(o: vec3<f32>, d: vec3<f32>, lo: f32, hi: f32) -> KHit {
     var best = no_hit();
+    var best_rank = 0.0;
     if (surfel_params.node_count == 0u) {
         return best;
     }
@@ -246,16 +264,17 @@ fn surfel_nearest(o: vec3<f32>, d: vec3<f32>, lo: f32, hi: f32) -> KHit {
         let n = surfel_stack_node[top];
         var limit = hi;
         if (best.found) {
-            limit = best.t;
+            limit = min(best_rank, hi);
         }
         if (surfel_stack_entry[top] > limit) {
             continue;
         }
         let kids = surfel_nodes[n].kids;
         if (kids.x == SURFEL_LEAF) {
-            let h = surfel_intersect(o, d, kids.y, lo, limit);
-            if (h.found && (!best.found || h.t < best.t || (h.t == best.t && h.primitive < best.primitive))) {
-                best = h;
+            let h = surfel_intersect(o, d, kids.y, lo, limit, true);
+            if (h.hit.found && (!best.found || h.rank < best_rank || (h.rank == best_rank && h.hit.primitive < best.primitive))) {
+                best = h.hit;
+                best_rank = h.rank;
             }
             continue;
         }
@@ -312,9 +331,9 @@ fn kind_any_hit(o: vec3<f32>, d: vec3<f32>, lo: f32, hi: f32, iso: f32) -> f32 {
             continue;
         }
         if (node.kids.x == SURFEL_LEAF) {
-            let h = surfel_intersect(o, d, node.kids.y, lo, hi);
-            if (h.found) {
-                return h.t;
+            let h = surfel_intersect(o, d, node.kids.y, lo, hi, false);
+            if (h.hit.found) {
+                return h.hit.t;
             }
             continue;
         }

@@ -325,7 +325,7 @@ pub fn first_hit<V: Spheres>(
 ) -> Option<LeafHit> {
     let mut best: Option<LeafHit> = None;
     if let Some(s) = hint.filter(|&s| (s as usize) < p.surfels.len()) {
-        best = intersect_leaf(p, ray, s as usize, t_min, t_max, c);
+        best = intersect_leaf(p, ray, s as usize, t_min, t_max, true, c);
         c.cache_hits += best.is_some() as u64;
     }
     let mut stack = [(0u32, 0f32, 0f32); STACK];
@@ -339,7 +339,7 @@ pub fn first_hit<V: Spheres>(
     while top > 0 {
         top -= 1;
         let (n, entry, radius) = stack[top];
-        let limit = best.map_or(t_max, |b| b.t);
+        let limit = best.map_or(t_max, |b| b.rank.min(t_max));
         if entry > limit {
             continue;
         }
@@ -348,7 +348,7 @@ pub fn first_hit<V: Spheres>(
             if Some(kids_of[1]) == hint {
                 continue;
             }
-            if let Some(h) = intersect_leaf(p, ray, kids_of[1] as usize, t_min, limit, c) {
+            if let Some(h) = intersect_leaf(p, ray, kids_of[1] as usize, t_min, limit, true, c) {
                 if best.is_none_or(|b| h.before(&b)) {
                     best = Some(h);
                 }
@@ -414,11 +414,11 @@ pub fn first_hits<V: Spheres>(
     for i in 0..n {
         out[i] = None;
         if let Some(s) = hints[i].filter(|&s| (s as usize) < p.surfels.len()) {
-            out[i] = intersect_leaf(p, &rays[i], s as usize, 0.0, t_max, c);
+            out[i] = intersect_leaf(p, &rays[i], s as usize, 0.0, t_max, true, c);
             c.cache_hits += out[i].is_some() as u64;
         }
     }
-    let limit = |out: &[Option<LeafHit>], i: usize| out[i].map_or(t_max, |b| b.t);
+    let limit = |out: &[Option<LeafHit>], i: usize| out[i].map_or(t_max, |b| b.rank.min(t_max));
     let lanes = Lanes::new(&rays[..n]);
     let cone = Cone::around(&rays[..n]);
     let mut lims = [t_max; PACKET];
@@ -462,7 +462,7 @@ pub fn first_hits<V: Spheres>(
                     continue;
                 }
                 let lim = limit(out, i);
-                let h = leaf.hit(&rays[i], 0.0, lim, c);
+                let h = leaf.hit(&rays[i], 0.0, lim, true, c);
                 if let Some(h) = h {
                     if out[i].is_none_or(|b| h.before(&b)) {
                         out[i] = Some(h);
@@ -594,7 +594,7 @@ pub fn any_hits<V: Spheres>(
         if a == LEAF {
             let mut leaf = Leaf::new(p, b as usize, c);
             for i in Bits(inside) {
-                if let Some(h) = leaf.hit(&rays[i], t_min, t_max[i], c) {
+                if let Some(h) = leaf.hit(&rays[i], t_min, t_max[i], false, c) {
                     out[i] = Some(h.t);
                     done |= 1 << i;
                 }
@@ -659,7 +659,7 @@ pub fn any_hit<V: Spheres>(
         }
         let [a, b] = v.kids(n);
         if a == LEAF {
-            if let Some(h) = intersect_leaf(p, ray, b as usize, t_min, t_max, c) {
+            if let Some(h) = intersect_leaf(p, ray, b as usize, t_min, t_max, false, c) {
                 return Some(h.t);
             }
             continue;
