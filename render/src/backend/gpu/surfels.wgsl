@@ -55,6 +55,9 @@ const SURFEL_LEAF: u32 = 0xffffffffu;
 // started ranks SURFEL_DEFER support radii farther than its distance.
 const SURFEL_WIDE: f32 = 1.5;
 const SURFEL_DEFER: f32 = 2.0;
+// How far a nearest-hit search's iterates may wander from the leaf's centre, in leaf
+// radii (intersect.rs's `ROAM`); the converged point must lie in the leaf's sphere.
+const SURFEL_ROAM: f32 = 3.0;
 // Traversal stack entries; a median-split tree of n surfels needs ceil(log2 n) + 1.
 const SURFEL_STACK: u32 = 64u;
 
@@ -137,15 +140,17 @@ fn surfel_colour_at(s: u32, x: vec3<f32>, inv_h2: f32) -> vec3<f32> {
     return sc / sw;
 }
 
-// The ray's MLS intersection with leaf surfel s within [lo, hi] (§4.2.1): start on the
-// deformed ellipse, then project onto the plane of the neighbourhood's weighted average
-// position and normal until |n·(x − a)| < ε h; leaving the leaf's sphere rejects.
 // A leaf's hit and the distance it ranks by (intersect.rs's `LeafHit::rank`).
 struct SurfelHit {
     hit: KHit,
     rank: f32,
 }
 
+// The ray's MLS intersection with leaf surfel s within [lo, hi] (§4.2.1): start on the
+// deformed ellipse (or, for a nearest hit, `wide`, up to SURFEL_WIDE radii out), then
+// project onto the plane of the neighbourhood's weighted average position and normal until
+// |n·(x − a)| < ε h; leaving the leaf's sphere (SURFEL_ROAM times it for a nearest hit) or
+// converging outside it rejects.
 fn surfel_intersect(o: vec3<f32>, d: vec3<f32>, s: u32, lo: f32, hi: f32, wide: bool) -> SurfelHit {
     let miss = SurfelHit(no_hit(), 0.0);
     let leaf = surfel_data[s];
@@ -183,6 +188,10 @@ fn surfel_intersect(o: vec3<f32>, d: vec3<f32>, s: u32, lo: f32, hi: f32, wide: 
     var x = o + t0 * d;
     // The last step's start and how far its plane moved it (the CPU's `next_step`): when two
     // steps point opposite ways the next point is the secant's root between them.
+    var roam = 1.0;
+    if (wide) {
+        roam = SURFEL_ROAM;
+    }
     var t_last = 0.0;
     var moved_last = 0.0;
     for (var it = 0u; it < surfel_params.mls_iterations; it++) {
@@ -213,6 +222,10 @@ fn surfel_intersect(o: vec3<f32>, d: vec3<f32>, s: u32, lo: f32, hi: f32, wide: 
         let n = sn * (1.0 / len);
         if (abs(dot(n, x - avg)) < surfel_params.mls_epsilon * h) {
             let t = dot(x - o, d);
+            let off = x - leaf.centre;
+            if (dot(off, off) > leaf.leaf_radius * leaf.leaf_radius) {
+                return miss;
+            }
             if (!(t >= lo && t <= hi) || surfel_clipped(s, x)) {
                 return miss;
             }
@@ -236,7 +249,7 @@ fn surfel_intersect(o: vec3<f32>, d: vec3<f32>, s: u32, lo: f32, hi: f32, wide: 
         moved_last = moved;
         x = o + (t + step) * d;
         let e = x - leaf.centre;
-        if (dot(e, e) > leaf.leaf_radius * leaf.leaf_radius) {
+        if (dot(e, e) > roam * roam * leaf.leaf_radius * leaf.leaf_radius) {
             return miss;
         }
     }

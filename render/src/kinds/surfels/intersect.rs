@@ -8,8 +8,9 @@
 //! and normal `n(x)` of the surfel's fixed neighbourhood (eq. 12, weights of eq. 2 about the
 //! current point) define a plane; the ray meets the plane at the next point, until
 //! `|n(x)ᵀ(x − a(x))| < ε` (where two steps point opposite ways, the next point is the
-//! secant's root between them: `next_step`). A point leaving the leaf's sphere rejects the
-//! intersection. The converged point is then clipped (§4.3): for each surface that clips
+//! secant's root between them: `next_step`). A point leaving the leaf's sphere (for a
+//! nearest hit: [`ROAM`] times it) rejects the intersection, and so does one converged
+//! outside it. The converged point is then clipped (§4.3): for each surface that clips
 //! this surfel's surface, the nearer of its two stored surfels decides, by the side of its
 //! tangent plane.
 //! Everything depends on the leaf and the ray only, so every traversal finds the same hits.
@@ -99,9 +100,9 @@ impl<'a> Leaf<'a> {
         }
     }
 
-    /// The ray's intersection with this leaf within `[t_min, t_max]`; `wide`: whether an
-    /// iteration may start in the second tier of the gate ([`WIDE`]), as a nearest-hit
-    /// search asks.
+    /// The ray's intersection with this leaf within `[t_min, t_max]`; `wide`: whether the
+    /// search is for the nearest hit, whose iteration may start in the second tier of the
+    /// gate ([`WIDE`]) and wander out of the leaf's sphere on its way ([`ROAM`]).
     pub fn hit(
         &mut self,
         ray: &Ray,
@@ -149,6 +150,7 @@ impl<'a> Leaf<'a> {
         let mut x = ray.at(t0);
         let (iterations, epsilon) = (p.options.mls_iterations, p.options.mls_epsilon);
         let inv_h2 = 1.0 / (h * h);
+        let roam = if wide { ROAM } else { 1.0 };
         // The last step's start and how far the plane moved it: (t, g(t) − t).
         let mut last: Option<(f32, f32)> = None;
         for _ in 0..iterations {
@@ -164,6 +166,9 @@ impl<'a> Leaf<'a> {
             }
             if n.dot(x - avg).abs() < epsilon * h {
                 let t = (x - ray.origin).dot(ray.dir);
+                if (x - self.centre).length_squared() > self.leaf_radius * self.leaf_radius {
+                    return None;
+                }
                 if !(t >= t_min && t <= t_max) || clipped(p, s, x, c) {
                     return None;
                 }
@@ -183,7 +188,9 @@ impl<'a> Leaf<'a> {
             let moved = n.dot(avg - ray.origin) / dn - t;
             x = ray.at(t + next_step(last, t, moved));
             last = Some((t, moved));
-            if (x - self.centre).length_squared() > self.leaf_radius * self.leaf_radius {
+            if (x - self.centre).length_squared()
+                > roam * roam * self.leaf_radius * self.leaf_radius
+            {
                 return None;
             }
         }
@@ -213,6 +220,20 @@ pub const WIDE: f32 = 1.5;
 /// 6/9/12/18 at 320×240 against the `f64` reference): 1 and 2 `h` gave the same failures,
 /// 4 `h` one or two more.
 pub const DEFER: f32 = 2.0;
+
+/// How far from a leaf surfel's centre (in its leaf sphere's radii) the iterates of a
+/// nearest-hit search may wander; the point it converges on must still lie in the leaf's
+/// sphere, so every hit stays inside the spheres the traversal prunes by.
+///
+/// Where a ray grazes the surface (the dent's folded wall in `surfel-impact`'s strike,
+/// `|n·d|` about 0.2), each step along the ray is the plane's offset over `|n·d|`, five
+/// times longer than across it: the iteration left the small leaf sphere (radius about
+/// 0.01) after one or two steps though its fixed point lay inside, and the ray went on to
+/// the wall behind. Measured on the strike (steps 6/9/12/18 at 320×240 against the `f64`
+/// reference): hits behind the reference's (robust or not) 108/73/10/4 → 74/60/8/4, the
+/// suite's failing pixels 101/24/1/0 → 97/23/1/0 (2 and 6 radii: 81/61/9/4 and 73/58/8/4
+/// behind). Shadow rays keep to the sphere.
+pub const ROAM: f32 = 3.0;
 
 /// How far along the ray the MLS iteration moves from `t`, where the plane of `t` lies
 /// `moved` away (the plain step of §4.2.1) and `last` is the previous step's `(t, moved)`.
@@ -390,9 +411,14 @@ mod tests {
     /// 18 do (step 6: 141 → 32; step 12: 9 → 5); the rest leave their leaf's sphere or start
     /// outside every disc (docs/accuracy.md). Where no disc holds the plane point, the second
     /// tier of the start gate ([`WIDE`]) starts from one up to 1.5 radii out: 17 specks of the
-    /// back showed through the dent with one tier, 4 now.
+    /// back showed through the dent with one tier, 4 with two. Since a nearest-hit search's
+    /// iterates may roam past the leaf's sphere ([`ROAM`]), more searches run on where they
+    /// used to stop: 62 run out with the secant step, 341 with the plain one; and 6 specks
+    /// (the roaming closes cracks of the wall behind, some down to a single pixel: against
+    /// the reference, fewer hits lie behind its surface, docs/accuracy.md).
     ///
     /// [`WIDE`]: super::WIDE
+    /// [`ROAM`]: super::ROAM
     #[test]
     fn the_strikes_grazing_searches_converge() {
         let step = 9;
@@ -412,7 +438,7 @@ mod tests {
         }
         assert!(hits > 18_000, "{hits} hits");
         assert!(
-            c.capped < 30,
+            c.capped < 100,
             "{} of {} searches ran out of iterations",
             c.capped,
             c.surfel_tests
@@ -427,6 +453,6 @@ mod tests {
                 t.is_finite() && around.iter().all(|&(i, j)| t > depth[j * 320 + i] + 0.1)
             })
             .count();
-        assert!(specks <= 6, "{specks} specks of the blob's back");
+        assert!(specks <= 8, "{specks} specks of the blob's back");
     }
 }
