@@ -7,7 +7,8 @@
 //! quality and H.264 bit rate against PSNR): time per frame, silhouette pixels lost and
 //! gained, hit-distance error (mean, p99, max, relative to the scene's extent), normal angle,
 //! and searches that hit their iteration cap. `--out` writes a CSV and a log–log SVG (Pareto
-//! front marked) per kind; `--doc` rewrites the generated block of docs/accuracy.md. The one
+//! front marked) per kind; `--doc` rewrites the generated block of docs/accuracy.md (with
+//! `--kinds`, only those kinds' sections, marked as re-run alone). The one
 //! command that regenerates it all is in docs/accuracy.md.
 
 use crate::common::{write_json, Machine};
@@ -137,13 +138,15 @@ pub fn run(args: AccuracyArgs) -> Result<(), String> {
         };
         all.push((kind, rows));
     }
-    let doc = document(
+    let (header, sections) = document(
         &machine,
         &args,
         &all,
         &notes,
         started.elapsed().as_secs_f64(),
     )?;
+    let mut doc = header.clone();
+    doc.extend(sections.iter().map(|(_, text)| text.as_str()));
     println!("{doc}");
     if let Some(path) = &args.doc {
         let text = std::fs::read_to_string(path).map_err(|e| format!("{}: {e}", path.display()))?;
@@ -153,7 +156,17 @@ pub fn run(args: AccuracyArgs) -> Result<(), String> {
                 path.display()
             ));
         };
-        let updated = format!("{}{BEGIN}\n{doc}\n{}", &text[..b], &text[e..]);
+        // A run of some kinds replaces only their sections, each marked as re-run alone.
+        let block = if args.kinds.is_empty() {
+            doc
+        } else {
+            let note = format!(
+                "Re-run alone (`--kinds {}`). {header}",
+                args.kinds.join(",")
+            );
+            merge(&text[b + BEGIN.len()..e], &sections, &note)
+        };
+        let updated = format!("{}{BEGIN}\n{block}\n{}", &text[..b], &text[e..]);
         std::fs::write(path, updated).map_err(|e| format!("{}: {e}", path.display()))?;
     }
     let rows: Vec<Row> = all.iter().flat_map(|(_, r)| r.iter().cloned()).collect();
@@ -172,16 +185,47 @@ pub fn run(args: AccuracyArgs) -> Result<(), String> {
     Ok(())
 }
 
-/// The markdown of the study (tables, plot links, the step bounds), writing each kind's CSV
-/// and SVG under `--out`.
+/// The generated block `old` (without its markers) with the sections of `fresh` in place of
+/// those of the same kinds (appended where it has none), `note` under each fresh heading;
+/// the other sections and the block's first lines stay as they were.
+fn merge(old: &str, fresh: &[(String, String)], note: &str) -> String {
+    let old = old.trim_start_matches('\n').trim_end();
+    let mut starts: Vec<usize> = old.match_indices("\n### ").map(|(i, _)| i).collect();
+    let lead = &old[..starts.first().copied().unwrap_or(old.len())];
+    starts.push(old.len());
+    let mut sections: Vec<(String, String)> = starts
+        .windows(2)
+        .map(|w| {
+            let text = &old[w[0]..w[1]];
+            let kind = text["\n### ".len()..].lines().next().unwrap_or("").trim();
+            (kind.to_string(), format!("{}\n", text.trim_end()))
+        })
+        .collect();
+    for (kind, text) in fresh {
+        let heading = format!("\n### {kind}\n\n");
+        let body = text.strip_prefix(heading.as_str()).unwrap_or(text);
+        let marked = format!("{heading}{}\n\n{body}", note.trim_end());
+        match sections.iter_mut().find(|(k, _)| k == kind) {
+            Some(slot) => slot.1 = marked,
+            None => sections.push((kind.clone(), marked)),
+        }
+    }
+    let mut out = lead.to_string();
+    out.extend(sections.iter().map(|(_, text)| text.as_str()));
+    out
+}
+
+/// The markdown of the study: its first lines, then a section per kind (tables, plot links,
+/// the step bounds), writing each kind's CSV and SVG under `--out`.
 fn document(
     machine: &Machine,
     args: &AccuracyArgs,
     all: &[(&str, Vec<Row>)],
     notes: &[String],
     seconds: f64,
-) -> Result<String, String> {
-    let mut doc = format!(
+) -> Result<(String, Vec<(String, String)>), String> {
+    let mut sections = Vec::new();
+    let header = format!(
         "Measured on {} by `isoray-bench accuracy` in {seconds:.0} s; times are medians of {} \
          frame(s), errors on every {}th pixel in x and y.\n",
         machine.line(),
@@ -192,6 +236,7 @@ fn document(
         if rows.is_empty() {
             continue;
         }
+        let mut doc = String::new();
         let points = plot::points(rows);
         let front = plot::pareto(&points);
         let (x_label, y_label) = if *kind == "codecs" {
@@ -247,8 +292,9 @@ fn document(
             }
             doc.push('\n');
         }
+        sections.push((kind.to_string(), doc));
     }
-    Ok(doc)
+    Ok((header, sections))
 }
 
 /// `path` relative to the folder of `doc` when it lies below it.
@@ -280,6 +326,27 @@ fn codec_table(rows: &[Row]) -> String {
 
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn a_run_of_some_kinds_replaces_only_their_sections() {
+        let old = "\nMeasured on A in 85 s.\n\n### metaballs\n\n| m |\n\n- Step bound: x\n\n### surfels\n\nold note\n\n| s old |\n\n### codecs\n\n| c |\n";
+        let fresh = vec![
+            (
+                "surfels".to_string(),
+                "\n### surfels\n\n| s new |\n".to_string(),
+            ),
+            ("tets".to_string(), "\n### tets\n\n| t |\n".to_string()),
+        ];
+        let merged = super::merge(
+            old,
+            &fresh,
+            "Re-run alone (`--kinds surfels,tets`). Measured on B.",
+        );
+        assert_eq!(
+            merged,
+            "Measured on A in 85 s.\n\n### metaballs\n\n| m |\n\n- Step bound: x\n\n### surfels\n\nRe-run alone (`--kinds surfels,tets`). Measured on B.\n\n| s new |\n\n### codecs\n\n| c |\n\n### tets\n\nRe-run alone (`--kinds surfels,tets`). Measured on B.\n\n| t |\n"
+        );
+    }
+
     #[test]
     fn bad_arguments_are_named() {
         let args = |runs, sample, tolerances: Vec<f32>| super::AccuracyArgs {
