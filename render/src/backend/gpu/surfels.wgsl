@@ -147,11 +147,11 @@ struct SurfelHit {
 }
 
 // The ray's MLS intersection with leaf surfel s within [lo, hi] (§4.2.1): start on the
-// deformed ellipse (or, for a nearest hit, `wide`, up to SURFEL_WIDE radii out), then
+// deformed ellipse (or, for a nearest hit, `nearest`, up to SURFEL_WIDE radii out), then
 // project onto the plane of the neighbourhood's weighted average position and normal until
 // |n·(x − a)| < ε h; leaving the leaf's sphere (SURFEL_ROAM times it for a nearest hit) or
 // converging outside it rejects.
-fn surfel_intersect(o: vec3<f32>, d: vec3<f32>, s: u32, lo: f32, hi: f32, wide: bool) -> SurfelHit {
+fn surfel_intersect(o: vec3<f32>, d: vec3<f32>, s: u32, lo: f32, hi: f32, nearest: bool) -> SurfelHit {
     let miss = SurfelHit(no_hit(), 0.0);
     let leaf = surfel_data[s];
     let denom = dot(leaf.normal, d);
@@ -178,7 +178,7 @@ fn surfel_intersect(o: vec3<f32>, d: vec3<f32>, s: u32, lo: f32, hi: f32, wide: 
     let b = (g11 * r2 - g12 * r1) / det;
     let rr = leaf.radius * leaf.radius;
     let outside = a * a + b * b > rr;
-    if (outside && !(wide && a * a + b * b <= SURFEL_WIDE * SURFEL_WIDE * rr)) {
+    if (outside && !(nearest && a * a + b * b <= SURFEL_WIDE * SURFEL_WIDE * rr)) {
         return miss;
     }
     let h = leaf.support;
@@ -189,7 +189,7 @@ fn surfel_intersect(o: vec3<f32>, d: vec3<f32>, s: u32, lo: f32, hi: f32, wide: 
     // The last step's start and how far its plane moved it (the CPU's `next_step`): when two
     // steps point opposite ways the next point is the secant's root between them.
     var roam = 1.0;
-    if (wide) {
+    if (nearest) {
         roam = SURFEL_ROAM;
     }
     var t_last = 0.0;

@@ -52,10 +52,10 @@ pub fn intersect_leaf(
     s: usize,
     t_min: f32,
     t_max: f32,
-    wide: bool,
+    nearest: bool,
     c: &mut SurfelCounters,
 ) -> Option<LeafHit> {
-    Leaf::new(p, s, c).hit(ray, t_min, t_max, wide, c)
+    Leaf::new(p, s, c).hit(ray, t_min, t_max, nearest, c)
 }
 
 /// One leaf as the rays of a packet meet it: its deformed surfel and ellipse read once, its
@@ -100,7 +100,7 @@ impl<'a> Leaf<'a> {
         }
     }
 
-    /// The ray's intersection with this leaf within `[t_min, t_max]`; `wide`: whether the
+    /// The ray's intersection with this leaf within `[t_min, t_max]`; `nearest`: whether the
     /// search is for the nearest hit, whose iteration may start in the second tier of the
     /// gate ([`WIDE`]) and wander out of the leaf's sphere on its way ([`ROAM`]).
     pub fn hit(
@@ -108,7 +108,7 @@ impl<'a> Leaf<'a> {
         ray: &Ray,
         t_min: f32,
         t_max: f32,
-        wide: bool,
+        nearest: bool,
         c: &mut SurfelCounters,
     ) -> Option<LeafHit> {
         c.surfel_tests += 1;
@@ -139,7 +139,7 @@ impl<'a> Leaf<'a> {
         let (a, b) = ((g22 * r1 - g12 * r2) / det, (g11 * r2 - g12 * r1) / det);
         let radius = p.model.surfels[s].radius;
         let outside = a * a + b * b > radius * radius;
-        if outside && !(wide && a * a + b * b <= WIDE * WIDE * radius * radius) {
+        if outside && !(nearest && a * a + b * b <= WIDE * WIDE * radius * radius) {
             return None;
         }
         let (hood, h) = self.hood.get_or_insert_with(|| {
@@ -150,7 +150,7 @@ impl<'a> Leaf<'a> {
         let mut x = ray.at(t0);
         let (iterations, epsilon) = (p.options.mls_iterations, p.options.mls_epsilon);
         let inv_h2 = 1.0 / (h * h);
-        let roam = if wide { ROAM } else { 1.0 };
+        let roam = if nearest { ROAM } else { 1.0 };
         // The last step's start and how far the plane moved it: (t, g(t) − t).
         let mut last: Option<(f32, f32)> = None;
         for _ in 0..iterations {
@@ -198,6 +198,12 @@ impl<'a> Leaf<'a> {
         None
     }
 }
+
+/// [`Leaf::hit`]'s `nearest` for a nearest-hit search (camera, reflection and refraction
+/// rays) and for a search for any hit (shadow rays).
+pub const NEAREST: bool = true;
+/// See [`NEAREST`].
+pub const ANY: bool = false;
 
 /// How far out of a leaf surfel's ellipse (in its radii) the plane point may lie for a
 /// nearest-hit search to start the iteration there: the second tier of the start gate.

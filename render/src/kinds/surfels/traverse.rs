@@ -9,7 +9,7 @@
 
 use crate::kinds::surfels::counters::SurfelCounters;
 use crate::kinds::surfels::deform::{node_sphere, sphere_around};
-use crate::kinds::surfels::intersect::{intersect_leaf, Leaf, LeafHit};
+use crate::kinds::surfels::intersect::{intersect_leaf, Leaf, LeafHit, ANY, NEAREST};
 use crate::kinds::surfels::prepared::{LazyNode, PreparedSurfels};
 use crate::kinds::surfels::tree::{TreeNode, LEAF};
 use crate::ray::Ray;
@@ -325,7 +325,7 @@ pub fn first_hit<V: Spheres>(
 ) -> Option<LeafHit> {
     let mut best: Option<LeafHit> = None;
     if let Some(s) = hint.filter(|&s| (s as usize) < p.surfels.len()) {
-        best = intersect_leaf(p, ray, s as usize, t_min, t_max, true, c);
+        best = intersect_leaf(p, ray, s as usize, t_min, t_max, NEAREST, c);
         c.cache_hits += best.is_some() as u64;
     }
     let mut stack = [(0u32, 0f32, 0f32); STACK];
@@ -348,7 +348,7 @@ pub fn first_hit<V: Spheres>(
             if Some(kids_of[1]) == hint {
                 continue;
             }
-            if let Some(h) = intersect_leaf(p, ray, kids_of[1] as usize, t_min, limit, true, c) {
+            if let Some(h) = intersect_leaf(p, ray, kids_of[1] as usize, t_min, limit, NEAREST, c) {
                 if best.is_none_or(|b| h.before(&b)) {
                     best = Some(h);
                 }
@@ -414,7 +414,7 @@ pub fn first_hits<V: Spheres>(
     for i in 0..n {
         out[i] = None;
         if let Some(s) = hints[i].filter(|&s| (s as usize) < p.surfels.len()) {
-            out[i] = intersect_leaf(p, &rays[i], s as usize, 0.0, t_max, true, c);
+            out[i] = intersect_leaf(p, &rays[i], s as usize, 0.0, t_max, NEAREST, c);
             c.cache_hits += out[i].is_some() as u64;
         }
     }
@@ -462,7 +462,7 @@ pub fn first_hits<V: Spheres>(
                     continue;
                 }
                 let lim = limit(out, i);
-                let h = leaf.hit(&rays[i], 0.0, lim, true, c);
+                let h = leaf.hit(&rays[i], 0.0, lim, NEAREST, c);
                 if let Some(h) = h {
                     if out[i].is_none_or(|b| h.before(&b)) {
                         out[i] = Some(h);
@@ -594,7 +594,7 @@ pub fn any_hits<V: Spheres>(
         if a == LEAF {
             let mut leaf = Leaf::new(p, b as usize, c);
             for i in Bits(inside) {
-                if let Some(h) = leaf.hit(&rays[i], t_min, t_max[i], false, c) {
+                if let Some(h) = leaf.hit(&rays[i], t_min, t_max[i], ANY, c) {
                     out[i] = Some(h.t);
                     done |= 1 << i;
                 }
@@ -659,7 +659,7 @@ pub fn any_hit<V: Spheres>(
         }
         let [a, b] = v.kids(n);
         if a == LEAF {
-            if let Some(h) = intersect_leaf(p, ray, b as usize, t_min, t_max, false, c) {
+            if let Some(h) = intersect_leaf(p, ray, b as usize, t_min, t_max, ANY, c) {
                 return Some(h.t);
             }
             continue;
