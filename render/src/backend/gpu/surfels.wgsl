@@ -58,6 +58,9 @@ const SURFEL_DEFER: f32 = 2.0;
 // How far a nearest-hit search's iterates may wander from the leaf's centre, in leaf
 // radii (intersect.rs's `ROAM`); the converged point must lie in the leaf's sphere.
 const SURFEL_ROAM: f32 = 3.0;
+// surfel_intersect's `nearest` (intersect.rs's `NEAREST` and `ANY`).
+const SURFEL_NEAREST: bool = true;
+const SURFEL_ANY: bool = false;
 // Traversal stack entries; a median-split tree of n surfels needs ceil(log2 n) + 1.
 const SURFEL_STACK: u32 = 64u;
 
@@ -147,7 +150,7 @@ struct SurfelHit {
 }
 
 // The ray's MLS intersection with leaf surfel s within [lo, hi] (§4.2.1): start on the
-// deformed ellipse (or, for a nearest hit, `nearest`, up to SURFEL_WIDE radii out), then
+// deformed ellipse (or, when `nearest` is sought, up to SURFEL_WIDE radii out), then
 // project onto the plane of the neighbourhood's weighted average position and normal until
 // |n·(x − a)| < ε h; leaving the leaf's sphere (SURFEL_ROAM times it for a nearest hit) or
 // converging outside it rejects.
@@ -186,12 +189,12 @@ fn surfel_intersect(o: vec3<f32>, d: vec3<f32>, s: u32, lo: f32, hi: f32, neares
     let first = leaf.neighbours_first;
     let end = first + leaf.neighbours_count;
     var x = o + t0 * d;
-    // The last step's start and how far its plane moved it (the CPU's `next_step`): when two
-    // steps point opposite ways the next point is the secant's root between them.
     var roam = 1.0;
     if (nearest) {
         roam = SURFEL_ROAM;
     }
+    // The last step's start and how far its plane moved it (the CPU's `next_step`): when two
+    // steps point opposite ways the next point is the secant's root between them.
     var t_last = 0.0;
     var moved_last = 0.0;
     for (var it = 0u; it < surfel_params.mls_iterations; it++) {
@@ -284,7 +287,7 @@ fn surfel_nearest(o: vec3<f32>, d: vec3<f32>, lo: f32, hi: f32) -> KHit {
         }
         let kids = surfel_nodes[n].kids;
         if (kids.x == SURFEL_LEAF) {
-            let h = surfel_intersect(o, d, kids.y, lo, limit, true);
+            let h = surfel_intersect(o, d, kids.y, lo, limit, SURFEL_NEAREST);
             if (h.hit.found && (!best.found || h.rank < best_rank || (h.rank == best_rank && h.hit.primitive < best.primitive))) {
                 best = h.hit;
                 best_rank = h.rank;
@@ -344,7 +347,7 @@ fn kind_any_hit(o: vec3<f32>, d: vec3<f32>, lo: f32, hi: f32, iso: f32) -> f32 {
             continue;
         }
         if (node.kids.x == SURFEL_LEAF) {
-            let h = surfel_intersect(o, d, node.kids.y, lo, hi, false);
+            let h = surfel_intersect(o, d, node.kids.y, lo, hi, SURFEL_ANY);
             if (h.hit.found) {
                 return h.hit.t;
             }
