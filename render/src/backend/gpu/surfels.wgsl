@@ -180,8 +180,9 @@ fn surfel_intersect(o: vec3<f32>, d: vec3<f32>, s: u32, lo: f32, hi: f32, neares
     let a = (g22 * r1 - g12 * r2) / det;
     let b = (g11 * r2 - g12 * r1) / det;
     let rr = leaf.radius * leaf.radius;
-    let outside = a * a + b * b > rr;
-    if (outside && !(nearest && a * a + b * b <= SURFEL_WIDE * SURFEL_WIDE * rr)) {
+    let e2 = a * a + b * b;
+    let outside = e2 > rr;
+    if (outside && !(nearest && e2 <= SURFEL_WIDE * SURFEL_WIDE * rr)) {
         return miss;
     }
     let h = leaf.support;
@@ -260,7 +261,8 @@ fn surfel_intersect(o: vec3<f32>, d: vec3<f32>, s: u32, lo: f32, hi: f32, neares
 }
 
 // The nearest hit in [lo, hi]: near child first, a subtree skipped once it starts beyond
-// the best hit so far; ties to the lower surfel.
+// the best hit's rank so far (its distance, deferred for a hit started in the gate's second
+// tier, as LeafHit::rank on the CPU); ties to the lower surfel.
 fn surfel_nearest(o: vec3<f32>, d: vec3<f32>, lo: f32, hi: f32) -> KHit {
     var best = no_hit();
     var best_rank = 0.0;

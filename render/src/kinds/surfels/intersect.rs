@@ -42,6 +42,13 @@ impl LeafHit {
     pub fn before(&self, o: &LeafHit) -> bool {
         self.rank < o.rank || (self.rank == o.rank && self.surfel < o.surfel)
     }
+
+    /// How far a traversal holding `best` still searches on `[.., t_max]`: a node or leaf
+    /// entered beyond the best hit's rank cannot hold a hit ranked before it.
+    #[inline]
+    pub fn limit(best: Option<LeafHit>, t_max: f32) -> f32 {
+        best.map_or(t_max, |b| b.rank.min(t_max))
+    }
 }
 
 /// The ray's intersection with leaf surfel `s` within `[t_min, t_max]` ([`Leaf::hit`]).
@@ -138,8 +145,9 @@ impl<'a> Leaf<'a> {
         let (r1, r2) = (self.t1.dot(q), self.t2.dot(q));
         let (a, b) = ((g22 * r1 - g12 * r2) / det, (g11 * r2 - g12 * r1) / det);
         let radius = p.model.surfels[s].radius;
-        let outside = a * a + b * b > radius * radius;
-        if outside && !(nearest && a * a + b * b <= WIDE * WIDE * radius * radius) {
+        let e2 = a * a + b * b;
+        let outside = e2 > radius * radius;
+        if outside && !(nearest && e2 <= WIDE * WIDE * radius * radius) {
             return None;
         }
         let (hood, h) = self.hood.get_or_insert_with(|| {

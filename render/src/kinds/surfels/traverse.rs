@@ -339,7 +339,7 @@ pub fn first_hit<V: Spheres>(
     while top > 0 {
         top -= 1;
         let (n, entry, radius) = stack[top];
-        let limit = best.map_or(t_max, |b| b.rank.min(t_max));
+        let limit = LeafHit::limit(best, t_max);
         if entry > limit {
             continue;
         }
@@ -394,13 +394,14 @@ pub type Entries = [[f32; PACKET]; STACK];
 /// [`first_hit`] for up to [`PACKET`] rays on `[0, t_max]` together (coherent camera rays):
 /// each node's sphere is read and updated once for the packet (and tightened once the
 /// packet is done with its subtree), and each ray tests it only while it is active (it met
-/// the parent and the parent's entry was not beyond its nearest hit so far). `hints` holds
+/// the parent and the parent's entry was not beyond its best hit's rank so far). `hints` holds
 /// each ray's cached surfel (tested first, as the single ray does).
 ///
-/// The answers are [`first_hit`]'s: a ray's answer is the nearest hit (ties to the lower
-/// surfel) over the leaves it tests, a leaf's hit does not depend on the order, and a ray
-/// drops a node only where the single ray would (entry beyond its nearest hit so far, which
-/// only shrinks), so every leaf holding its nearest hit is tested by both.
+/// The answers are [`first_hit`]'s: a ray's answer is the first hit by [`LeafHit::before`]
+/// (lowest rank, ties to the lower surfel) over the leaves it tests, a leaf's hit does not
+/// depend on the order, and a ray drops a node only where the single ray would (entry
+/// beyond its best rank so far, which only shrinks), so every leaf holding that hit is
+/// tested by both.
 pub fn first_hits<V: Spheres>(
     v: &V,
     p: &PreparedSurfels,
@@ -418,7 +419,7 @@ pub fn first_hits<V: Spheres>(
             c.cache_hits += out[i].is_some() as u64;
         }
     }
-    let limit = |out: &[Option<LeafHit>], i: usize| out[i].map_or(t_max, |b| b.rank.min(t_max));
+    let limit = |out: &[Option<LeafHit>], i: usize| LeafHit::limit(out[i], t_max);
     let lanes = Lanes::new(&rays[..n]);
     let cone = Cone::around(&rays[..n]);
     let mut lims = [t_max; PACKET];
