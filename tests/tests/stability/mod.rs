@@ -14,7 +14,7 @@
 //!
 //! Some cases add explicit rays (along the axes, through box faces, edges and corners).
 //! `metaballs`, `tets` and `surfels` hold the cases of each kind (`surfel_demos` the surfel
-//! demos at a viewer's size); a new kind is a new module
+//! demos at a viewer's size, `surfel_shadows` their shadow rays); a new kind is a new module
 //! using [`check_image`] and [`check_rays`] with its own reference. Cases far from the origin
 //! (`scene_and_camera_1e5_from_the_origin`, `surfels_and_camera_1e5_from_the_origin`) take the
 //! bounds of their twins at the origin: the prepared scene recentres in `f64`.
@@ -35,6 +35,7 @@
 
 mod metaballs;
 mod surfel_demos;
+mod surfel_shadows;
 mod surfels;
 mod tets;
 

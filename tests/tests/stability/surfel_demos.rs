@@ -19,8 +19,8 @@ use std::sync::Arc;
 
 /// The surfaces of a demo as the reference traces them: which surface each surfel belongs
 /// to, and which surfaces clip which (§4.3).
-struct Surfaces {
-    of: Vec<u16>,
+pub(super) struct Surfaces {
+    pub(super) of: Vec<u16>,
     clips: BTreeMap<u16, Vec<u16>>,
 }
 
@@ -28,7 +28,7 @@ impl Surfaces {
     /// One surface per simulated body (the blob and the cannonball, each ball of the pit):
     /// the engine's neighbourhoods are fixed at rest, where the bodies lie apart, so they
     /// never blend two bodies, and neither does the reference then.
-    fn bodies(model: &SurfelModel) -> Surfaces {
+    pub(super) fn bodies(model: &SurfelModel) -> Surfaces {
         let of = (0..model.len())
             .map(|k| {
                 model
@@ -61,22 +61,25 @@ impl Surfaces {
     }
 }
 
+/// The whole of a camera ray, as the engine traces it.
+const SPAN: (f64, f64) = (0.0, 1e4);
+
 /// A reference hit: distance in units of `|d|`, normal, surface.
 type SurfaceHit = (f64, DVec3, u16);
 
-/// What the reference finds on a ray over the surfels `ids` (in the model's order): the
-/// nearest kept crossing over the surfaces (distance in units of `|d|`, normal, surface), the
+/// What the reference finds on `span` of a ray over the surfels `ids` (in the model's
+/// order): the nearest kept crossing over the surfaces (distance in units of `|d|`, normal, surface), the
 /// first point where the ray ran within `near` of a surface (see `MlsTrace::near_from`), and
 /// the surfels of each surface. Each surface is traced over its own surfels alone, a
 /// crossing cut away where it lies outside a surface that clips it: there that surface's own
 /// MLS field over its surfels is positive (`surfels::reference::field`), not the engine's
 /// rule (the side of the nearer of two stored surfels' tangent planes), so the two may part
 /// along an edge. Running within `near` counts only less than `margin` outside.
-fn surface_trace(
+pub(super) fn surface_trace(
     surfels: &[MlsSurfel],
     ids: &[u32],
     surfaces: &Surfaces,
-    ray: (DVec3, DVec3),
+    (ray, span): ((DVec3, DVec3), (f64, f64)),
     (near, margin): (f64, f64),
 ) -> (
     Option<SurfaceHit>,
@@ -98,7 +101,7 @@ fn surface_trace(
             hit: &hit,
             near: &close,
         };
-        let found = trace_kept(set, o, d, (0.0, 1e4), near, keep);
+        let found = trace_kept(set, o, d, span, near, keep);
         if let Some(h) = found.hit.filter(|h| best.is_none_or(|b| h.t < b.0)) {
             best = Some((h.t, h.normal, surface));
         }
@@ -143,8 +146,13 @@ fn demo_answer(
 ) -> Answer {
     let (o, d) = (ray.origin.as_dvec3(), ray.dir.as_dvec3());
     let ids = groups.crossing_ids(o, d);
-    let (best, near_from, own) =
-        surface_trace(&groups.surfels, &ids, surfaces, (o, d), (near, margin));
+    let (best, near_from, own) = surface_trace(
+        &groups.surfels,
+        &ids,
+        surfaces,
+        ((o, d), SPAN),
+        (near, margin),
+    );
     // Where two surfaces meet (balls pressed together), either may be hit at the crease:
     // the normals of every surfel near the point must agree, not only its own surface's.
     let all_agree = |x: DVec3| {
@@ -191,7 +199,8 @@ fn check_grouping(
     }
     let (o, d) = (ray.origin.as_dvec3(), ray.dir.as_dvec3());
     let answer = |ids: &[u32]| {
-        let (best, near_from, _) = surface_trace(&groups.surfels, ids, surfaces, (o, d), near);
+        let (best, near_from, _) =
+            surface_trace(&groups.surfels, ids, surfaces, ((o, d), SPAN), near);
         (best, near_from)
     };
     let all: Vec<u32> = (0..groups.surfels.len() as u32).collect();
@@ -205,7 +214,7 @@ fn check_grouping(
 /// The demo step's surfels in `f64` for the reference: eq. 1 from the model's embedding
 /// weights (data) and the step's node arrays, written here (the render crate's tests check
 /// `deform` against eq. 1 in `f64` the same way).
-fn demo_surfels(model: &SurfelModel, u: &[Vec3], g: &[Mat3]) -> Vec<MlsSurfel> {
+pub(super) fn demo_surfels(model: &SurfelModel, u: &[Vec3], g: &[Mat3]) -> Vec<MlsSurfel> {
     (0..model.len())
         .map(|k| {
             let x = model.surfels[k].centre.as_dvec3();
@@ -227,14 +236,14 @@ fn demo_surfels(model: &SurfelModel, u: &[Vec3], g: &[Mat3]) -> Vec<MlsSurfel> {
 /// crossed surfels are among the groups whose sphere the ray's line meets. Handed to the
 /// reference in the model's order, that superset gives its answer over all the surfels bit
 /// for bit (the test asserts so on a sample).
-struct MlsGroups {
-    surfels: Vec<MlsSurfel>,
+pub(super) struct MlsGroups {
+    pub(super) surfels: Vec<MlsSurfel>,
     /// Centre, radius and members of each group.
     groups: Vec<(DVec3, f64, Vec<u32>)>,
 }
 
 impl MlsGroups {
-    fn new(surfels: Vec<MlsSurfel>) -> MlsGroups {
+    pub(super) fn new(surfels: Vec<MlsSurfel>) -> MlsGroups {
         let mut supports: Vec<f64> = surfels.iter().map(|s| s.support).collect();
         supports.sort_by(f64::total_cmp);
         let cell = 3.0 * supports[supports.len() / 2];
@@ -257,7 +266,7 @@ impl MlsGroups {
     }
 
     /// The members of every group whose sphere the line `o + t d` meets, in the model's order.
-    fn crossing_ids(&self, o: DVec3, d: DVec3) -> Vec<u32> {
+    pub(super) fn crossing_ids(&self, o: DVec3, d: DVec3) -> Vec<u32> {
         let dd = d.length_squared();
         let mut ids: Vec<u32> = Vec::new();
         for (c, r, members) in &self.groups {
@@ -273,7 +282,7 @@ impl MlsGroups {
 
 /// Step `step` of `demo` as served (default options, a fresh runtime), from its camera, with
 /// the hit distance bound and normal angle `(bound, normal_deg)`.
-fn demo_case(
+pub(super) fn demo_case(
     kind: SurfelDemoKind,
     demo: &SurfelDemo,
     step: usize,

@@ -58,6 +58,10 @@ const SURFEL_DEFER: f32 = 2.0;
 // How far a nearest-hit search's iterates may wander from the leaf's centre, in leaf
 // radii (intersect.rs's `ROAM`); the converged point must lie in the leaf's sphere.
 const SURFEL_ROAM: f32 = 3.0;
+// How far from its start, in support radii, a search for any hit passes over a crossing
+// out of the surface (intersect.rs's `OUTWARD`): the start was inside a neighbouring
+// leaf's sheet of the same surface.
+const SURFEL_OUTWARD: f32 = 2.0;
 // surfel_intersect's `nearest` (intersect.rs's `NEAREST` and `ANY`).
 const SURFEL_NEAREST: bool = true;
 const SURFEL_ANY: bool = false;
@@ -231,6 +235,9 @@ fn surfel_intersect(o: vec3<f32>, d: vec3<f32>, s: u32, lo: f32, hi: f32, neares
                 return miss;
             }
             if (!(t >= lo && t <= hi) || surfel_clipped(s, x)) {
+                return miss;
+            }
+            if (!nearest && dot(n, d) > 0.0 && t <= lo + SURFEL_OUTWARD * h) {
                 return miss;
             }
             var rank = t;
