@@ -46,7 +46,7 @@ impl Surfaces {
 
     /// One surface per surfel group, clipped as the model's clipping rows say (which groups
     /// their stored surfels belong to: data, not the engine's rule).
-    fn groups(model: &SurfelModel) -> Surfaces {
+    pub(super) fn groups(model: &SurfelModel) -> Surfaces {
         let of: Vec<u16> = model.surfels.iter().map(|s| s.group).collect();
         let mut clips: BTreeMap<u16, Vec<u16>> = BTreeMap::new();
         for (k, &g) in of.iter().enumerate() {
