@@ -37,6 +37,9 @@ use crate::ray::{surface_offset, Hit, Ray, INSIDE_EPS};
 use crate::sampling::{cosine_hemisphere, uniform_cone};
 use crate::scene::PreparedScene;
 use crate::shade::{direct, facing, fresnel, Light, Lighting, Material};
+/// The hard shadow rays of a frame as the renderer traces them (the stability suite checks
+/// their answers against each kind's reference).
+pub use batch::{trace_shadows, ShadowQuery};
 use glam::Vec3;
 
 /// Far limit of every ray, in scene units.

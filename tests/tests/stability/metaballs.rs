@@ -2,7 +2,7 @@
 //! section, a certified interval search: no tree, no Bézier clipping, no pruning).
 
 use super::{check_image, check_image_at, check_rays, Answer, Case};
-use glam::Vec3;
+use glam::{DVec3, Vec3};
 use isoray_render::kinds::metaballs::reference::ReferenceRay;
 use isoray_render::kinds::metaballs::{Kernel, Metaball, MetaballScene};
 use isoray_render::scene::Geometry;
@@ -42,14 +42,7 @@ fn answer(case: &Case, ray: &Ray) -> Answer {
     };
     let origin = ray.origin.as_dvec3();
     let r = ReferenceRay::new(balls, origin, ray.dir.as_dvec3(), 0.0, 1.0e4);
-    let eps = 4e-6
-        * r.crossed()
-            .map(|i| {
-                let b = &balls.balls[i as usize];
-                let d = (b.center.as_dvec3() - origin).length();
-                b.strength.abs() as f64 * (d / b.min_semi_axis() as f64 + 1.0)
-            })
-            .sum::<f64>();
+    let eps = rounding_budget(balls, &r, origin);
     let t = case.isovalue as f64;
     let high = r.first_at_least(t + eps, 0.0);
     let robust = high.is_some_and(|h| r.first_below(t + eps, h + 1e-9) - h > case.bound);
@@ -66,6 +59,18 @@ fn answer(case: &Case, ray: &Ray) -> Answer {
         robust,
         normal: at.filter(no_graze).and_then(|t| r.normal(t)),
     }
+}
+
+/// [`answer`]'s rounding budget `ε` for the reference ray `r` from `origin`.
+pub(super) fn rounding_budget(balls: &MetaballScene, r: &ReferenceRay, origin: DVec3) -> f64 {
+    4e-6 * r
+        .crossed()
+        .map(|i| {
+            let b = &balls.balls[i as usize];
+            let d = (b.center.as_dvec3() - origin).length();
+            b.strength.abs() as f64 * (d / b.min_semi_axis() as f64 + 1.0)
+        })
+        .sum::<f64>()
 }
 
 fn image(case: Case) {

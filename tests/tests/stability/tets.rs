@@ -1,9 +1,12 @@
 //! Tet hard cases, against `tets::reference` (every tet by brute force in `f64`: the plane
 //! of the linear field and barycentric coordinates; no marching-tets table, no BVH), and the
-//! tet demos at a viewer's size against the same per-tet test behind a uniform grid.
+//! tet demos at a viewer's size, camera and shadow rays, against the same per-tet test behind
+//! a uniform grid.
 
-use super::{check_image, check_image_at, check_rays, Answer, Case};
+use super::{check_image, check_image_at, check_rays, shadow_rays, Answer, Case};
 use glam::{DVec3, Vec3};
+use isoray_render::integrator::trace_shadows;
+use isoray_render::kinds::counters::SceneCounters;
 use isoray_render::kinds::tets::generate::box_mesh;
 use isoray_render::kinds::tets::reference::reference_hit;
 use isoray_render::kinds::tets::{TetMesh, TetScene};
@@ -299,6 +302,13 @@ impl TetGrid<'_> {
 /// fail turned by `10⁻⁸` (two pixels: a silhouette and a grazing hit).
 const TURN: f64 = 4e-7;
 
+/// Unit `d` and `d` turned by [`TURN`] four ways (up, down, left and right of it).
+fn turned(d: DVec3) -> [DVec3; 5] {
+    let u = d.any_orthonormal_vector();
+    let v = d.cross(u);
+    [d, d + TURN * u, d - TURN * u, d + TURN * v, d - TURN * v]
+}
+
 /// The reference's answer for the ray and for the ray turned by [`TURN`] four ways (up, down,
 /// left and right of it). Where they agree the answer is robust: the engine must hit there
 /// (within the case's bound) or miss. Where they differ the ray passes within rounding of a
@@ -307,10 +317,8 @@ const TURN: f64 = 4e-7;
 /// polygon so obliquely that rounding moves the hit far along it: any of their hits, or
 /// anything between, is right, and a miss too where one of them misses.
 fn turned_answer(grid: &TetGrid, ray: &Ray) -> Answer {
-    let (o, d) = (ray.origin.as_dvec3(), ray.dir.as_dvec3().normalize());
-    let u = d.any_orthonormal_vector();
-    let v = d.cross(u);
-    let hits = [d, d + TURN * u, d - TURN * u, d + TURN * v, d - TURN * v].map(|d| grid.hit(o, d));
+    let o = ray.origin.as_dvec3();
+    let hits = turned(ray.dir.as_dvec3().normalize()).map(|d| grid.hit(o, d));
     let found = hits.iter().flatten().copied();
     let (low, high) = (found.clone().reduce(f64::min), found.reduce(f64::max));
     Answer {
@@ -318,6 +326,28 @@ fn turned_answer(grid: &TetGrid, ray: &Ray) -> Answer {
         high,
         robust: hits.iter().all(Option::is_some),
         normal: None,
+    }
+}
+
+/// The tet demos' frames the suite checks at a viewer's size.
+const DEMO_FRAMES: [(DemoScene, f64); 4] = [
+    (DemoScene::TetGyroid, 23.3),
+    (DemoScene::TetGyroid, 6.0),
+    (DemoScene::TetBucky, 0.0),
+    (DemoScene::TetBucky, 2.5),
+];
+
+/// `demo` at `time` from its own camera, as served.
+fn demo_case(demo: DemoScene, time: f64) -> Case {
+    Case {
+        name: demo.id(),
+        scene: demo.state_at(time),
+        camera: demo.default_camera(),
+        isovalue: demo.default_isovalue(),
+        // Beyond the turned answers' band: at most 1.7e-6 in the camera suite's frames,
+        // 8.2e-6 in the sweep at 640×480.
+        bound: 2e-5,
+        normal_deg: 0.0,
     }
 }
 
@@ -329,22 +359,8 @@ fn turned_answer(grid: &TetGrid, ray: &Ray) -> Answer {
 /// edge planes were formed about the edge's midpoint.
 #[test]
 fn the_tet_demos_at_a_viewers_size() {
-    for (demo, time) in [
-        (DemoScene::TetGyroid, 23.3),
-        (DemoScene::TetGyroid, 6.0),
-        (DemoScene::TetBucky, 0.0),
-        (DemoScene::TetBucky, 2.5),
-    ] {
-        let case = Case {
-            name: demo.id(),
-            scene: demo.state_at(time),
-            camera: demo.default_camera(),
-            isovalue: demo.default_isovalue(),
-            // Beyond the turned answers' band: at most 1.7e-6 in these frames, 8.2e-6 in the
-            // sweep at 640×480.
-            bound: 2e-5,
-            normal_deg: 0.0,
-        };
+    for (demo, time) in DEMO_FRAMES {
+        let case = demo_case(demo, time);
         eprintln!("{} at {time} s", demo.id());
         let grid = TetGrid::new(&case);
         // The grid only culls: on a sample of the image's rays (every 1201st, in pixel order)
@@ -368,4 +384,63 @@ fn the_tet_demos_at_a_viewers_size() {
             turned_answer(&grid, ray)
         });
     }
+}
+
+/// Both tet demos' hard shadow rays ([`shadow_rays`]: from the isosurface and the floor where
+/// it faces the light), answered as the renderer answers them (`integrator::trace_shadows`)
+/// and by the reference: blocked where the ray and the ray turned by [`TURN`] four ways all
+/// hit the surface before the light, let through where none does; anything else goes (the
+/// ray passes within rounding of a silhouette).
+#[test]
+fn the_tet_demos_shadow_rays() {
+    let (mut must_block, mut must_pass) = (0, 0);
+    for (demo, time) in DEMO_FRAMES {
+        let case = demo_case(demo, time);
+        let grid = TetGrid::new(&case);
+        let prepared = Arc::new(case.scene.clone()).prepare();
+        let frame = *prepared.frame();
+        let shadows = shadow_rays(&prepared, &case.camera, (320, 240), case.isovalue);
+        let queries: Vec<_> = shadows.iter().map(|s| s.query).collect();
+        let blocked = trace_shadows(
+            &prepared,
+            case.isovalue,
+            &queries,
+            &mut SceneCounters::default(),
+        );
+        let mut wrong = Vec::new();
+        let (mut block, mut pass, mut floor) = (0, 0, 0);
+        for (shadow, &got) in shadows.iter().zip(&blocked) {
+            let q = &shadow.query;
+            let (o, d) = (frame.world_from_local(q.ray.origin), q.ray.dir.as_dvec3());
+            let hits = turned(d).map(|d| grid.hit(o, d).is_some_and(|t| t <= q.t_max as f64));
+            floor += shadow.on_floor as usize;
+            let answer = if hits.iter().all(|&h| h) {
+                block += 1;
+                Some(true)
+            } else if hits.iter().all(|&h| !h) {
+                pass += 1;
+                Some(false)
+            } else {
+                None
+            };
+            if answer.is_some_and(|a| a != got) {
+                wrong.push(format!(
+                    "pixel {:?} (floor: {}, cos {:.3}) {q:?}: renderer {got}",
+                    shadow.pixel, shadow.on_floor, shadow.cos
+                ));
+            }
+        }
+        eprintln!(
+            "{} at {time} s: {} shadow rays ({floor} from the floor), {block} to block, {pass} to pass, {} wrong",
+            demo.id(),
+            shadows.len(),
+            wrong.len()
+        );
+        assert!(wrong.is_empty(), "{} at {time} s: {wrong:#?}", demo.id());
+        (must_block, must_pass) = (must_block + block, must_pass + pass);
+    }
+    assert!(
+        must_block > 1000 && must_pass > 10_000,
+        "{must_block} to block, {must_pass} to pass"
+    );
 }
