@@ -14,8 +14,12 @@
 //!
 //! Some cases add explicit rays (along the axes, through box faces, edges and corners).
 //! `metaballs`, `tets` and `surfels` hold the cases of each kind (`surfel_demos` the surfel
-//! demos at a viewer's size, `surfel_shadows` their shadow rays); a new kind is a new module
-//! using [`check_image`] and [`check_rays`] with its own reference. Cases far from the origin
+//! demos at a viewer's size); a new kind is a new module
+//! using [`check_image`] and [`check_rays`] with its own reference. The demos' hard shadow
+//! rays are checked apart (`metaball_shadows`, `surfel_shadows` and
+//! `tets::the_tet_demos_shadow_rays`): each ray as [`shadow_rays`] casts it, answered by the
+//! renderer's own batch (`integrator::trace_shadows`) and by the kind's reference, which
+//! says where it must be blocked and where it must pass. Cases far from the origin
 //! (`scene_and_camera_1e5_from_the_origin`, `surfels_and_camera_1e5_from_the_origin`) take the
 //! bounds of their twins at the origin: the prepared scene recentres in `f64`.
 //!
