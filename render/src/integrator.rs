@@ -136,6 +136,9 @@ pub struct Tracer<'a> {
     /// Whether the next occlusion queries search `hint`'s leaves first (not for ambient
     /// occlusion rays).
     hinting: bool,
+    /// Whether the next [`Tracer::closest`] is for a mirror ray leaving a surface outwards
+    /// (`PreparedKind::first_hit_leaving`).
+    leaving: bool,
 }
 
 impl<'a> Tracer<'a> {
@@ -160,6 +163,7 @@ impl<'a> Tracer<'a> {
             shadow_light: None,
             hint: OcclusionHint::default(),
             hinting: true,
+            leaving: false,
         }
     }
 
@@ -244,7 +248,7 @@ impl<'a> Tracer<'a> {
     /// The isosurface a camera ray sees first, outside the plan's clip box (inside the solid
     /// where the ray leaves the box there); no floor, no further isosurfaces, no volume.
     pub fn surface_hit(&mut self, ray: &Ray) -> Option<Hit> {
-        self.crossing(ray, 0.0, T_MAX, self.isovalue)
+        self.crossing(ray, 0.0, T_MAX, self.isovalue, false)
     }
 
     /// Linear colour and hit distance (`INFINITY` on a miss) of a camera ray.
@@ -304,8 +308,9 @@ impl<'a> Tracer<'a> {
 
     /// The first crossing of the isosurface at `isovalue` on `[a, b]`, entering the solid or,
     /// when the ray starts inside it, leaving it.
-    fn crossing(&mut self, ray: &Ray, a: f32, b: f32, isovalue: f32) -> Option<Hit> {
-        self.crossing_from(ray, a, b, isovalue, false)
+    /// `leaving`: the ray leaves a surface outwards (a mirror ray from outside).
+    fn crossing(&mut self, ray: &Ray, a: f32, b: f32, isovalue: f32, leaving: bool) -> Option<Hit> {
+        self.crossing_from(ray, a, b, isovalue, false, leaving)
     }
 
     /// [`Tracer::crossing`]; `inside`: the ray is known to start inside the solid (it just
@@ -317,6 +322,7 @@ impl<'a> Tracer<'a> {
         b: f32,
         isovalue: f32,
         inside: bool,
+        leaving: bool,
     ) -> Option<Hit> {
         let (segments, n) = self.segments(ray, a, b);
         for (k, &(lo, hi)) in segments[..n].iter().enumerate() {
@@ -329,10 +335,12 @@ impl<'a> Tracer<'a> {
                 }
                 continue;
             }
-            let Some(hit) = self
-                .scene
-                .first_hit_counted(ray, lo, hi, isovalue, &mut self.counters)
-            else {
+            let (scene, c) = (self.scene, &mut self.counters);
+            let first = match leaving {
+                true => scene.first_hit_leaving_counted(ray, lo, hi, isovalue, c),
+                false => scene.first_hit_counted(ray, lo, hi, isovalue, c),
+            };
+            let Some(hit) = first else {
                 continue;
             };
             if hit.t > lo + INSIDE_EPS {
@@ -363,14 +371,14 @@ impl<'a> Tracer<'a> {
     fn closest(&mut self, ray: &Ray, t0: f32, t1: f32) -> Option<SurfaceHit> {
         let mut best: Option<SurfaceHit> = None;
         let mut limit = t1;
-        let given = self.given.take();
+        let (given, leaving) = (self.given.take(), std::mem::take(&mut self.leaving));
         if !self.plan.volume {
             let first = match given {
                 // A camera ray's tile hit is `crossing`'s answer unless the ray starts inside
                 // the solid (then `crossing` asks for the way out).
                 Some(Some(h)) if h.t > t0 + INSIDE_EPS => Some(h),
                 Some(None) => None,
-                Some(Some(_)) | None => self.crossing(ray, t0, limit, self.isovalue),
+                Some(Some(_)) | None => self.crossing(ray, t0, limit, self.isovalue, leaving),
             };
             if let Some(h) = first {
                 limit = h.t;
@@ -385,7 +393,7 @@ impl<'a> Tracer<'a> {
             if self.plan.isosurfaces {
                 for k in 0..self.lighting.isosurfaces.len() {
                     let surface = self.lighting.isosurfaces[k];
-                    if let Some(h) = self.crossing(ray, t0, limit, surface.isovalue) {
+                    if let Some(h) = self.crossing(ray, t0, limit, surface.isovalue, leaving) {
                         limit = h.t;
                         best = Some(SurfaceHit {
                             t: h.t,
@@ -467,6 +475,7 @@ impl<'a> Tracer<'a> {
                 origin: above,
                 dir: reflect(view, normal),
             };
+            self.leaving = entering;
             let mirror = self.radiance(&reflected, 0.0, depth + 1, layers, rng).0;
             color = color * (1.0 - material.reflectivity) + mirror * material.reflectivity;
         }
@@ -755,6 +764,7 @@ impl<'a> Tracer<'a> {
                 origin: hit.position + normal * eps,
                 dir: reflect(view, normal),
             };
+            self.leaving = entering;
             color += reflectance * self.radiance(&ray, 0.0, depth + 1, layers, rng).0;
         }
         if reflectance < 1.0 {

@@ -183,6 +183,22 @@ impl PreparedScene {
             .first_hit(ray, t_min, t_max, isovalue, counters)
     }
 
+    /// [`PreparedScene::first_hit_counted`] for a ray that leaves the surface outwards from a
+    /// start lifted off it (a mirror ray from outside the solid): see
+    /// [`PreparedKind::first_hit_leaving`](crate::kinds::contract::PreparedKind::first_hit_leaving).
+    #[inline]
+    pub fn first_hit_leaving_counted(
+        &self,
+        ray: &Ray,
+        t_min: f32,
+        t_max: f32,
+        isovalue: f32,
+        counters: &mut impl Tally,
+    ) -> Option<Hit> {
+        self.prepared
+            .first_hit_leaving(ray, t_min, t_max, isovalue, counters)
+    }
+
     /// Each primary ray through pixels `x0..x1 × y0..y1` of `rays` (row by row) and its
     /// first hit, exactly as [`PreparedScene::first_hit`] would find it ray by ray. Tets trace
     /// the tile as one packet (tetrahedral-isosurface-ray-tracing.txt §5.2); metaballs ray by

@@ -37,6 +37,22 @@ pub trait PreparedKind {
         counters: &mut Self::Counters,
     ) -> Option<Hit>;
 
+    /// [`PreparedKind::first_hit`] for a ray that leaves the surface outwards from a start
+    /// lifted off it (a mirror ray from outside the solid), whose first crossing is one into
+    /// the solid: a kind whose surface near the start has more than one definition (surfels:
+    /// each leaf's own neighbourhood) may pass over a crossing out there. By default the
+    /// same query.
+    fn first_hit_leaving(
+        &self,
+        ray: &Ray,
+        t_min: f32,
+        t_max: f32,
+        isovalue: f32,
+        counters: &mut Self::Counters,
+    ) -> Option<Hit> {
+        self.first_hit(ray, t_min, t_max, isovalue, counters)
+    }
+
     /// Some root of the isosurface on `[t_min, t_max]`, stopping at the first one found (not
     /// necessarily the nearest). A root at `t_min` means the segment starts inside the solid.
     fn any_hit(

@@ -199,6 +199,24 @@ impl PreparedGeometry {
         }
     }
 
+    /// [`PreparedKind::first_hit_leaving`] of the kind.
+    #[inline]
+    pub fn first_hit_leaving<C: Tally>(
+        &self,
+        ray: &Ray,
+        t_min: f32,
+        t_max: f32,
+        isovalue: f32,
+        counters: &mut C,
+    ) -> Option<Hit> {
+        let span = (t_min, t_max);
+        match self {
+            PreparedGeometry::Metaballs(m) => leaving(m.as_ref(), ray, span, isovalue, counters),
+            PreparedGeometry::Tets(t) => leaving(t.as_ref(), ray, span, isovalue, counters),
+            PreparedGeometry::Surfels(s) => leaving(s.as_ref(), ray, span, isovalue, counters),
+        }
+    }
+
     /// [`PreparedGeometry::first_hit`] with its work counted nowhere.
     #[inline]
     pub fn first_hit_uncounted(
@@ -412,6 +430,17 @@ fn first_hit<K: PreparedKind, C: Tally>(
     counters: &mut C,
 ) -> Option<Hit> {
     counters.count::<K, _>(|c| k.first_hit(ray, t_min, t_max, isovalue, c))
+}
+
+#[inline]
+fn leaving<K: PreparedKind, C: Tally>(
+    k: &K,
+    ray: &Ray,
+    (t_min, t_max): (f32, f32),
+    isovalue: f32,
+    counters: &mut C,
+) -> Option<Hit> {
+    counters.count::<K, _>(|c| k.first_hit_leaving(ray, t_min, t_max, isovalue, c))
 }
 
 #[inline]

@@ -421,13 +421,15 @@ fn segments(o: vec3<f32>, d: vec3<f32>, a: f32, b: f32) -> Segments {
 }
 
 // Tracer::crossing_from: the first crossing of `iso` on [a, b] outside the clip box,
-// entering the solid or, when the ray starts inside it (or `inside`), leaving it.
+// entering the solid or, when the ray starts inside it (or `inside`), leaving it; `leaving`:
+// the ray leaves a surface outwards (a mirror ray from outside, PreparedKind::
+// first_hit_leaving), which kind_first_hit may use.
 //
 // Every query site of the kind is inlined whole by the shader compilers (lavapipe's NIR
 // inlines every call), so the integrator asks the kind from as few places as it can: each of
 // kind_first_hit and kind_exit_hit is called once here, and crossing_from itself from two
 // places (closest, transmittance).
-fn crossing_from(o: vec3<f32>, d: vec3<f32>, a: f32, b: f32, iso: f32, inside: bool) -> KHit {
+fn crossing_from(o: vec3<f32>, d: vec3<f32>, a: f32, b: f32, iso: f32, inside: bool, leaving: bool) -> KHit {
     let segs = segments(o, d, a, b);
     for (var k = 0u; k < segs.n; k = k + 1u) {
         let lo = segs.s[k].x;
@@ -438,7 +440,7 @@ fn crossing_from(o: vec3<f32>, d: vec3<f32>, a: f32, b: f32, iso: f32, inside: b
             if (exit) {
                 h = kind_exit_hit(o, d, lo, hi, iso);
             } else {
-                h = kind_first_hit(o, d, lo, hi, iso);
+                h = kind_first_hit(o, d, lo, hi, iso, leaving);
             }
             if (exit) {
                 if (h.found) {
@@ -514,7 +516,7 @@ fn square_wave_mean(u: f32, w: f32) -> f32 {
 }
 
 // Tracer::closest: the nearest surface on [t0, t1], every drawn isosurface and the floor.
-fn closest(o: vec3<f32>, d: vec3<f32>, t0: f32, t1: f32) -> SurfaceHit {
+fn closest(o: vec3<f32>, d: vec3<f32>, t0: f32, t1: f32, leaving: bool) -> SurfaceHit {
     var best = SurfaceHit(false, 0.0, vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0), 0u);
     var limit = t1;
     if (!has(FLAG_VOLUME)) {
@@ -527,7 +529,7 @@ fn closest(o: vec3<f32>, d: vec3<f32>, t0: f32, t1: f32) -> SurfaceHit {
             if (k > 0u) {
                 iso = isosurfaces[k - 1u].isovalue;
             }
-            let h = crossing_from(o, d, t0, limit, iso, false);
+            let h = crossing_from(o, d, t0, limit, iso, false, leaving);
             if (!h.found) {
                 continue;
             }
@@ -599,7 +601,7 @@ fn transmittance(o: vec3<f32>, d: vec3<f32>, t_max: f32) -> f32 {
         var crossings = 0u;
         var inside = false;
         loop {
-            let h = crossing_from(o, d, t, t_max, iso, inside);
+            let h = crossing_from(o, d, t, t_max, iso, inside, false);
             if (!h.found) {
                 break;
             }
@@ -711,14 +713,16 @@ struct Task {
     depth: u32,
     weight: vec3<f32>,
     layers: u32,
+    // A mirror ray leaving a surface outwards (Tracer::leaving; kind_first_hit's `leaving`).
+    leaving: bool,
 }
 
 var<private> tasks: array<Task, RAY_STACK>;
 var<private> task_count: u32;
 
-fn push(origin: vec3<f32>, dir: vec3<f32>, t0: f32, depth: u32, layers: u32, weight: vec3<f32>) {
+fn push(origin: vec3<f32>, dir: vec3<f32>, t0: f32, depth: u32, layers: u32, weight: vec3<f32>, leaving: bool) {
     if (task_count < RAY_STACK && max(max(weight.x, weight.y), weight.z) > 0.0) {
-        tasks[task_count] = Task(origin, t0, dir, depth, weight, layers);
+        tasks[task_count] = Task(origin, t0, dir, depth, weight, layers, leaving);
         task_count = task_count + 1u;
     }
 }
@@ -728,7 +732,7 @@ fn push(origin: vec3<f32>, dir: vec3<f32>, t0: f32, depth: u32, layers: u32, wei
 fn radiance(task: Task, color: ptr<function, vec3<f32>>) -> f32 {
     let o = task.origin;
     let d = task.dir;
-    let h = closest(o, d, task.t0, frame.t_max);
+    let h = closest(o, d, task.t0, frame.t_max, task.leaving);
     var far = frame.t_max;
     if (h.found) {
         far = h.t;
@@ -759,7 +763,7 @@ fn radiance(task: Task, color: ptr<function, vec3<f32>>) -> f32 {
     // The mirror's share (shade_hit's last step), then what lies behind.
     var keep = w;
     if (reflectivity > 0.0 && task.depth < frame.reflection_depth) {
-        push(above, reflect_dir(view, normal), 0.0, task.depth + 1u, task.layers, w * reflectivity);
+        push(above, reflect_dir(view, normal), 0.0, task.depth + 1u, task.layers, w * reflectivity, entering);
         keep = w * (1.0 - reflectivity);
     }
     let transparent = opacity < 1.0;
@@ -777,15 +781,15 @@ fn radiance(task: Task, color: ptr<function, vec3<f32>>) -> f32 {
         if (reflectance < 1.0) {
             let bent = refract_dir(view, normal, n1 / n2);
             if (bent.w > 0.0) {
-                push(h.position - normal * eps, bent.xyz, 0.0, task.depth + 1u, task.layers, behind * (1.0 - reflectance));
+                push(h.position - normal * eps, bent.xyz, 0.0, task.depth + 1u, task.layers, behind * (1.0 - reflectance), false);
             }
         }
         if (reflectance > 0.0) {
-            push(h.position + normal * eps, reflect_dir(view, normal), 0.0, task.depth + 1u, task.layers, behind * reflectance);
+            push(h.position + normal * eps, reflect_dir(view, normal), 0.0, task.depth + 1u, task.layers, behind * reflectance, entering);
         }
         *color = *color + keep * opacity * own;
     } else if (transmits && task.layers > 0u) {
-        push(o, d, h.t + eps, task.depth, task.layers - 1u, keep * (1.0 - opacity));
+        push(o, d, h.t + eps, task.depth, task.layers - 1u, keep * (1.0 - opacity), false);
         *color = *color + keep * opacity * own;
     } else {
         *color = *color + keep * own;
@@ -806,7 +810,7 @@ fn trace(@builtin(global_invocation_id) id: vec3<u32>) {
     var t = -1.0;
     if (has(FLAG_PASS)) {
         rng_seed(id.x, id.y, frame.pass_index);
-        tasks[0] = Task(o, 0.0, d, 0u, vec3<f32>(1.0), frame.layers);
+        tasks[0] = Task(o, 0.0, d, 0u, vec3<f32>(1.0), frame.layers, false);
         task_count = 1u;
         var primary = true;
         // Whether the loop saw the stack empty in an iteration of its own (see CUT).
@@ -828,7 +832,7 @@ fn trace(@builtin(global_invocation_id) id: vec3<u32>) {
             t = CUT;
         }
     } else {
-        let h = kind_first_hit(o, d, 0.0, frame.t_max, frame.isovalue);
+        let h = kind_first_hit(o, d, 0.0, frame.t_max, frame.isovalue, false);
         var limit = frame.t_max;
         if (h.found) {
             limit = h.t;

@@ -4,8 +4,9 @@
 //! uniform at binding 0 and [`GpuKind::arrays`] storage arrays at bindings `1..=N`.
 //!
 //! A kind's WGSL defines `kind_first_hit`, `kind_exit_hit`, `kind_any_hit` and
-//! `kind_optical_depth`, the GPU twins of [`crate::kinds::contract::PreparedKind`]'s queries;
-//! the common integrator calls nothing else of it.
+//! `kind_optical_depth`, the GPU twins of [`crate::kinds::contract::PreparedKind`]'s queries
+//! (`kind_first_hit`'s last argument, `leaving`, chooses `first_hit_leaving`); the common
+//! integrator calls nothing else of it.
 
 use std::any::Any;
 use std::sync::Arc;

@@ -290,7 +290,7 @@ fn surface_at(t: f32, p: vec3<f32>) -> KHit {
 
 // The kind's queries (render/src/kinds/contract.rs).
 
-fn kind_first_hit(o: vec3<f32>, d: vec3<f32>, lo: f32, hi: f32, iso: f32) -> KHit {
+fn kind_first_hit(o: vec3<f32>, d: vec3<f32>, lo: f32, hi: f32, iso: f32, leaving: bool) -> KHit {
     mb_iso = iso;
     mb_finder = mb.finder;
     let r = first_root(o, d, lo, hi, 1.0);

@@ -58,9 +58,10 @@ const SURFEL_DEFER: f32 = 2.0;
 // How far a nearest-hit search's iterates may wander from the leaf's centre, in leaf
 // radii (intersect.rs's `ROAM`); the converged point must lie in the leaf's sphere.
 const SURFEL_ROAM: f32 = 3.0;
-// How far from its start, in support radii, a search for any hit passes over a crossing
-// out of the surface (intersect.rs's `OUTWARD`): the start was inside a neighbouring
-// leaf's sheet of the same surface.
+// How far from its start, in support radii, a ray leaving the surface outwards (shadow,
+// occlusion and mirror rays: surfel_intersect's `leaving`, intersect.rs's `Search::leaving`)
+// passes over a crossing out of the surface (intersect.rs's `OUTWARD`): the start was inside
+// a neighbouring leaf's sheet of the same surface.
 const SURFEL_OUTWARD: f32 = 2.0;
 // surfel_intersect's `nearest` (intersect.rs's `NEAREST` and `ANY`).
 const SURFEL_NEAREST: bool = true;
@@ -158,7 +159,7 @@ struct SurfelHit {
 // project onto the plane of the neighbourhood's weighted average position and normal until
 // |n·(x − a)| < ε h; leaving the leaf's sphere (SURFEL_ROAM times it for a nearest hit) or
 // converging outside it rejects.
-fn surfel_intersect(o: vec3<f32>, d: vec3<f32>, s: u32, lo: f32, hi: f32, nearest: bool) -> SurfelHit {
+fn surfel_intersect(o: vec3<f32>, d: vec3<f32>, s: u32, lo: f32, hi: f32, nearest: bool, leaving: bool) -> SurfelHit {
     let miss = SurfelHit(no_hit(), 0.0);
     let leaf = surfel_data[s];
     let denom = dot(leaf.normal, d);
@@ -237,7 +238,7 @@ fn surfel_intersect(o: vec3<f32>, d: vec3<f32>, s: u32, lo: f32, hi: f32, neares
             if (!(t >= lo && t <= hi) || surfel_clipped(s, x)) {
                 return miss;
             }
-            if (!nearest && dot(n, d) > 0.0 && t <= lo + SURFEL_OUTWARD * h) {
+            if (leaving && dot(n, d) > 0.0 && t <= lo + SURFEL_OUTWARD * h) {
                 return miss;
             }
             var rank = t;
@@ -270,7 +271,7 @@ fn surfel_intersect(o: vec3<f32>, d: vec3<f32>, s: u32, lo: f32, hi: f32, neares
 // The nearest hit in [lo, hi]: near child first, a subtree skipped once it starts beyond
 // the best hit's rank so far (its distance, deferred for a hit started in the gate's second
 // tier, as LeafHit::rank on the CPU); ties to the lower surfel.
-fn surfel_nearest(o: vec3<f32>, d: vec3<f32>, lo: f32, hi: f32) -> KHit {
+fn surfel_nearest(o: vec3<f32>, d: vec3<f32>, lo: f32, hi: f32, leaving: bool) -> KHit {
     var best = no_hit();
     var best_rank = 0.0;
     if (surfel_params.node_count == 0u) {
@@ -296,7 +297,7 @@ fn surfel_nearest(o: vec3<f32>, d: vec3<f32>, lo: f32, hi: f32) -> KHit {
         }
         let kids = surfel_nodes[n].kids;
         if (kids.x == SURFEL_LEAF) {
-            let h = surfel_intersect(o, d, kids.y, lo, limit, SURFEL_NEAREST);
+            let h = surfel_intersect(o, d, kids.y, lo, limit, SURFEL_NEAREST, leaving);
             if (h.hit.found && (!best.found || h.rank < best_rank || (h.rank == best_rank && h.hit.primitive < best.primitive))) {
                 best = h.hit;
                 best_rank = h.rank;
@@ -332,13 +333,13 @@ fn surfel_nearest(o: vec3<f32>, d: vec3<f32>, lo: f32, hi: f32) -> KHit {
     return best;
 }
 
-fn kind_first_hit(o: vec3<f32>, d: vec3<f32>, lo: f32, hi: f32, iso: f32) -> KHit {
-    return surfel_nearest(o, d, lo, hi);
+fn kind_first_hit(o: vec3<f32>, d: vec3<f32>, lo: f32, hi: f32, iso: f32, leaving: bool) -> KHit {
+    return surfel_nearest(o, d, lo, hi, leaving);
 }
 
 // A surfel surface is a sheet: the way out of a closed object is its next crossing.
 fn kind_exit_hit(o: vec3<f32>, d: vec3<f32>, lo: f32, hi: f32, iso: f32) -> KHit {
-    return surfel_nearest(o, d, lo, hi);
+    return surfel_nearest(o, d, lo, hi, false);
 }
 
 // Some hit in [lo, hi], the first found (first child first, as the CPU's updated tree).
@@ -356,7 +357,7 @@ fn kind_any_hit(o: vec3<f32>, d: vec3<f32>, lo: f32, hi: f32, iso: f32) -> f32 {
             continue;
         }
         if (node.kids.x == SURFEL_LEAF) {
-            let h = surfel_intersect(o, d, node.kids.y, lo, hi, SURFEL_ANY);
+            let h = surfel_intersect(o, d, node.kids.y, lo, hi, SURFEL_ANY, true);
             if (h.hit.found) {
                 return h.hit.t;
             }

@@ -376,7 +376,7 @@ fn tet_record(o: vec3<f32>, d: vec3<f32>, best: TetBest, iso: f32) -> KHit {
 }
 
 // The kind contract (kinds/tets/kind.rs): one isovalue, no clip box (the integrator's).
-fn kind_first_hit(o: vec3<f32>, d: vec3<f32>, lo: f32, hi: f32, iso: f32) -> KHit {
+fn kind_first_hit(o: vec3<f32>, d: vec3<f32>, lo: f32, hi: f32, iso: f32, leaving: bool) -> KHit {
     let best = tet_trace(o, d, lo, hi, iso, false);
     if (best.tet == TET_NONE) {
         return KHit(false, 0.0, vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0), 0u);
@@ -386,7 +386,7 @@ fn kind_first_hit(o: vec3<f32>, d: vec3<f32>, lo: f32, hi: f32, iso: f32) -> KHi
 
 // Every crossing of a tet isosurface is a surface: the way out is the first crossing.
 fn kind_exit_hit(o: vec3<f32>, d: vec3<f32>, lo: f32, hi: f32, iso: f32) -> KHit {
-    return kind_first_hit(o, d, lo, hi, iso);
+    return kind_first_hit(o, d, lo, hi, iso, false);
 }
 
 fn kind_any_hit(o: vec3<f32>, d: vec3<f32>, lo: f32, hi: f32, iso: f32) -> f32 {

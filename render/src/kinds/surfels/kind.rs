@@ -6,7 +6,7 @@ use crate::camera::PrimaryRays;
 use crate::kinds::contract::{OcclusionHint, PreparedKind};
 use crate::kinds::counters::SceneCounters;
 use crate::kinds::surfels::counters::SurfelCounters;
-use crate::kinds::surfels::intersect::LeafHit;
+use crate::kinds::surfels::intersect::{LeafHit, Search, NEAREST, NEAREST_LEAVING};
 use crate::kinds::surfels::prepared::{Accel, PreparedSurfels};
 use crate::kinds::surfels::scene::SurfelRuntime;
 use crate::kinds::surfels::traverse::{self, FixedView, LazyView};
@@ -23,14 +23,28 @@ impl PreparedSurfels {
         hint: Option<u32>,
         c: &mut SurfelCounters,
     ) -> Option<LeafHit> {
+        self.nearest_as(ray, (t_min, t_max), hint, NEAREST, c)
+    }
+
+    /// [`PreparedSurfels::nearest`] as `search` asks.
+    #[inline]
+    pub fn nearest_as(
+        &self,
+        ray: &Ray,
+        span: (f32, f32),
+        hint: Option<u32>,
+        search: Search,
+        c: &mut SurfelCounters,
+    ) -> Option<LeafHit> {
         c.rays += 1;
+        let asked = (hint, search);
         let hit = match &self.accel {
             Accel::Lazy(nodes) => {
                 let v = LazyView { p: self, nodes };
-                traverse::first_hit(&v, self, ray, t_min, t_max, hint, c)
+                traverse::first_hit(&v, self, ray, span, asked, c)
             }
             Accel::Fixed(nodes) => {
-                traverse::first_hit(&FixedView(nodes), self, ray, t_min, t_max, hint, c)
+                traverse::first_hit(&FixedView(nodes), self, ray, span, asked, c)
             }
         };
         c.hits += hit.is_some() as u64;
@@ -82,6 +96,21 @@ impl PreparedKind for PreparedSurfels {
         let hit = self.nearest(ray, t_min, t_max, self.runtime.cached_ray(key), c);
         self.runtime.remember_ray(key, hit.map(|h| h.surfel));
         hit.map(|h| self.record(h))
+    }
+
+    /// A mirror ray from outside passes over a crossing out of the surface near its start
+    /// (`intersect::OUTWARD`).
+    #[inline]
+    fn first_hit_leaving(
+        &self,
+        ray: &Ray,
+        t_min: f32,
+        t_max: f32,
+        _isovalue: f32,
+        c: &mut SurfelCounters,
+    ) -> Option<Hit> {
+        self.nearest_as(ray, (t_min, t_max), None, NEAREST_LEAVING, c)
+            .map(|h| self.record(h))
     }
 
     #[inline]

@@ -9,7 +9,7 @@
 
 use crate::kinds::surfels::counters::SurfelCounters;
 use crate::kinds::surfels::deform::{node_sphere, sphere_around};
-use crate::kinds::surfels::intersect::{intersect_leaf, Leaf, LeafHit, ANY, NEAREST};
+use crate::kinds::surfels::intersect::{intersect_leaf, Leaf, LeafHit, Search, ANY, NEAREST};
 use crate::kinds::surfels::prepared::{LazyNode, PreparedSurfels};
 use crate::kinds::surfels::tree::{TreeNode, LEAF};
 use crate::ray::Ray;
@@ -313,19 +313,20 @@ impl Lanes {
     }
 }
 
-/// The nearest hit in `[t_min, t_max]`; `hint` is the ray's cached surfel, tested first.
+/// The nearest hit in `[t_min, t_max]` as `search` asks ([`NEAREST`], or
+/// [`NEAREST_LEAVING`](crate::kinds::surfels::intersect::NEAREST_LEAVING)); `hint` is the
+/// ray's cached surfel, tested first.
 pub fn first_hit<V: Spheres>(
     v: &V,
     p: &PreparedSurfels,
     ray: &Ray,
-    t_min: f32,
-    t_max: f32,
-    hint: Option<u32>,
+    (t_min, t_max): (f32, f32),
+    (hint, search): (Option<u32>, Search),
     c: &mut SurfelCounters,
 ) -> Option<LeafHit> {
     let mut best: Option<LeafHit> = None;
     if let Some(s) = hint.filter(|&s| (s as usize) < p.surfels.len()) {
-        best = intersect_leaf(p, ray, s as usize, t_min, t_max, NEAREST, c);
+        best = intersect_leaf(p, ray, s as usize, t_min, t_max, search, c);
         c.cache_hits += best.is_some() as u64;
     }
     let mut stack = [(0u32, 0f32, 0f32); STACK];
@@ -348,7 +349,7 @@ pub fn first_hit<V: Spheres>(
             if Some(kids_of[1]) == hint {
                 continue;
             }
-            if let Some(h) = intersect_leaf(p, ray, kids_of[1] as usize, t_min, limit, NEAREST, c) {
+            if let Some(h) = intersect_leaf(p, ray, kids_of[1] as usize, t_min, limit, search, c) {
                 if best.is_none_or(|b| h.before(&b)) {
                     best = Some(h);
                 }
