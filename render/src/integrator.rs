@@ -306,35 +306,12 @@ impl<'a> Tracer<'a> {
         (out, n)
     }
 
-    /// The first crossing of the isosurface at `isovalue` on `[a, b]`, entering the solid or,
-    /// when the ray starts inside it, leaving it.
-    /// `leaving`: the ray leaves a surface outwards (a mirror ray from outside).
+    /// The first crossing of the isosurface at `isovalue` on `[a, b]` outside the clip box,
+    /// entering the solid or, when the ray starts inside it, leaving it; `leaving`: the ray
+    /// leaves a surface outwards (a mirror ray from outside).
     fn crossing(&mut self, ray: &Ray, a: f32, b: f32, isovalue: f32, leaving: bool) -> Option<Hit> {
-        self.crossing_from(ray, a, b, isovalue, false, leaving)
-    }
-
-    /// [`Tracer::crossing`]; `inside`: the ray is known to start inside the solid (it just
-    /// entered it), so the way out is asked for at once.
-    fn crossing_from(
-        &mut self,
-        ray: &Ray,
-        a: f32,
-        b: f32,
-        isovalue: f32,
-        inside: bool,
-        leaving: bool,
-    ) -> Option<Hit> {
         let (segments, n) = self.segments(ray, a, b);
-        for (k, &(lo, hi)) in segments[..n].iter().enumerate() {
-            if inside && k == 0 && lo == a {
-                if let Some(exit) =
-                    self.scene
-                        .exit_hit_counted(ray, lo, hi, isovalue, &mut self.counters)
-                {
-                    return Some(exit);
-                }
-                continue;
-            }
+        for &(lo, hi) in &segments[..n] {
             let (scene, c) = (self.scene, &mut self.counters);
             let first = match leaving {
                 true => scene.first_hit_leaving_counted(ray, lo, hi, isovalue, c),

@@ -209,11 +209,16 @@ impl PreparedGeometry {
         isovalue: f32,
         counters: &mut C,
     ) -> Option<Hit> {
-        let span = (t_min, t_max);
         match self {
-            PreparedGeometry::Metaballs(m) => leaving(m.as_ref(), ray, span, isovalue, counters),
-            PreparedGeometry::Tets(t) => leaving(t.as_ref(), ray, span, isovalue, counters),
-            PreparedGeometry::Surfels(s) => leaving(s.as_ref(), ray, span, isovalue, counters),
+            PreparedGeometry::Metaballs(m) => {
+                first_hit_leaving(m.as_ref(), ray, t_min, t_max, isovalue, counters)
+            }
+            PreparedGeometry::Tets(t) => {
+                first_hit_leaving(t.as_ref(), ray, t_min, t_max, isovalue, counters)
+            }
+            PreparedGeometry::Surfels(s) => {
+                first_hit_leaving(s.as_ref(), ray, t_min, t_max, isovalue, counters)
+            }
         }
     }
 
@@ -433,10 +438,11 @@ fn first_hit<K: PreparedKind, C: Tally>(
 }
 
 #[inline]
-fn leaving<K: PreparedKind, C: Tally>(
+fn first_hit_leaving<K: PreparedKind, C: Tally>(
     k: &K,
     ray: &Ray,
-    (t_min, t_max): (f32, f32),
+    t_min: f32,
+    t_max: f32,
     isovalue: f32,
     counters: &mut C,
 ) -> Option<Hit> {

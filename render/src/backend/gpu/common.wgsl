@@ -420,7 +420,7 @@ fn segments(o: vec3<f32>, d: vec3<f32>, a: f32, b: f32) -> Segments {
     return out;
 }
 
-// Tracer::crossing_from: the first crossing of `iso` on [a, b] outside the clip box,
+// Tracer::crossing: the first crossing of `iso` on [a, b] outside the clip box,
 // entering the solid or, when the ray starts inside it (or `inside`), leaving it; `leaving`:
 // the ray leaves a surface outwards (a mirror ray from outside, PreparedKind::
 // first_hit_leaving), which kind_first_hit may use.
