@@ -228,6 +228,43 @@ fn mirror_rays_from_outside_surfels_leave_the_surface_on_both_backends() {
     assert!(a.far_channels <= 1500, "{a:?}");
 }
 
+/// Pixels of `fb` whose hit lies more than `gap` behind the hits of all four neighbours: the
+/// object's back seen through a crack in its front.
+fn specks(fb: &Framebuffer, gap: f32) -> usize {
+    let (w, h) = (fb.width as usize, fb.height as usize);
+    let depth = |x: usize, y: usize| fb.depth[y * w + x];
+    (1..h - 1)
+        .flat_map(|y| (1..w - 1).map(move |x| (x, y)))
+        .filter(|&(x, y)| {
+            let t = depth(x, y);
+            let around = [(x - 1, y), (x + 1, y), (x, y - 1), (x, y + 1)];
+            t.is_finite() && around.iter().all(|&(i, j)| t > depth(i, j) + gap)
+        })
+        .count()
+}
+
+#[test]
+fn the_strikes_cracks_close_on_both_backends() {
+    // `surfel-impact` as the cannonball dents the blob (step 6): where the start gate turns
+    // away every leaf of the front a camera ray's nearest hit is the blob's back, facing away
+    // from it; both backends search such a ray again for a crossing in before it (the CPU's
+    // `camera_nearest`, the kernel's `kind_first_hit` from 0).
+    let (gpu, cpu) = (gpu(), CpuBackend::new(2).expect("pool"));
+    let scene = Arc::new(DemoScene::SurfelImpact.state_at(0.2)).prepare();
+    let view = DemoScene::SurfelImpact.default_view(320, 240);
+    let effects = scene.lighting().effects;
+    let (g, _) = accumulator::render_effects(&gpu, &scene, &view, &effects);
+    let (c, _) = accumulator::render_effects(&cpu, &scene, &view, &effects);
+    // Measured on lavapipe: no channel over 3 codes apart and no speck on either backend;
+    // with the kernel's second search left out, 105 channels and 6 specks on the GPU (within
+    // the agreement's 1%, so counted here).
+    let a = assert_agree("the strike", &c, &g);
+    let (sc, sg) = (specks(&c, 0.1), specks(&g, 0.1));
+    eprintln!("the strike: specks CPU {sc}, GPU {sg}");
+    assert!(a.far_channels <= 30, "{a:?}");
+    assert!(sc <= 2 && sg <= 2, "specks: CPU {sc}, GPU {sg}");
+}
+
 /// The kernel's output as the backend turns it into a frame (a negative depth: a miss).
 fn framebuffer(pixels: &[[f32; 4]]) -> Framebuffer {
     let mut fb = Framebuffer::new(WIDTH, HEIGHT);

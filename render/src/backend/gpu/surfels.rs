@@ -201,7 +201,7 @@ mod tests {
     use crate::backend::gpu::naga_checks::{assert_layout, constant, constant_f32, module_of};
     use crate::kinds::surfels::deform::deform_surfel;
     use crate::kinds::surfels::demo::{self, SurfelDemoKind};
-    use crate::kinds::surfels::intersect::{DEFER, OUTWARD, ROAM, WIDE};
+    use crate::kinds::surfels::intersect::{DEFER, OUTWARD, RESCUE_DISC, RESCUE_REACH, ROAM, WIDE};
     use crate::kinds::surfels::prepared::Accel;
     use crate::kinds::surfels::scene::{SurfelOptions, SurfelRuntime, UpdateMode};
     use crate::kinds::surfels::tree::LEAF;
@@ -223,6 +223,8 @@ mod tests {
         assert_eq!(constant_f32(&m, "SURFEL_DEFER"), DEFER);
         assert_eq!(constant_f32(&m, "SURFEL_ROAM"), ROAM);
         assert_eq!(constant_f32(&m, "SURFEL_OUTWARD"), OUTWARD);
+        assert_eq!(constant_f32(&m, "SURFEL_RESCUE_REACH"), RESCUE_REACH);
+        assert_eq!(constant_f32(&m, "SURFEL_RESCUE_DISC"), RESCUE_DISC);
         assert_eq!(GpuKind::Surfels.arrays(), ARRAYS);
         for binding in 0..=ARRAYS as u32 {
             let bound = m

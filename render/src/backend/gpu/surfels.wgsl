@@ -58,6 +58,14 @@ const SURFEL_DEFER: f32 = 2.0;
 // How far a nearest-hit search's iterates may wander from the leaf's centre, in leaf
 // radii (intersect.rs's `ROAM`); the converged point must lie in the leaf's sphere.
 const SURFEL_ROAM: f32 = 3.0;
+// A camera ray's second search, for a crossing into the object before a first hit that
+// faced away (surfel_intersect's `entering`, intersect.rs's `RESCUE`): a leaf off the gate
+// starts from the ray's point nearest its centre, and its iterates may wander, and converge,
+// out to SURFEL_RESCUE_REACH leaf radii (intersect.rs's `RESCUE_REACH`), the hit ranked no
+// nearer than the leaf sphere's entry.
+const SURFEL_RESCUE_REACH: f32 = 4.0;
+// ... and must converge within SURFEL_RESCUE_DISC radii of the ellipse (RESCUE_DISC).
+const SURFEL_RESCUE_DISC: f32 = 2.0;
 // How far from its start, in support radii, a ray leaving the surface outwards (shadow,
 // occlusion and mirror rays: surfel_intersect's `leaving`, intersect.rs's `Search::leaving`)
 // passes over a crossing out of the surface (intersect.rs's `OUTWARD`): the start was inside
@@ -159,7 +167,7 @@ struct SurfelHit {
 // project onto the plane of the neighbourhood's weighted average position and normal until
 // |n·(x − a)| < ε h; leaving the leaf's sphere (SURFEL_ROAM times it for a nearest hit) or
 // converging outside it rejects.
-fn surfel_intersect(o: vec3<f32>, d: vec3<f32>, s: u32, lo: f32, hi: f32, nearest: bool, leaving: bool) -> SurfelHit {
+fn surfel_intersect(o: vec3<f32>, d: vec3<f32>, s: u32, lo: f32, hi: f32, nearest: bool, leaving: bool, entering: bool) -> SurfelHit {
     let miss = SurfelHit(no_hit(), 0.0);
     let leaf = surfel_data[s];
     let denom = dot(leaf.normal, d);
@@ -187,16 +195,27 @@ fn surfel_intersect(o: vec3<f32>, d: vec3<f32>, s: u32, lo: f32, hi: f32, neares
     let rr = leaf.radius * leaf.radius;
     let e2 = a * a + b * b;
     let outside = e2 > rr;
+    // Off the gate, a rescue (`entering`) starts from the ray's point nearest the centre.
+    var start = t0;
     if (outside && !(nearest && e2 <= SURFEL_WIDE * SURFEL_WIDE * rr)) {
-        return miss;
+        if (!entering) {
+            return miss;
+        }
+        start = max(dot(leaf.centre - o, d), lo);
     }
     let h = leaf.support;
     let inv_h2 = leaf.inv_support2;
     let first = leaf.neighbours_first;
     let end = first + leaf.neighbours_count;
-    var x = o + t0 * d;
+    var x = o + start * d;
+    // How far the iterates may wander and where the converged point must lie, in leaf
+    // radii from the centre (intersect.rs's `roam` and `reach`).
     var roam = 1.0;
-    if (nearest) {
+    var reach = 1.0;
+    if (entering) {
+        roam = SURFEL_RESCUE_REACH;
+        reach = SURFEL_RESCUE_REACH;
+    } else if (nearest) {
         roam = SURFEL_ROAM;
     }
     // The last step's start and how far its plane moved it (the CPU's `next_step`): when two
@@ -232,7 +251,7 @@ fn surfel_intersect(o: vec3<f32>, d: vec3<f32>, s: u32, lo: f32, hi: f32, neares
         if (abs(dot(n, x - avg)) < surfel_params.mls_epsilon * h) {
             let t = dot(x - o, d);
             let off = x - leaf.centre;
-            if (dot(off, off) > leaf.leaf_radius * leaf.leaf_radius) {
+            if (dot(off, off) > reach * reach * leaf.leaf_radius * leaf.leaf_radius) {
                 return miss;
             }
             if (!(t >= lo && t <= hi) || surfel_clipped(s, x)) {
@@ -241,9 +260,31 @@ fn surfel_intersect(o: vec3<f32>, d: vec3<f32>, s: u32, lo: f32, hi: f32, neares
             if (leaving && dot(n, d) > 0.0 && t <= lo + SURFEL_OUTWARD * h) {
                 return miss;
             }
+            if (entering && !(dot(n, d) < 0.0)) {
+                return miss;
+            }
+            if (entering) {
+                // Within SURFEL_RESCUE_DISC radii of the ellipse (intersect.rs's RESCUE_DISC).
+                let qx = x - leaf.centre;
+                let rx1 = dot(leaf.t1, qx);
+                let rx2 = dot(leaf.t2, qx);
+                let ax = (g22 * rx1 - g12 * rx2) / det;
+                let bx = (g11 * rx2 - g12 * rx1) / det;
+                if (ax * ax + bx * bx > SURFEL_RESCUE_DISC * SURFEL_RESCUE_DISC * rr) {
+                    return miss;
+                }
+            }
             var rank = t;
             if (outside) {
                 rank = t + SURFEL_DEFER * h;
+            }
+            if (entering) {
+                // No nearer than the leaf sphere's entry, so pruning by entries stays exact.
+                let oc = leaf.centre - o;
+                let b = dot(oc, d);
+                let off2 = dot(oc, oc) - b * b;
+                let r2 = leaf.leaf_radius * leaf.leaf_radius;
+                rank = max(rank, b - sqrt(max(r2 - off2, 0.0)));
             }
             return SurfelHit(KHit(true, t, x, n, surfel_colour_at(s, x, inv_h2), s), rank);
         }
@@ -271,7 +312,7 @@ fn surfel_intersect(o: vec3<f32>, d: vec3<f32>, s: u32, lo: f32, hi: f32, neares
 // The nearest hit in [lo, hi]: near child first, a subtree skipped once it starts beyond
 // the best hit's rank so far (its distance, deferred for a hit started in the gate's second
 // tier, as LeafHit::rank on the CPU); ties to the lower surfel.
-fn surfel_nearest(o: vec3<f32>, d: vec3<f32>, lo: f32, hi: f32, leaving: bool) -> KHit {
+fn surfel_nearest(o: vec3<f32>, d: vec3<f32>, lo: f32, hi: f32, leaving: bool, entering: bool) -> KHit {
     var best = no_hit();
     var best_rank = 0.0;
     if (surfel_params.node_count == 0u) {
@@ -297,7 +338,7 @@ fn surfel_nearest(o: vec3<f32>, d: vec3<f32>, lo: f32, hi: f32, leaving: bool) -
         }
         let kids = surfel_nodes[n].kids;
         if (kids.x == SURFEL_LEAF) {
-            let h = surfel_intersect(o, d, kids.y, lo, limit, SURFEL_NEAREST, leaving);
+            let h = surfel_intersect(o, d, kids.y, lo, limit, SURFEL_NEAREST, leaving, entering);
             if (h.hit.found && (!best.found || h.rank < best_rank || (h.rank == best_rank && h.hit.primitive < best.primitive))) {
                 best = h.hit;
                 best_rank = h.rank;
@@ -333,13 +374,35 @@ fn surfel_nearest(o: vec3<f32>, d: vec3<f32>, lo: f32, hi: f32, leaving: bool) -
     return best;
 }
 
+// A camera ray (from 0, not leaving a surface) whose nearest hit faces away from it is
+// searched again for a crossing into the object before that hit, from leaves the start gate
+// turned away (PreparedSurfels::camera_nearest on the CPU). One call site of
+// surfel_nearest, looped, so the compilers inline it once.
 fn kind_first_hit(o: vec3<f32>, d: vec3<f32>, lo: f32, hi: f32, iso: f32, leaving: bool) -> KHit {
-    return surfel_nearest(o, d, lo, hi, leaving);
+    var entering = false;
+    var end = hi;
+    var first = no_hit();
+    loop {
+        let h = surfel_nearest(o, d, lo, end, leaving, entering);
+        if (entering) {
+            if (h.found) {
+                return h;
+            }
+            return first;
+        }
+        if (!(lo == 0.0 && !leaving && h.found && dot(h.normal, d) > 0.0)) {
+            return h;
+        }
+        first = h;
+        entering = true;
+        end = h.t;
+    }
+    return first;
 }
 
 // A surfel surface is a sheet: the way out of a closed object is its next crossing.
 fn kind_exit_hit(o: vec3<f32>, d: vec3<f32>, lo: f32, hi: f32, iso: f32) -> KHit {
-    return surfel_nearest(o, d, lo, hi, false);
+    return surfel_nearest(o, d, lo, hi, false, false);
 }
 
 // Some hit in [lo, hi], the first found (first child first, as the CPU's updated tree).
@@ -357,7 +420,7 @@ fn kind_any_hit(o: vec3<f32>, d: vec3<f32>, lo: f32, hi: f32, iso: f32) -> f32 {
             continue;
         }
         if (node.kids.x == SURFEL_LEAF) {
-            let h = surfel_intersect(o, d, node.kids.y, lo, hi, SURFEL_ANY, true);
+            let h = surfel_intersect(o, d, node.kids.y, lo, hi, SURFEL_ANY, true, false);
             if (h.hit.found) {
                 return h.hit.t;
             }

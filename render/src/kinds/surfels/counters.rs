@@ -23,6 +23,9 @@ pub struct SurfelCounters {
     pub clipped: u64,
     /// Intersections that ran out of MLS iterations without converging (a miss, counted).
     pub capped: u64,
+    /// Camera rays whose nearest hit faced away from them, searched again for a crossing
+    /// into the object before it (`PreparedSurfels::camera_nearest`).
+    pub rescues: u64,
     /// Of `rays`, the any-hit (shadow and occlusion) queries, and their sphere + surfel
     /// tests: the rest are nearest-hit queries, the ones the cache of §4.2.2 serves.
     pub any_rays: u64,
@@ -41,6 +44,7 @@ impl KindCounters for SurfelCounters {
         self.cache_hits += o.cache_hits;
         self.clipped += o.clipped;
         self.capped += o.capped;
+        self.rescues += o.rescues;
         self.any_rays += o.any_rays;
         self.any_tests += o.any_tests;
     }

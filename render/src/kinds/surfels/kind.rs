@@ -6,7 +6,7 @@ use crate::camera::PrimaryRays;
 use crate::kinds::contract::{OcclusionHint, PreparedKind};
 use crate::kinds::counters::SceneCounters;
 use crate::kinds::surfels::counters::SurfelCounters;
-use crate::kinds::surfels::intersect::{LeafHit, Search, NEAREST, NEAREST_LEAVING};
+use crate::kinds::surfels::intersect::{LeafHit, Search, NEAREST, NEAREST_LEAVING, RESCUE};
 use crate::kinds::surfels::prepared::{Accel, PreparedSurfels};
 use crate::kinds::surfels::scene::SurfelRuntime;
 use crate::kinds::surfels::traverse::{self, FixedView, LazyView};
@@ -26,6 +26,41 @@ impl PreparedSurfels {
         self.nearest_as(ray, (t_min, t_max), hint, NEAREST, c)
     }
 
+    /// A camera ray's nearest hit: [`PreparedSurfels::nearest`] from `0`, and where that
+    /// hit faces away from the ray (the ray seems to leave the object without having entered
+    /// it: where the surface bends sharply or is met at a grazing angle the start gate can
+    /// turn away every leaf of the front, and the back showed through as a dark crack), the
+    /// crossing into the object before it, from a second search ([`RESCUE`]), if there is
+    /// one. Both searches depend on the ray alone, so every traversal agrees.
+    #[inline]
+    pub fn camera_nearest(
+        &self,
+        ray: &Ray,
+        t_max: f32,
+        hint: Option<u32>,
+        c: &mut SurfelCounters,
+    ) -> Option<LeafHit> {
+        let hit = self.nearest(ray, 0.0, t_max, hint, c);
+        self.rescued(ray, hit, c)
+    }
+
+    /// [`PreparedSurfels::camera_nearest`]'s second search, for a first search's `hit`.
+    #[inline]
+    pub fn rescued(
+        &self,
+        ray: &Ray,
+        hit: Option<LeafHit>,
+        c: &mut SurfelCounters,
+    ) -> Option<LeafHit> {
+        match hit {
+            Some(h) if h.normal.dot(ray.dir) > 0.0 => {
+                c.rescues += 1;
+                self.traverse(ray, (0.0, h.t), (None, RESCUE), c).or(hit)
+            }
+            _ => hit,
+        }
+    }
+
     /// [`PreparedSurfels::nearest`] as `search` asks.
     #[inline]
     pub fn nearest_as(
@@ -37,8 +72,21 @@ impl PreparedSurfels {
         c: &mut SurfelCounters,
     ) -> Option<LeafHit> {
         c.rays += 1;
-        let asked = (hint, search);
-        let hit = match &self.accel {
+        let hit = self.traverse(ray, span, (hint, search), c);
+        c.hits += hit.is_some() as u64;
+        hit
+    }
+
+    /// [`traverse::first_hit`] over this frame's tree.
+    #[inline]
+    fn traverse(
+        &self,
+        ray: &Ray,
+        span: (f32, f32),
+        asked: (Option<u32>, Search),
+        c: &mut SurfelCounters,
+    ) -> Option<LeafHit> {
+        match &self.accel {
             Accel::Lazy(nodes) => {
                 let v = LazyView { p: self, nodes };
                 traverse::first_hit(&v, self, ray, span, asked, c)
@@ -46,9 +94,7 @@ impl PreparedSurfels {
             Accel::Fixed(nodes) => {
                 traverse::first_hit(&FixedView(nodes), self, ray, span, asked, c)
             }
-        };
-        c.hits += hit.is_some() as u64;
-        hit
+        }
     }
 
     #[inline]
@@ -85,15 +131,21 @@ impl PreparedKind for PreparedSurfels {
         _isovalue: f32,
         c: &mut SurfelCounters,
     ) -> Option<Hit> {
-        // A camera ray of the effects integrator (no pixel here) starts at 0: with the cache
-        // on, its last nearest surfel is tested first (§4.2.2). The image is the same.
-        if !(self.options.cache && t_min == 0.0) {
+        // A camera ray of the effects integrator (no pixel here) starts at 0: it is searched
+        // again where its hit faces away (`camera_nearest`), and with the cache on its last
+        // nearest surfel is tested first (§4.2.2; the image is the same).
+        if t_min != 0.0 {
             return self
                 .nearest(ray, t_min, t_max, None, c)
                 .map(|h| self.record(h));
         }
+        if !self.options.cache {
+            return self
+                .camera_nearest(ray, t_max, None, c)
+                .map(|h| self.record(h));
+        }
         let key = SurfelRuntime::ray_key(ray);
-        let hit = self.nearest(ray, t_min, t_max, self.runtime.cached_ray(key), c);
+        let hit = self.camera_nearest(ray, t_max, self.runtime.cached_ray(key), c);
         self.runtime.remember_ray(key, hit.map(|h| h.surfel));
         hit.map(|h| self.record(h))
     }
@@ -196,7 +248,8 @@ impl PreparedKind for PreparedSurfels {
         0.0
     }
 
-    /// In 8×8 packets ([`traverse::first_hits`]); with the cache on, each pixel's last
+    /// In 8×8 packets ([`traverse::first_hits`]), a ray whose hit faces away searched again
+    /// on its own ([`PreparedSurfels::rescued`]); with the cache on, each pixel's last
     /// nearest surfel is tested first and this frame's is remembered (the image is the same
     /// either way, and the same as ray by ray).
     fn primary_tile(
@@ -249,7 +302,7 @@ impl PreparedKind for PreparedSurfels {
                     }
                 }
                 for (k, &(x, y)) in pixels.iter().enumerate() {
-                    let hit = hits[k];
+                    let hit = self.rescued(&packet[k], hits[k], c);
                     c.hits += hit.is_some() as u64;
                     if cache {
                         self.runtime.remember(x, y, hit.map(|h| h.surfel));

@@ -344,7 +344,7 @@ fn packets_give_the_single_rays_hits_on_every_demo() {
                 for (k, (ray, hit)) in got.iter().enumerate() {
                     let (x, y) = (3 + k as u32 % (w - 3), 2 + k as u32 / (w - 3));
                     assert_eq!(*ray, rays.through_pixel(x, y));
-                    let want = single.nearest(ray, 0.0, 1e4, None, &mut c);
+                    let want = single.camera_nearest(ray, 1e4, None, &mut c);
                     let key = |h: Option<(f32, u32)>| h.map(|(t, s)| (t.to_bits(), s));
                     assert_eq!(
                         key(hit.map(|h| (h.t, h.primitive))),
