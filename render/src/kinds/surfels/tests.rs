@@ -638,6 +638,44 @@ fn a_ray_leaving_a_flat_face_skips_the_leaves_behind_its_start() {
     assert!(inside.iterations >= 64);
 }
 
+/// A camera inside a closed body sees its inside: every camera ray's nearest hit faces away
+/// from it, so each is searched again for a crossing into the body before it
+/// (`camera_nearest`, `RESCUE`), finds none, and keeps its hit on the sphere.
+#[test]
+fn a_camera_inside_a_ball_keeps_the_inside_it_sees() {
+    use crate::kinds::contract::PreparedKind;
+    let model = Arc::new(ball_model(4000, 11));
+    let p = PreparedSurfels::new(SurfelScene::rest(model, SurfelOptions::default()));
+    let centre = Vec3::new(0.1, -0.2, 0.3);
+    let (w, h) = (24, 18);
+    let mut c = SurfelCounters::default();
+    for target in [
+        Vec3::X,
+        Vec3::NEG_X,
+        Vec3::Z,
+        Vec3::NEG_Z,
+        Vec3::new(1.0, 1.0, 0.5),
+    ] {
+        let camera = Camera {
+            eye: centre,
+            target: centre + target,
+            up: Vec3::Y,
+            fov_y_deg: 90.0,
+        };
+        let rays = camera.rays(w, h);
+        for (ray, hit) in p.primary_tile(&rays, (0, 0, w, h), 0.0, 1e4, &mut c) {
+            let hit = hit.unwrap_or_else(|| panic!("{ray:?} sees the ball's inside"));
+            assert!(
+                (0.9..=1.02).contains(&hit.t) && hit.normal.dot(ray.dir) > 0.0,
+                "{ray:?}: hit at {} with normal {}",
+                hit.t,
+                hit.normal
+            );
+        }
+    }
+    assert_eq!(c.rescues, 5 * (w * h) as u64, "every ray searched again");
+}
+
 #[test]
 fn bad_surfel_data_is_rejected_with_what_is_wrong() {
     let good = sample::sphere(Vec3::ZERO, 1.0, 50, Vec3::ONE, 0);
