@@ -340,8 +340,9 @@ pub const ROAM: f32 = 3.0;
 /// pixels did, the back of the blob showing through the dent's rim as dark cracks. Searched
 /// again from the leaves' points nearest their centres, entering crossings only: with the
 /// converged point kept in the leaf's sphere 342 stayed, with it allowed to `RESCUE_REACH`
-/// of 3, 4, 6 and 10 radii 299, 282, 279 and 279 (the rest lie on the grazing rim, where the
-/// reference's own hit is not robust either: docs/accuracy.md).
+/// of 3, 4, 6 and 10 radii 299, 282, 279 and 279 before [`RESCUE_DISC`] was added (294 with
+/// it; the rest lie on the grazing rim, where the reference's own hit is not robust either:
+/// docs/accuracy.md).
 pub const RESCUE_REACH: f32 = 4.0;
 
 /// How far from a leaf surfel's ellipse (in its radii, in the ellipse's plane) a rescue's
