@@ -2,6 +2,8 @@
 //! in simulation nodes, a bounding-sphere hierarchy updated lazily while tracing, the MLS
 //! ray–surface intersection, sphere-node caching and clipping.
 
+#[cfg(test)]
+mod clip_tests;
 pub mod counters;
 pub mod deform;
 pub mod demo;
