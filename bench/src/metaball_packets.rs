@@ -170,9 +170,10 @@ pub(crate) fn measure(demos: &[DemoScene], runs: usize, time: f64) -> Vec<Packet
                         // first).
                         let mut hint = OcclusionHint::default();
                         let light = Some(light);
-                        if let Some(found) =
-                            m.any_hits_towards(rays, 0.0, t_max, light, isovalue, &mut hint, &mut c)
-                        {
+                        let starts = &[]; // not known, and metaballs take no account of it
+                        if let Some(found) = m.any_hits_towards(
+                            rays, 0.0, t_max, light, isovalue, starts, &mut hint, &mut c,
+                        ) {
                             std::hint::black_box(found);
                             return;
                         }

@@ -31,7 +31,7 @@ use crate::effects::plan::EffectsPlan;
 use crate::effects::rays::{RayCounts, RayKind};
 pub use crate::geom::optics::{reflect, refract_dir};
 use crate::geom::rng::PixelRng;
-use crate::kinds::contract::OcclusionHint;
+use crate::kinds::contract::{OcclusionHint, RayStart};
 use crate::kinds::counters::SceneCounters;
 use crate::ray::{surface_offset, Hit, Ray, INSIDE_EPS};
 use crate::sampling::{cosine_hemisphere, uniform_cone};
@@ -105,6 +105,8 @@ struct SurfaceHit {
     normal: Vec3,
     albedo: Vec3,
     material: u16,
+    /// The kind's primitive hit (`None`: the floor).
+    primitive: Option<u32>,
 }
 
 /// The integrator of one frame on one thread: the scene, the plan, and the rays it traced.
@@ -139,6 +141,10 @@ pub struct Tracer<'a> {
     /// Whether the next [`Tracer::closest`] is for a mirror ray leaving a surface outwards
     /// (`PreparedKind::first_hit_leaving`).
     leaving: bool,
+    /// While a kind's hit seen from outside is lit (no clip box opening the surfaces), its
+    /// outward normal and primitive: the shadow and occlusion rays that leave it on that
+    /// side start outside that primitive's body ([`RayStart::Leaving`]).
+    outward: Option<(Vec3, u32)>,
 }
 
 impl<'a> Tracer<'a> {
@@ -164,6 +170,7 @@ impl<'a> Tracer<'a> {
             hint: OcclusionHint::default(),
             hinting: true,
             leaving: false,
+            outward: None,
         }
     }
 
@@ -365,6 +372,7 @@ impl<'a> Tracer<'a> {
                     normal: h.normal,
                     albedo: self.albedo(&h, self.isovalue, None),
                     material: self.lighting.material_of(h.primitive),
+                    primitive: Some(h.primitive),
                 });
             }
             if self.plan.isosurfaces {
@@ -378,6 +386,7 @@ impl<'a> Tracer<'a> {
                             normal: h.normal,
                             albedo: self.albedo(&h, surface.isovalue, surface.color),
                             material: surface.material,
+                            primitive: Some(h.primitive),
                         });
                     }
                 }
@@ -399,6 +408,7 @@ impl<'a> Tracer<'a> {
                         self.scene.frame(),
                     ),
                     material: floor.material,
+                    primitive: None,
                 });
             }
         }
@@ -424,7 +434,11 @@ impl<'a> Tracer<'a> {
             if self.batch.is_recording() {
                 self.terms.push(batch::Term::Emission(color));
             }
+            self.outward = (hit.primitive)
+                .filter(|_| entering && self.plan.clip_box.is_none())
+                .map(|p| (hit.normal, p));
             color += self.local(&material, hit, normal, view, above, rng);
+            self.outward = None;
         }
 
         // Transparency is on (some visible material is transparent) when either kind of
@@ -580,6 +594,10 @@ impl<'a> Tracer<'a> {
     /// scenes (any hit, early exit), `Π (1 - α)` through transparent surfaces, `e^{-τ}`
     /// through a volume.
     fn transmittance(&mut self, ray: &Ray, t_max: f32) -> f32 {
+        let start = match self.outward {
+            Some((n, primitive)) if n.dot(ray.dir) > 0.0 => RayStart::Leaving(primitive),
+            _ => RayStart::Unknown,
+        };
         if let Some(floor) = &self.lighting.floor {
             let t = floor.distance(ray);
             if t > 0.0 && t < t_max && self.lighting.material(floor.material).opacity >= 1.0 {
@@ -611,13 +629,14 @@ impl<'a> Tracer<'a> {
                         ray: *ray,
                         t_max,
                         light: self.shadow_light,
+                        start,
                     })
                 } else {
                     None
                 };
                 let blocked = match batched {
                     Some(blocked) => blocked,
-                    None => self.blocked(ray, 0.0, t_max, isovalue),
+                    None => self.blocked(ray, (0.0, t_max), isovalue, start),
                 };
                 if blocked {
                     return 0.0;
@@ -691,7 +710,7 @@ impl<'a> Tracer<'a> {
 
     /// Whether the isosurface at `isovalue` crosses `[a, b]` outside the clip box (any hit),
     /// each query searching first where the tile's last blocked ray was blocked.
-    fn blocked(&mut self, ray: &Ray, a: f32, b: f32, isovalue: f32) -> bool {
+    fn blocked(&mut self, ray: &Ray, (a, b): (f32, f32), isovalue: f32, start: RayStart) -> bool {
         let (segments, n) = self.segments(ray, a, b);
         let mut none = OcclusionHint::default();
         let hint = if self.hinting {
@@ -700,7 +719,7 @@ impl<'a> Tracer<'a> {
             &mut none
         };
         segments[..n].iter().any(|&span| {
-            (self.scene).occluded_counted(ray, span, isovalue, hint, &mut self.counters)
+            (self.scene).occluded_counted(ray, span, isovalue, start, hint, &mut self.counters)
         })
     }
 

@@ -15,7 +15,7 @@
 
 use crate::camera::{Camera, PrimaryRays};
 use crate::geom::frame::LocalFrame;
-use crate::kinds::contract::OcclusionHint;
+use crate::kinds::contract::{OcclusionHint, RayStart};
 use crate::kinds::dispatch::Tally;
 use crate::kinds::metaballs::engine::PrepareOptions;
 use crate::kinds::tets::prepared::TetOptions;
@@ -238,10 +238,11 @@ impl PreparedScene {
         ray: &Ray,
         span: (f32, f32),
         isovalue: f32,
+        start: RayStart,
         hint: &mut OcclusionHint,
         counters: &mut impl Tally,
     ) -> bool {
-        self.prepared.occluded(ray, span, isovalue, hint, counters)
+        (self.prepared).occluded(ray, span, isovalue, start, hint, counters)
     }
 
     /// Whether `root`, an any-hit root on `span` of `ray`, blocks it
@@ -268,10 +269,12 @@ impl PreparedScene {
         t_max: &[f32],
         light: Option<Vec3>,
         isovalue: f32,
+        starts: &[RayStart],
         hint: &mut OcclusionHint,
         counters: &mut impl Tally,
     ) -> Option<Vec<Option<f32>>> {
-        (self.prepared).any_hits_towards(rays, t_min, t_max, light, isovalue, hint, counters)
+        (self.prepared)
+            .any_hits_towards(rays, t_min, t_max, light, isovalue, starts, hint, counters)
     }
 
     /// From a start inside the solid, where the ray leaves it within `[t_min, t_max]`.

@@ -7,7 +7,7 @@
 //! shading sums them. The image is the pixel-by-pixel one (checked by the CPU backend's
 //! `effects_frames_from_tile_hits_are_the_pixel_by_pixel_frames`).
 
-use crate::kinds::contract::OcclusionHint;
+use crate::kinds::contract::{OcclusionHint, RayStart};
 use crate::kinds::counters::SceneCounters;
 use crate::ray::Ray;
 use crate::scene::PreparedScene;
@@ -22,12 +22,14 @@ pub enum ShadowBatch {
     Record(Vec<ShadowQuery>),
 }
 
-/// One shadow ray over `[0, t_max]` towards `light` (a point, or `None`: directional).
+/// One shadow ray over `[0, t_max]` towards `light` (a point, or `None`: directional), from
+/// where `start` says.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ShadowQuery {
     pub ray: Ray,
     pub t_max: f32,
     pub light: Option<Vec3>,
+    pub start: RayStart,
 }
 
 impl ShadowBatch {
@@ -99,10 +101,10 @@ pub fn resolve(terms: &[Term], blocked: &[bool]) -> Vec3 {
 }
 
 /// Whether each shadow ray is blocked by the isosurface at `isovalue`: the rays towards one
-/// light handed to the kind together, in the order given (it packs them, neighbouring pixels
-/// sharing a packet), each root settled as a single ray's is ([`PreparedScene::settles`]);
-/// where the kind has no packet for them, ray by ray ([`PreparedScene::occluded_counted`]).
-/// One hint serves the whole batch.
+/// light handed to the kind together with where each starts, in the order given (it packs
+/// them, neighbouring pixels sharing a packet), each root settled as a single ray's is
+/// ([`PreparedScene::settles`]); where the kind has no packet for them, ray by ray
+/// ([`PreparedScene::occluded_counted`]). One hint serves the whole batch.
 pub fn trace_shadows(
     scene: &PreparedScene,
     isovalue: f32,
@@ -116,7 +118,7 @@ pub fn trace_shadows(
             lights.push(q.light);
         }
     }
-    let (mut rays, mut t_max) = (Vec::new(), Vec::new());
+    let (mut rays, mut t_max, mut starts) = (Vec::new(), Vec::new(), Vec::new());
     let mut hint = OcclusionHint::default();
     for light in lights {
         let of_light: Vec<usize> = (0..queries.len())
@@ -124,15 +126,18 @@ pub fn trace_shadows(
             .collect();
         rays.clear();
         t_max.clear();
+        starts.clear();
         rays.extend(of_light.iter().map(|&i| queries[i].ray));
         t_max.extend(of_light.iter().map(|&i| queries[i].t_max));
-        let found =
-            scene.any_hits_towards(&rays, 0.0, &t_max, light, isovalue, &mut hint, counters);
+        starts.extend(of_light.iter().map(|&i| queries[i].start));
+        let found = (scene).any_hits_towards(
+            &rays, 0.0, &t_max, light, isovalue, &starts, &mut hint, counters,
+        );
         for (k, &i) in of_light.iter().enumerate() {
-            let (ray, span) = (&rays[k], (0.0, t_max[k]));
+            let (ray, span, start) = (&rays[k], (0.0, t_max[k]), starts[k]);
             answers[i] = match &found {
                 Some(found) => scene.settles(ray, span, isovalue, found[k], counters),
-                None => scene.occluded_counted(ray, span, isovalue, &mut hint, counters),
+                None => scene.occluded_counted(ray, span, isovalue, start, &mut hint, counters),
             };
         }
     }

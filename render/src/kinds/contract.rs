@@ -16,6 +16,20 @@ thread_local! {
     static COUNTED: std::cell::Cell<Vec<Hit>> = const { std::cell::Cell::new(Vec::new()) };
 }
 
+/// Where a shadow or occlusion ray starts, as far as its caller knows.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum RayStart {
+    /// Leaving the surface of this primitive's hit outwards, the hit having faced the ray
+    /// that found it (seen from outside) and no clip box cutting the surfaces open: outside
+    /// the body the primitive belongs to, so that if that body is closed the ray's first
+    /// crossing of it, if any, faces the ray. A kind may skip what of that body faces away
+    /// (surfels: [`crate::kinds::surfels::cones`]); other bodies may hold the start.
+    Leaving(u32),
+    /// Anywhere else, or not known.
+    #[default]
+    Unknown,
+}
+
 /// A prepared state of one primitive kind, ready to trace.
 pub trait PreparedKind {
     /// The kind's own work counters.
@@ -134,17 +148,19 @@ pub trait PreparedKind {
     /// [`PreparedKind::any_hit`]'s root. `hint` is what this caller's earlier queries left
     /// (a tile's shadow rays, in order); a kind may search first where the last blocked ray
     /// was blocked, taking only a root that is a genuine crossing from outside the solid
-    /// into it within the segment, where the full query answers "blocked" too. This default
-    /// ignores it.
+    /// into it within the segment, where the full query answers "blocked" too. `start` is
+    /// what the caller knows of where the ray starts ([`RayStart`]). This default ignores
+    /// both.
     fn occluded(
         &self,
         ray: &Ray,
         (t_min, t_max): (f32, f32),
         isovalue: f32,
+        start: RayStart,
         hint: &mut OcclusionHint,
         counters: &mut Self::Counters,
     ) -> bool {
-        let _ = hint;
+        let _ = (hint, start);
         let root = self.any_hit(ray, t_min, t_max, isovalue, counters);
         settle(self, ray, (t_min, t_max), isovalue, root, counters)
     }
@@ -171,8 +187,9 @@ pub trait PreparedKind {
     /// at `t_min`) returns `any_hit`'s own root, a kind of sheets (surfels, whose way out is
     /// any later hit) may return another, and a kind that shows a ray blocked by other means
     /// (a metaball witness, with the caller's `hint`) a point of its segment inside the
-    /// solid, which [`settle`] answers as it answers the root. `None` where the kind has no
-    /// packet for these rays (the caller asks ray by ray).
+    /// solid, which [`settle`] answers as it answers the root. `starts[i]` is where ray `i`
+    /// starts, as [`PreparedKind::occluded`] takes it (empty: not known for any). `None`
+    /// where the kind has no packet for these rays (the caller asks ray by ray).
     #[allow(clippy::too_many_arguments)]
     fn any_hits_towards(
         &self,
@@ -181,6 +198,7 @@ pub trait PreparedKind {
         _t_max: &[f32],
         _light: Option<Vec3>,
         _isovalue: f32,
+        _starts: &[RayStart],
         _hint: &mut OcclusionHint,
         _counters: &mut Self::Counters,
     ) -> Option<Vec<Option<f32>>> {

@@ -8,7 +8,7 @@
 
 use crate::camera::PrimaryRays;
 use crate::geom::frame::LocalFrame;
-use crate::kinds::contract::{settle, OcclusionHint, PreparedKind};
+use crate::kinds::contract::{settle, OcclusionHint, PreparedKind, RayStart};
 use crate::kinds::counters::SceneCounters;
 use crate::kinds::metaballs::counters::MetaballCounters;
 use crate::kinds::metaballs::engine::{PrepareOptions, PreparedMetaballs};
@@ -287,17 +287,15 @@ impl PreparedGeometry {
         ray: &Ray,
         span: (f32, f32),
         isovalue: f32,
+        start: RayStart,
         hint: &mut OcclusionHint,
         counters: &mut C,
     ) -> bool {
+        let ask = (span, isovalue, start);
         match self {
-            PreparedGeometry::Metaballs(m) => {
-                occluded(m.as_ref(), ray, span, isovalue, hint, counters)
-            }
-            PreparedGeometry::Tets(t) => occluded(t.as_ref(), ray, span, isovalue, hint, counters),
-            PreparedGeometry::Surfels(s) => {
-                occluded(s.as_ref(), ray, span, isovalue, hint, counters)
-            }
+            PreparedGeometry::Metaballs(m) => occluded(m.as_ref(), ray, ask, hint, counters),
+            PreparedGeometry::Tets(t) => occluded(t.as_ref(), ray, ask, hint, counters),
+            PreparedGeometry::Surfels(s) => occluded(s.as_ref(), ray, ask, hint, counters),
         }
     }
 
@@ -404,10 +402,11 @@ impl PreparedGeometry {
         t_max: &[f32],
         light: Option<Vec3>,
         isovalue: f32,
+        starts: &[RayStart],
         hint: &mut OcclusionHint,
         counters: &mut C,
     ) -> Option<Vec<Option<f32>>> {
-        let ask = (rays, t_min, t_max, light, isovalue);
+        let ask = (rays, t_min, t_max, light, isovalue, starts);
         match self {
             PreparedGeometry::Metaballs(m) => any_hits_towards(m.as_ref(), ask, hint, counters),
             PreparedGeometry::Tets(t) => any_hits_towards(t.as_ref(), ask, hint, counters),
@@ -477,12 +476,11 @@ fn any_hit<K: PreparedKind, C: Tally>(
 fn occluded<K: PreparedKind, C: Tally>(
     k: &K,
     ray: &Ray,
-    span: (f32, f32),
-    isovalue: f32,
+    (span, isovalue, start): ((f32, f32), f32, RayStart),
     hint: &mut OcclusionHint,
     counters: &mut C,
 ) -> bool {
-    counters.count::<K, _>(|c| k.occluded(ray, span, isovalue, hint, c))
+    counters.count::<K, _>(|c| k.occluded(ray, span, isovalue, start, hint, c))
 }
 
 #[inline]
@@ -542,14 +540,15 @@ fn primary_tile<K: PreparedKind, C: Tally>(
 }
 
 /// The shadow rays of [`PreparedGeometry::any_hits_towards`]: rays, `t_min`, each `t_max`,
-/// the light and the isovalue.
-type ShadowPacket<'a> = (&'a [Ray], f32, &'a [f32], Option<Vec3>, f32);
+/// the light, the isovalue and where each ray starts.
+type ShadowPacket<'a> = (&'a [Ray], f32, &'a [f32], Option<Vec3>, f32, &'a [RayStart]);
 
 fn any_hits_towards<K: PreparedKind, C: Tally>(
     k: &K,
-    (rays, t_min, t_max, light, isovalue): ShadowPacket<'_>,
+    (rays, t_min, t_max, light, isovalue, starts): ShadowPacket<'_>,
     hint: &mut OcclusionHint,
     counters: &mut C,
 ) -> Option<Vec<Option<f32>>> {
-    counters.count::<K, _>(|c| k.any_hits_towards(rays, t_min, t_max, light, isovalue, hint, c))
+    counters
+        .count::<K, _>(|c| k.any_hits_towards(rays, t_min, t_max, light, isovalue, starts, hint, c))
 }

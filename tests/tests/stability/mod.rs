@@ -46,6 +46,7 @@ mod tets;
 
 use glam::DVec3;
 use isoray_render::integrator::{ShadowQuery, T_MAX};
+use isoray_render::kinds::contract::RayStart;
 use isoray_render::kinds::counters::SceneCounters;
 use isoray_render::ray::surface_offset;
 use isoray_render::shade::{facing, Light};
@@ -282,10 +283,17 @@ pub fn shadow_rays(
         let floor = (lighting.floor.as_ref())
             .map(|f| f.distance(ray))
             .filter(|&t| t > 0.0 && hit.is_none_or(|h| t < h.t));
-        let (position, normal, on_floor) = match (floor, hit) {
-            (Some(t), _) => (ray.at(t), glam::Vec3::Y, true),
-            (None, Some(h)) => (h.position, h.normal, false),
+        let (position, normal, primitive) = match (floor, hit) {
+            (Some(t), _) => (ray.at(t), glam::Vec3::Y, None),
+            (None, Some(h)) => (h.position, h.normal, Some(h.primitive)),
             (None, None) => continue,
+        };
+        let on_floor = primitive.is_none();
+        // Seen from outside, the ray leaves the primitive's surface on the side it was seen
+        // from, as the integrator's `RayStart::Leaving` says.
+        let start = match primitive {
+            Some(p) if normal.dot(ray.dir) < 0.0 => RayStart::Leaving(p),
+            _ => RayStart::Unknown,
         };
         let normal = facing(normal, ray.dir);
         let Some(sample) = light.toward(position) else {
@@ -311,6 +319,7 @@ pub fn shadow_rays(
                 },
                 t_max,
                 light: towards,
+                start,
             },
             pixel: (k as u32 % size.0, k as u32 / size.0),
             cos,

@@ -2,7 +2,7 @@
 //! the prepared Fitted BVH (or the structure the options chose) and the root finders.
 
 use crate::camera::PrimaryRays;
-use crate::kinds::contract::{OcclusionHint, PreparedKind};
+use crate::kinds::contract::{OcclusionHint, PreparedKind, RayStart};
 use crate::kinds::counters::SceneCounters;
 use crate::kinds::metaballs::counters::MetaballCounters;
 use crate::kinds::metaballs::engine::{PreparedMetaballs, FIRST_SHADOW_PACKET};
@@ -50,6 +50,7 @@ impl PreparedKind for PreparedMetaballs {
         ray: &Ray,
         span: (f32, f32),
         isovalue: f32,
+        _start: RayStart,
         hint: &mut OcclusionHint,
         counters: &mut MetaballCounters,
     ) -> bool {
@@ -70,6 +71,7 @@ impl PreparedKind for PreparedMetaballs {
         t_max: &[f32],
         light: Option<glam::Vec3>,
         isovalue: f32,
+        _starts: &[RayStart],
         hint: &mut OcclusionHint,
         counters: &mut MetaballCounters,
     ) -> Option<Vec<Option<f32>>> {

@@ -110,6 +110,8 @@ impl Builder {
                 node_mass: Vec::new(),
                 clip: self.clip,
                 node_body: self.node_body,
+                // Balls, a blob and cubes: every body a closed, outward surface.
+                closed: true,
             },
             usize::MAX,
         )?;

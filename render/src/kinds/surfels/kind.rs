@@ -3,7 +3,7 @@
 //! go through the per-pixel sphere-node cache (§4.2.2) when the scene enables it.
 
 use crate::camera::PrimaryRays;
-use crate::kinds::contract::{OcclusionHint, PreparedKind};
+use crate::kinds::contract::{settle, OcclusionHint, PreparedKind, RayStart};
 use crate::kinds::counters::SceneCounters;
 use crate::kinds::surfels::counters::SurfelCounters;
 use crate::kinds::surfels::intersect::{LeafHit, Search, NEAREST, NEAREST_LEAVING, RESCUE};
@@ -74,6 +74,35 @@ impl PreparedSurfels {
         c.rays += 1;
         let hit = self.traverse(ray, span, (hint, search), c);
         c.hits += hit.is_some() as u64;
+        hit
+    }
+
+    /// [`PreparedKind::any_hit`] over `span`, counted; a ray that starts `Outside` skips
+    /// the nodes whose hits all face away from it (on a closed object:
+    /// [`crate::kinds::surfels::cones`]).
+    #[inline]
+    pub fn any_hit_from(
+        &self,
+        ray: &Ray,
+        span: (f32, f32),
+        start: RayStart,
+        c: &mut SurfelCounters,
+    ) -> Option<f32> {
+        c.rays += 1;
+        let before = c.sphere_tests + c.surfel_tests;
+        let outside = self.outside_of(start);
+        let hit = match &self.accel {
+            Accel::Lazy(nodes) => {
+                let v = LazyView { p: self, nodes };
+                traverse::any_hit(&v, self, ray, span, outside, c)
+            }
+            Accel::Fixed(nodes) => {
+                traverse::any_hit(&FixedView(nodes), self, ray, span, outside, c)
+            }
+        };
+        c.hits += hit.is_some() as u64;
+        c.any_rays += 1;
+        c.any_tests += c.sphere_tests + c.surfel_tests - before;
         hit
     }
 
@@ -174,24 +203,27 @@ impl PreparedKind for PreparedSurfels {
         _isovalue: f32,
         c: &mut SurfelCounters,
     ) -> Option<f32> {
-        c.rays += 1;
-        let before = c.sphere_tests + c.surfel_tests;
-        let hit = match &self.accel {
-            Accel::Lazy(nodes) => {
-                let v = LazyView { p: self, nodes };
-                traverse::any_hit(&v, self, ray, t_min, t_max, c)
-            }
-            Accel::Fixed(nodes) => traverse::any_hit(&FixedView(nodes), self, ray, t_min, t_max, c),
-        };
-        c.hits += hit.is_some() as u64;
-        c.any_rays += 1;
-        c.any_tests += c.sphere_tests + c.surfel_tests - before;
-        hit
+        self.any_hit_from(ray, (t_min, t_max), RayStart::Unknown, c)
+    }
+
+    /// [`PreparedKind::any_hit`], a ray from outside skipping what faces away from it.
+    #[inline]
+    fn occluded(
+        &self,
+        ray: &Ray,
+        span: (f32, f32),
+        isovalue: f32,
+        start: RayStart,
+        _hint: &mut OcclusionHint,
+        c: &mut SurfelCounters,
+    ) -> bool {
+        let root = self.any_hit_from(ray, span, start, c);
+        settle(self, ray, span, isovalue, root, c)
     }
 
     /// Packets of up to 64 rays ([`traverse::any_hits`]) whatever the light: `Some` exactly
-    /// where [`PreparedKind::any_hit`] finds a hit (perhaps another one: a sheet's way out is
-    /// any later hit, so the integrator decides the same).
+    /// where [`PreparedKind::occluded`] finds a hit (perhaps another one: a sheet's way out
+    /// is any later hit, so the integrator decides the same).
     fn any_hits_towards(
         &self,
         rays: &[Ray],
@@ -199,6 +231,7 @@ impl PreparedKind for PreparedSurfels {
         t_max: &[f32],
         _light: Option<glam::Vec3>,
         _isovalue: f32,
+        starts: &[RayStart],
         _hint: &mut OcclusionHint,
         c: &mut SurfelCounters,
     ) -> Option<Vec<Option<f32>>> {
@@ -206,17 +239,21 @@ impl PreparedKind for PreparedSurfels {
             return None;
         }
         let mut out = vec![None; rays.len()];
+        let mut outside: Vec<Option<u16>> = starts.iter().map(|&s| self.outside_of(s)).collect();
+        outside.resize(rays.len(), None);
         let before = c.sphere_tests + c.surfel_tests;
         for (k, chunk) in rays.chunks(traverse::PACKET).enumerate() {
             let at = k * traverse::PACKET;
             let (hi, found) = (&t_max[at..], &mut out[at..at + chunk.len()]);
+            let outside = &outside[at..at + chunk.len()];
             match &self.accel {
                 Accel::Lazy(nodes) => {
                     let v = LazyView { p: self, nodes };
-                    traverse::any_hits(&v, self, chunk, t_min, hi, found, c);
+                    traverse::any_hits(&v, self, chunk, t_min, hi, outside, found, c);
                 }
                 Accel::Fixed(nodes) => {
-                    traverse::any_hits(&FixedView(nodes), self, chunk, t_min, hi, found, c);
+                    let v = FixedView(nodes);
+                    traverse::any_hits(&v, self, chunk, t_min, hi, outside, found, c);
                 }
             }
         }

@@ -4,6 +4,9 @@
 
 #[cfg(test)]
 mod clip_tests;
+pub mod cones;
+#[cfg(test)]
+mod cones_tests;
 pub mod counters;
 pub mod deform;
 pub mod demo;

@@ -11,6 +11,7 @@
 //! hierarchy is [`crate::kinds::surfels::tree::SphereTree`].
 
 use crate::geom::frame::LocalFrame;
+use crate::kinds::surfels::cones::{self, Cones};
 use crate::kinds::surfels::kernel::{sigma_max, weight, Rows};
 use crate::kinds::surfels::knn::Grid;
 use crate::kinds::surfels::tree::{leaf_order, surfel_bodies, SphereTree};
@@ -52,6 +53,11 @@ pub struct SurfelSet {
     /// rigid frame (the per-set transforms of §6), so separately moving objects keep tight
     /// spheres.
     pub node_body: Vec<u16>,
+    /// Every body is a closed surface with outward normals, the bodies apart: then a shadow
+    /// ray from outside skips the nodes whose hits all face away from it
+    /// ([`crate::kinds::surfels::cones`]). Off for sheets, scans and anything not known to be
+    /// closed (a wrong `true` lets light through where a ray would cross a body's back).
+    pub closed: bool,
 }
 
 /// Why surfel data was rejected.
@@ -113,6 +119,9 @@ pub struct SurfelModel {
     pub orient: Vec<f32>,
     pub tree: SphereTree,
     pub groups: u16,
+    /// Per hierarchy node, the normal cone of its hits ([`SurfelSet::closed`] objects only;
+    /// empty otherwise).
+    pub cones: Cones,
 }
 
 impl SurfelModel {
@@ -125,6 +134,7 @@ impl SurfelModel {
             mut node_mass,
             clip,
             mut node_body,
+            closed,
         } = set;
         if node_mass.is_empty() {
             node_mass = vec![1.0; nodes.len()];
@@ -157,13 +167,24 @@ impl SurfelModel {
             .iter()
             .map(|s| sigma_max(s.t1, s.t2) * s.radius)
             .collect();
-        let orient = surfels
+        let orient: Vec<f32> = surfels
             .iter()
             .map(|s| s.normal.dot(s.t1.cross(s.t2)).signum())
             .collect();
         let tree = SphereTree::build(&centres, &leaf_radius, Some((&embed, &nodes, &node_body)));
         let bodies = node_body.iter().copied().max().unwrap_or(0) + 1;
+        let cones = if closed {
+            let normals: Vec<glam::DVec3> = (surfels.iter().zip(&orient))
+                .map(|(s, &o)| {
+                    (s.t1.as_dvec3().cross(s.t2.as_dvec3()) * o as f64).normalize_or_zero()
+                })
+                .collect();
+            cones::build(&normals, &neighbours, (&embed, &node_body), &tree)
+        } else {
+            Cones::default()
+        };
         Ok(SurfelModel {
+            cones,
             surfels,
             nodes,
             node_mass,
@@ -210,6 +231,7 @@ impl SurfelModel {
             orient: self.orient.clone(),
             tree,
             groups: self.groups,
+            cones: self.cones.clone(),
         }
     }
 

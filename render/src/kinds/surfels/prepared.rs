@@ -12,13 +12,15 @@
 //! bound, so the set of hits, and the image, do not (the traversal returns the
 //! nearest hit, ties to the lower surfel).
 
+use crate::kinds::contract::RayStart;
+use crate::kinds::surfels::cones::Widening;
 use crate::kinds::surfels::deform::{
     deform_surfel, node_centre, node_sphere, radius_from_children, sphere_around, DeformedSurfel,
     LeafSpheres, StepFrame,
 };
 use crate::kinds::surfels::model::SurfelModel;
 use crate::kinds::surfels::scene::{SurfelOptions, SurfelRuntime, SurfelScene, UpdateMode};
-use crate::kinds::surfels::tree::{SphereTree, TreeNode};
+use crate::kinds::surfels::tree::{SphereTree, TreeNode, MIXED};
 use glam::{Mat3, Vec3};
 use rayon::prelude::*;
 use std::borrow::Cow;
@@ -167,6 +169,10 @@ pub struct PreparedSurfels {
     pub used: UpdateMode,
     /// The root's eq. 9 bound over its rest radius.
     pub root_growth: f32,
+    /// This step's widening of the model's normal cones, where shadow rays from outside may
+    /// skip nodes by them: closed objects traced on the model's own hierarchy (lazy or eager;
+    /// a rebuilt tree has other nodes).
+    pub cull: Option<Widening>,
     build_ms: f64,
     id: u64,
 }
@@ -219,6 +225,7 @@ impl PreparedSurfels {
             options,
             used,
             root_growth,
+            cull: None,
             build_ms: 0.0,
             id: NEXT_ID.fetch_add(1, Ordering::Relaxed),
         };
@@ -231,8 +238,35 @@ impl PreparedSurfels {
             UpdateMode::Eager => Accel::Fixed(p.eager_refit()),
             UpdateMode::Rebuild => Accel::Fixed(p.rebuild()),
         };
+        if !p.model.cones.cone.is_empty() && matches!(used, UpdateMode::Lazy | UpdateMode::Eager) {
+            let rotation = p.step.frames.iter().map(|f| f.rotation).collect();
+            p.cull = Some(Widening::new(rotation, &p.step.own.g_norm, &p.model.cones));
+        }
         p.build_ms = start.elapsed().as_secs_f64() * 1e3;
         p
+    }
+
+    /// Node `n`'s normal cone this step and its body: `(axis, sin, body)` such that a unit
+    /// direction `d` with `axis · d > sin` meets only hits below `n` that face away from it
+    /// ([`crate::kinds::surfels::cones`]); `None` where nothing is known.
+    #[inline]
+    pub fn cone(&self, n: u32) -> Option<(Vec3, f32, u16)> {
+        let cones = &self.model.cones;
+        let (axis, sin) = self.cull.as_ref()?.cone(cones, n as usize)?;
+        Some((axis, sin, cones.body[n as usize]))
+    }
+
+    /// The body a ray starting at `start` starts outside of, where this step skips nodes by
+    /// their cones ([`crate::kinds::surfels::cones`]): the body of the surfel it leaves.
+    #[inline]
+    pub fn outside_of(&self, start: RayStart) -> Option<u16> {
+        match start {
+            RayStart::Leaving(s) if self.cull.is_some() => {
+                let body = *self.model.cones.surfel_body.get(s as usize)?;
+                (body != MIXED).then_some(body)
+            }
+            _ => None,
+        }
     }
 
     pub fn build_ms(&self) -> f64 {

@@ -409,10 +409,12 @@ fn a_packet_tightens_each_node_it_expanded_after_its_subtree() {
 }
 
 /// Shadow packets find a hit exactly for the rays the single any-hit query finds one for, on
-/// every demo, lazy and eager, rays from the visible surface towards a light above it.
+/// every demo, lazy and eager, rays from the visible surface towards a light above it, from
+/// an unknown start and (the rays from hits that face the camera and the light) from
+/// outside, which skips nodes by their normal cones.
 #[test]
 fn shadow_packets_are_blocked_where_single_shadow_rays_are() {
-    use crate::kinds::contract::PreparedKind;
+    use crate::kinds::contract::{PreparedKind, RayStart};
     let (w, h) = (36, 27);
     for kind in SurfelDemoKind::ALL {
         let demo = demo::build(kind, 0.03, 12).expect("demo");
@@ -422,34 +424,65 @@ fn shadow_packets_are_blocked_where_single_shadow_rays_are() {
             let p = prepare(&demo, 7, mode, false, &rt);
             let mut c = SurfelCounters::default();
             let light = demo.camera.eye + Vec3::new(3.0, 9.0, 2.0);
-            let (mut shadow, mut t_max) = (Vec::new(), Vec::new());
-            for (_, hit) in p.primary_tile(&rays, (0, 0, w, h), 0.0, 1e4, &mut c) {
+            let (mut shadow, mut t_max, mut leaving) = (Vec::new(), Vec::new(), Vec::new());
+            for (ray, hit) in p.primary_tile(&rays, (0, 0, w, h), 0.0, 1e4, &mut c) {
                 let Some(hit) = hit else { continue };
                 let origin = hit.position + hit.normal * 1e-3;
                 let to = light - origin;
-                shadow.push(Ray::new(origin, to.normalize()));
+                let dir = to.normalize();
+                shadow.push(Ray::new(origin, dir));
                 t_max.push(to.length());
+                let outside = hit.normal.dot(ray.dir) < 0.0 && hit.normal.dot(dir) > 0.0;
+                leaving.push(outside.then_some(RayStart::Leaving(hit.primitive)));
             }
             let single = prepare(&demo, 7, mode, false, &rt);
             let mut hint = crate::kinds::contract::OcclusionHint::default();
-            let packed = p
-                .any_hits_towards(&shadow, 0.0, &t_max, Some(light), 0.0, &mut hint, &mut c)
-                .expect("surfels have shadow packets");
-            let mut blocked = 0;
-            for (i, ray) in shadow.iter().enumerate() {
-                let want = single.any_hit(ray, 0.0, t_max[i], 0.0, &mut c).is_some();
-                assert_eq!(
-                    packed[i].is_some(),
-                    want,
-                    "{kind:?} {mode:?} shadow ray {i}"
+            for outside in [false, true] {
+                let ids: Vec<usize> = (0..shadow.len())
+                    .filter(|&i| !outside || leaving[i].is_some())
+                    .collect();
+                let rays: Vec<Ray> = ids.iter().map(|&i| shadow[i]).collect();
+                let hi: Vec<f32> = ids.iter().map(|&i| t_max[i]).collect();
+                let starts: Vec<RayStart> = (ids.iter())
+                    .map(|&i| leaving[i].filter(|_| outside).unwrap_or_default())
+                    .collect();
+                let packed = p
+                    .any_hits_towards(
+                        &rays,
+                        0.0,
+                        &hi,
+                        Some(light),
+                        0.0,
+                        &starts,
+                        &mut hint,
+                        &mut c,
+                    )
+                    .expect("surfels have shadow packets");
+                let mut blocked = 0;
+                for (k, ray) in rays.iter().enumerate() {
+                    let start = starts[k];
+                    let want = single
+                        .any_hit_from(ray, (0.0, hi[k]), start, &mut c)
+                        .is_some();
+                    assert_eq!(
+                        packed[k].is_some(),
+                        want,
+                        "{kind:?} {mode:?} {start:?} shadow ray {k}"
+                    );
+                    if outside {
+                        let every = single.any_hit(ray, 0.0, hi[k], 0.0, &mut c).is_some();
+                        assert_eq!(want, every, "{kind:?} {mode:?} shadow ray {k} from outside");
+                    }
+                    blocked += want as usize;
+                }
+                // From outside (the rays from lit hits), the cubes shadow nothing here.
+                let some = outside || blocked > 0;
+                assert!(
+                    some && blocked < rays.len(),
+                    "{kind:?} outside {outside}: {blocked} of {} blocked",
+                    rays.len()
                 );
-                blocked += want as usize;
             }
-            assert!(
-                blocked > 0 && blocked < shadow.len(),
-                "{kind:?}: {blocked} of {} blocked",
-                shadow.len()
-            );
         }
     }
 }

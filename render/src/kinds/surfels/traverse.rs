@@ -543,16 +543,21 @@ pub fn first_hits<V: Spheres>(
 /// node's sphere is read and updated once for the packet and tested by the rays still
 /// searching that met its parent; a ray stops at its first hit. `out[i]` is `Some` exactly
 /// when [`any_hit`] finds a hit for ray `i` (both search until a hit or the whole tree:
-/// every sphere bounds its surfels), though it may be another hit.
+/// every sphere bounds its surfels), though it may be another hit. A ray that starts
+/// outside a body (`outside[i]`, [`PreparedSurfels::outside_of`]) skips that body's nodes
+/// whose hits all face away from it, as [`any_hit`]'s does.
+#[allow(clippy::too_many_arguments)]
 pub fn any_hits<V: Spheres>(
     v: &V,
     p: &PreparedSurfels,
     rays: &[Ray],
     t_min: f32,
     t_max: &[f32],
+    outside: &[Option<u16>],
     out: &mut [Option<f32>],
     c: &mut SurfelCounters,
 ) {
+    let cull = p.cull.is_some() && outside.iter().any(Option::is_some);
     let n = rays.len().min(PACKET).min(t_max.len()).min(out.len());
     out[..n].fill(None);
     let lanes = Lanes::new(&rays[..n]);
@@ -573,7 +578,16 @@ pub fn any_hits<V: Spheres>(
     while top > 0 {
         top -= 1;
         let (node, mask) = stack[top];
-        let mask = mask & !done;
+        let mut mask = mask & !done;
+        if cull && mask != 0 {
+            if let Some((axis, sin, body)) = p.cone(node) {
+                for i in Bits(mask) {
+                    if outside.get(i) == Some(&Some(body)) && axis.dot(rays[i].dir) > sin {
+                        mask &= !(1 << i);
+                    }
+                }
+            }
+        }
         if mask == 0 {
             continue;
         }
@@ -639,21 +653,30 @@ impl Iterator for Bits {
     }
 }
 
-/// Some hit in `[t_min, t_max]`, the first found.
+/// Some hit in `[t_min, t_max]`, the first found. A ray that starts `outside` a closed body
+/// ([`PreparedSurfels::outside_of`]) skips that body's nodes whose hits all face away from
+/// it: its first crossing of the body, if any, faces it ([`crate::kinds::surfels::cones`]).
 pub fn any_hit<V: Spheres>(
     v: &V,
     p: &PreparedSurfels,
     ray: &Ray,
-    t_min: f32,
-    t_max: f32,
+    (t_min, t_max): (f32, f32),
+    outside: Option<u16>,
     c: &mut SurfelCounters,
 ) -> Option<f32> {
+    let cull = outside.is_some() && p.cull.is_some();
     let mut stack = [0u32; STACK];
     stack[0] = 0;
     let mut top = 1;
     while top > 0 {
         top -= 1;
         let n = stack[top];
+        if cull
+            && p.cone(n)
+                .is_some_and(|(axis, sin, body)| Some(body) == outside && axis.dot(ray.dir) > sin)
+        {
+            continue;
+        }
         c.sphere_tests += 1;
         let (sc, sr) = v.sphere(n, c);
         if sphere_entry(ray, sc, sr, t_min, t_max).is_none() {

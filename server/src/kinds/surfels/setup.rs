@@ -389,6 +389,7 @@ pub fn setup_from_spec(spec: Option<&SurfelSpec>) -> Result<SurfelSetup, KindErr
         node_mass,
         clip,
         node_body: Vec::new(),
+        closed: false,
     };
     let model = SurfelModel::new(set, MAX_SURFELS).map_err(model_error)?;
     Ok(SurfelSetup {

@@ -300,7 +300,7 @@ fn hinted_shadow_packets_settle_as_the_full_query_on_every_demo() {
                 let mut c = MetaballCounters::default();
                 let ask = (&shadow_rays[..], 0.0, &t_max[..], light, isovalue);
                 let Some(found) =
-                    m.any_hits_towards(ask.0, 0.0, ask.2, ask.3, ask.4, &mut hint, &mut c)
+                    m.any_hits_towards(ask.0, 0.0, ask.2, ask.3, ask.4, &[], &mut hint, &mut c)
                 else {
                     continue;
                 };
@@ -396,6 +396,7 @@ fn spread_out_shadow_rays_fall_back_to_single_rays() {
         &near_max,
         Some(light),
         isovalue,
+        &[],
         &mut hint,
         &mut c,
     );
@@ -408,6 +409,7 @@ fn spread_out_shadow_rays_fall_back_to_single_rays() {
         &far_max,
         Some(light),
         isovalue,
+        &[],
         &mut hint,
         &mut c,
     );
