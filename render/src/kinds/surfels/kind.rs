@@ -77,9 +77,9 @@ impl PreparedSurfels {
         hit
     }
 
-    /// [`PreparedKind::any_hit`] over `span`, counted; a ray that starts `Outside` skips
-    /// the nodes whose hits all face away from it (on a closed object:
-    /// [`crate::kinds::surfels::cones`]).
+    /// [`PreparedKind::any_hit`] over `span`, counted; a ray [`RayStart::Leaving`] a surfel
+    /// of a closed object skips the nodes of that surfel's body whose hits all face away from
+    /// it ([`crate::kinds::surfels::cones`]).
     #[inline]
     pub fn any_hit_from(
         &self,
