@@ -26,6 +26,7 @@
 use crate::kinds::surfels::kernel::Rows;
 use crate::kinds::surfels::tree::{SphereTree, MIXED};
 use glam::{DVec3, Mat3, Vec3};
+use rayon::prelude::*;
 
 /// Added to every leaf cone's half-angle (radians): more than the `f32` rounding of the
 /// normals, their sums and the cull's dot product.
@@ -158,44 +159,42 @@ pub fn build(
         })
         .collect();
     let n = tree.nodes.len();
-    let mut wide = vec![
-        Wide {
-            axis: DVec3::ZERO,
-            angle: HALF_PI,
-        };
-        n
-    ];
-    let mut body = vec![MIXED; n];
-    for k in (0..n).rev() {
-        let node = &tree.nodes[k];
-        if node.is_leaf() {
-            let hood = neighbours.row(node.kids[1] as usize);
-            wide[k] = around(hood.iter().map(|&j| normals[j as usize]));
-            let mut bodies = hood.iter().map(|&j| row_body[j as usize]);
-            let first = bodies.next().unwrap_or(MIXED);
-            body[k] = bodies.fold(first, same_body);
-        } else {
-            let [a, b] = node.kids.map(|c| c as usize);
-            wide[k] = merge(wide[a], wide[b]);
-            body[k] = same_body(body[a], body[b]);
-        }
-    }
-    let sims_of_leaf: Vec<Vec<u32>> = (0..n)
+    // The leaves' cones, bodies and simulation nodes in parallel (each depends on its
+    // neighbourhood alone), then the inner nodes' from their children, bottom up.
+    let leaves: Vec<(Wide, u16, Vec<u32>)> = (0..n)
+        .into_par_iter()
         .map(|k| {
             let node = &tree.nodes[k];
             if !node.is_leaf() {
-                return Vec::new();
+                let none = Wide {
+                    axis: DVec3::ZERO,
+                    angle: HALF_PI,
+                };
+                return (none, MIXED, Vec::new());
             }
             let hood = neighbours.row(node.kids[1] as usize);
+            let cone = around(hood.iter().map(|&j| normals[j as usize]));
+            let mut bodies = hood.iter().map(|&j| row_body[j as usize]);
+            let first = bodies.next().unwrap_or(MIXED);
             let mut sims: Vec<u32> = hood
                 .iter()
                 .flat_map(|&j| embed.row(j as usize).iter().map(|&(sim, _)| sim))
                 .collect();
             sims.sort_unstable();
             sims.dedup();
-            sims
+            (cone, bodies.fold(first, same_body), sims)
         })
         .collect();
+    let (mut wide, mut body): (Vec<Wide>, Vec<u16>) = leaves.iter().map(|l| (l.0, l.1)).unzip();
+    let sims_of_leaf: Vec<Vec<u32>> = leaves.into_iter().map(|l| l.2).collect();
+    for k in (0..n).rev() {
+        let node = &tree.nodes[k];
+        if !node.is_leaf() {
+            let [a, b] = node.kids.map(|c| c as usize);
+            wide[k] = merge(wide[a], wide[b]);
+            body[k] = same_body(body[a], body[b]);
+        }
+    }
     let (anchor, sims) = anchors(tree, &sims_of_leaf, node_body.len());
     let cone = wide
         .iter()
